@@ -1,0 +1,1 @@
+"""One module per command (``<name>_cmd.py``) with ``add_arguments(parser)`` and ``run(args)``."""

@@ -1,0 +1,303 @@
+"""The parameter catalogue of ``model.md`` and the layout of a calibration vector.
+
+Every parameter has a flat name (``gyro.bias``), elements (``x y z``), an SI unit
+and a unit for reports.  A :class:`Layout` fixes which parameters a solver
+estimates and where each sits in the flat calibration vector ``x``; it is the one
+name-to-slice registry that the model, both solvers and the files use.
+
+Examples
+--------
+>>> layout = Layout.declared()
+>>> layout.slice("gyro.bias")
+slice(0, 3, None)
+>>> layout.element_names()[:2]
+['gyro.bias.x', 'gyro.bias.y']
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from graph_calib import constants as c
+
+XYZ = ("x", "y", "z")
+NINE = ("xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz")
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One parameter of the catalogue.
+
+    Attributes
+    ----------
+    name : str
+        Flat name, as in ``model.md``.
+    elements : tuple of str
+        Element names; empty for a scalar parameter.
+    unit : str
+        SI unit of the value.
+    report_unit : str
+        Unit shown in reports and printing.
+    to_report : float
+        Factor from the SI unit into ``report_unit``.
+    declared : bool
+        Whether the parameter belongs to the declared model (else a further effect).
+    """
+
+    name: str
+    elements: tuple
+    unit: str
+    report_unit: str
+    to_report: float
+    declared: bool
+
+    @property
+    def size(self):
+        return max(1, len(self.elements))
+
+    def element_names(self):
+        if not self.elements:
+            return [self.name]
+        return [f"{self.name}.{e}" for e in self.elements]
+
+
+def _p(name, elements, unit, report_unit, to_report, declared):
+    return ParamSpec(name, tuple(elements), unit, report_unit, to_report, declared)
+
+
+_UG = c.MPS2_TO_UG
+_DH = c.RS_TO_DH
+_AS = c.RAD_TO_ARCSEC
+
+#: Every parameter, declared model first, in the canonical order of a calibration vector.
+CATALOGUE = (
+    _p("gyro.bias", XYZ, "rad/s", "deg/h", _DH, True),
+    _p("gyro.bias_tc", XYZ, "rad/s/degC", "deg/h/degC", _DH, True),
+    _p("gyro.scale", XYZ, "1", "ppm", c.TO_PPM, True),
+    _p("gyro.scale_tc", XYZ, "1/degC", "ppm/degC", c.TO_PPM, True),
+    _p("gyro.misalignment", ("xy", "xz", "yx", "yz", "zx", "zy"), "rad", "arcsec", _AS, True),
+    _p("accel.bias", XYZ, "m/s^2", "micro-g", _UG, True),
+    _p("accel.bias_tc", XYZ, "m/s^2/degC", "micro-g/degC", _UG, True),
+    _p("accel.scale", XYZ, "1", "ppm", c.TO_PPM, True),
+    _p("accel.scale_tc", XYZ, "1/degC", "ppm/degC", c.TO_PPM, True),
+    _p("accel.misalignment", ("yx", "zx", "zy"), "rad", "arcsec", _AS, True),
+    _p("mount", XYZ, "rad", "arcsec", _AS, True),
+    _p("lever_arm", XYZ, "m", "mm", 1e3, True),
+    _p("time_lag.table", (), "s", "ms", 1e3, True),
+    # further effects
+    _p("gyro.bias_tc2", XYZ, "rad/s/degC^2", "deg/h/degC^2", _DH, False),
+    _p("accel.bias_tc2", XYZ, "m/s^2/degC^2", "micro-g/degC^2", _UG, False),
+    _p("gyro.scale_tc2", XYZ, "1/degC^2", "ppm/degC^2", c.TO_PPM, False),
+    _p("accel.scale_tc2", XYZ, "1/degC^2", "ppm/degC^2", c.TO_PPM, False),
+    _p("gyro.bias_dtdt", XYZ, "rad/s per degC/s", "deg/h per degC/min", _DH / 60.0, False),
+    _p("accel.bias_dtdt", XYZ, "m/s^2 per degC/s", "micro-g per degC/min", _UG / 60.0, False),
+    _p("gyro.scale_asym", XYZ, "1", "ppm", c.TO_PPM, False),
+    _p("gyro.g_sensitivity", NINE, "rad/s per m/s^2", "deg/h/g", _DH * c.G0, False),
+    _p("accel.nonlinearity", XYZ, "1/(m/s^2)", "micro-g/g^2", _UG * c.G0**2, False),
+    _p("accel.size_effect", ("yx", "yy", "yz", "zx", "zy", "zz"), "m", "mm", 1e3, False),
+    _p("time_lag.accel", (), "s", "ms", 1e3, False),
+    _p("damping.stiffness", NINE, "rad per m/s^2", "arcsec/g", _AS * c.G0, False),
+)
+
+SPECS = {p.name: p for p in CATALOGUE}
+DECLARED = tuple(p.name for p in CATALOGUE if p.declared)
+FURTHER_EFFECTS = tuple(p.name for p in CATALOGUE if not p.declared)
+GYRO_PARAMS = tuple(p.name for p in CATALOGUE if p.name.startswith("gyro."))
+ACCEL_PARAMS = tuple(p.name for p in CATALOGUE if p.name.startswith("accel."))
+
+
+def spec(name):
+    """The :class:`ParamSpec` of a parameter name; ``KeyError`` naming it if unknown."""
+    try:
+        return SPECS[name]
+    except KeyError:
+        raise KeyError(f"unknown parameter {name!r}; known: {', '.join(SPECS)}") from None
+
+
+def split_element_name(flat):
+    """Split ``'gyro.misalignment.zx'`` into ``('gyro.misalignment', 'zx')``; a scalar gives ``(name, None)``."""
+    if flat in SPECS and not SPECS[flat].elements:
+        return flat, None
+    name, _, element = flat.rpartition(".")
+    if name not in SPECS or element not in SPECS[name].elements:
+        raise KeyError(f"unknown parameter element {flat!r}")
+    return name, element
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Which parameters a calibration vector holds, in canonical catalogue order.
+
+    Parameters
+    ----------
+    names : tuple of str
+        Parameter names (any order on input; stored in catalogue order).
+    """
+
+    names: tuple
+
+    def __post_init__(self):
+        unknown = [n for n in self.names if n not in SPECS]
+        if unknown:
+            raise KeyError(f"unknown parameter(s) {unknown}; known: {', '.join(SPECS)}")
+        ordered = tuple(p.name for p in CATALOGUE if p.name in set(self.names))
+        object.__setattr__(self, "names", ordered)
+        offsets = {}
+        k = 0
+        for n in ordered:
+            offsets[n] = slice(k, k + SPECS[n].size)
+            k += SPECS[n].size
+        object.__setattr__(self, "_slices", offsets)
+        object.__setattr__(self, "size", k)
+
+    @classmethod
+    def declared(cls, *, extra=(), exclude=()):
+        """The declared model, plus further effects ``extra``, minus ``exclude``."""
+        return cls(tuple(n for n in DECLARED if n not in exclude) + tuple(extra))
+
+    def __contains__(self, name):
+        return name in self._slices
+
+    def slice(self, name):
+        """Slice of parameter ``name`` in the flat vector (``KeyError`` if absent)."""
+        try:
+            return self._slices[name]
+        except KeyError:
+            raise KeyError(f"parameter {name!r} is not in this layout") from None
+
+    def get(self, x, name, default=None):
+        """Value of parameter ``name`` in vector ``x`` (a copy), or ``default`` when not in the layout."""
+        if name not in self._slices:
+            return default
+        v = np.asarray(x)[self._slices[name]]
+        return v.copy()
+
+    def element_names(self):
+        """Flat element names in vector order."""
+        out = []
+        for n in self.names:
+            out.extend(SPECS[n].element_names())
+        return out
+
+    def index(self, flat):
+        """Vector index of a flat element name."""
+        name, element = split_element_name(flat)
+        s = self.slice(name)
+        return s.start if element is None else s.start + SPECS[name].elements.index(element)
+
+    def with_names(self, *names):
+        """A new layout with ``names`` added."""
+        return Layout(self.names + tuple(names))
+
+    def zeros(self):
+        return np.zeros(self.size)
+
+    def to_dict(self, x):
+        """``{flat element name: value}`` for vector ``x``."""
+        return dict(zip(self.element_names(), np.asarray(x, dtype=float).tolist()))
+
+    def from_dict(self, values, *, missing=0.0):
+        """Vector from ``{flat element name: value}``; elements not given take ``missing``."""
+        x = np.full(self.size, float(missing))
+        for i, nm in enumerate(self.element_names()):
+            if nm in values:
+                x[i] = float(values[nm])
+        return x
+
+    def embed(self, other, x_other):
+        """Vector of this layout holding the values of ``x_other`` (layout ``other``); the rest zero."""
+        x = self.zeros()
+        for n in other.names:
+            if n in self:
+                x[self.slice(n)] = np.asarray(x_other)[other.slice(n)]
+        return x
+
+
+# ---------------------------------------------------------------------------
+# IMU grades: default prior sigmas and sensor noise
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Grade:
+    """Prior sigmas (SI, per parameter name) and white-noise densities of an IMU grade.
+
+    Attributes
+    ----------
+    name : str
+        ``"navigation"``, ``"tactical"`` or ``"consumer"``.
+    prior_sigma : dict
+        One-sigma prior per parameter name, SI (a scalar for every element).
+    gyro_noise : float
+        Angle random walk, rad/sqrt(s) (rate noise density, rad/s/sqrt(Hz)).
+    accel_noise : float
+        Velocity random walk, m/s/sqrt(s) (specific-force noise density).
+    encoder_noise : float
+        Table attitude reading noise, rad (one sigma per axis).
+    """
+
+    name: str
+    prior_sigma: dict
+    gyro_noise: float
+    accel_noise: float
+    encoder_noise: float
+
+    def prior_vector(self, layout):
+        """Prior sigmas for every element of ``layout``, shape (layout.size,)."""
+        s = np.empty(layout.size)
+        for n in layout.names:
+            s[layout.slice(n)] = self.prior_sigma[n]
+        return s
+
+
+def _grade(name, *, gb, gbtc, gs, gstc, gm, ab, abtc, as_, astc, am, mount, lever, lag,
+           gyro_noise, accel_noise, encoder_noise):
+    prior = {
+        "gyro.bias": gb, "gyro.bias_tc": gbtc, "gyro.scale": gs, "gyro.scale_tc": gstc,
+        "gyro.misalignment": gm, "accel.bias": ab, "accel.bias_tc": abtc, "accel.scale": as_,
+        "accel.scale_tc": astc, "accel.misalignment": am, "mount": mount, "lever_arm": lever,
+        "time_lag.table": lag,
+        # further effects: loose priors scaled from the declared ones
+        "gyro.bias_tc2": gbtc / 5.0, "accel.bias_tc2": abtc / 5.0,
+        "gyro.scale_tc2": gstc / 5.0, "accel.scale_tc2": astc / 5.0,
+        "gyro.bias_dtdt": gbtc * 600.0, "accel.bias_dtdt": abtc * 600.0,
+        "gyro.scale_asym": gs, "gyro.g_sensitivity": gb / 10.0,
+        "accel.nonlinearity": as_ / 10.0, "accel.size_effect": lever / 2.0,
+        "time_lag.accel": lag, "damping.stiffness": mount / 10.0,
+    }
+    return Grade(name, prior, gyro_noise, accel_noise, encoder_noise)
+
+
+GRADES = {
+    "navigation": _grade(
+        "navigation",
+        gb=1.0 * c.DH_TO_RS, gbtc=0.05 * c.DH_TO_RS, gs=300e-6, gstc=10e-6, gm=200 * c.ARCSEC_TO_RAD,
+        ab=1e-2, abtc=5e-4, as_=1000e-6, astc=30e-6, am=200 * c.ARCSEC_TO_RAD,
+        mount=0.1 * c.DEG_TO_RAD, lever=0.2, lag=0.02,
+        gyro_noise=0.002 * c.DSH_TO_RSS, accel_noise=2e-5, encoder_noise=2 * c.ARCSEC_TO_RAD,
+    ),
+    "tactical": _grade(
+        "tactical",
+        gb=20.0 * c.DH_TO_RS, gbtc=1.0 * c.DH_TO_RS, gs=3000e-6, gstc=50e-6, gm=0.1 * c.DEG_TO_RAD,
+        ab=5e-2, abtc=2e-3, as_=3000e-6, astc=100e-6, am=0.1 * c.DEG_TO_RAD,
+        mount=0.5 * c.DEG_TO_RAD, lever=0.2, lag=0.02,
+        gyro_noise=0.05 * c.DSH_TO_RSS, accel_noise=1e-4, encoder_noise=5 * c.ARCSEC_TO_RAD,
+    ),
+    "consumer": _grade(
+        "consumer",
+        gb=2.0 * c.DEG_TO_RAD, gbtc=0.05 * c.DEG_TO_RAD, gs=0.05, gstc=1e-3, gm=2.0 * c.DEG_TO_RAD,
+        ab=0.5, abtc=1e-2, as_=0.05, astc=1e-3, am=2.0 * c.DEG_TO_RAD,
+        mount=5.0 * c.DEG_TO_RAD, lever=0.2, lag=0.05,
+        gyro_noise=0.3 * c.DSH_TO_RSS, accel_noise=2e-3, encoder_noise=60 * c.ARCSEC_TO_RAD,
+    ),
+}
+
+
+def grade(name):
+    """The :class:`Grade` called ``name``; ``KeyError`` listing the known ones."""
+    try:
+        return GRADES[name]
+    except KeyError:
+        raise KeyError(f"unknown IMU grade {name!r}; known: {', '.join(GRADES)}") from None
