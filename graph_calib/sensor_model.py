@@ -1,0 +1,305 @@
+r"""Sensor error model of ``model.md``: every term, forward (simulator) and inverse (solvers).
+
+Each triad's error is linear in the calibration vector ``x``::
+
+    measured = true + Phi(true, context) @ x
+
+where every element of a parameter contributes one *term*: a scalar feature of
+the true signal and the context (temperature offset ``dT``, its rate ``dT/dt``,
+the other triad's signal) placed on one sensor axis.  A term row is
+``(column of x, axis, code, aux)``:
+
+==================  ===========================================  ==================
+code                feature on ``axis`` (``s`` the triad signal)  parameters
+==================  ===========================================  ==================
+``BIAS``            1                                            ``*.bias``
+``BIAS_TC``         ``dT``                                       ``*.bias_tc``
+``BIAS_TC2``        ``dT**2``                                    ``*.bias_tc2``
+``BIAS_DTDT``       ``dT/dt``                                    ``*.bias_dtdt``
+``SCALE``           ``s[axis]``                                  ``*.scale``
+``SCALE_TC``        ``s[axis] * dT``                             ``*.scale_tc``
+``SCALE_TC2``       ``s[axis] * dT**2``                          ``*.scale_tc2``
+``SCALE_ASYM``      ``abs(s[axis])``                             ``gyro.scale_asym``
+``CROSS``           ``s[aux]``                                   ``*.misalignment``
+``GSENS``           ``f_b[aux]``                                 ``gyro.g_sensitivity``
+``NONLIN``          ``s[axis]**2``                               ``accel.nonlinearity``
+``SIZE``            ``(w' x e_aux + w x (w x e_aux))[axis]``     ``accel.size_effect``
+``LAG``             ``-ds/dt[axis]``                             ``time_lag.accel``
+==================  ===========================================  ==================
+
+``dT`` and ``dT/dt`` are those of the sensor on ``axis``.  ``w`` and ``w'`` are
+the angular rate and acceleration of the block, ``e_aux`` the unit vector of
+the offset component.  The gyro-scale asymmetry ``p * sign(w) * w`` is written
+``p * |w|``; the accelerometer time lag ``f(t - p) ~= f(t) - p * df/dt``.
+
+Solvers invert the model: they find ``s`` with ``s + Phi(s) x = m`` by Newton's
+method, and its Jacobian by implicit differentiation,
+``ds/dx = -(I + dPhi x/ds)^-1 Phi(s)``.  Features of the *other* triad
+(``f_b`` in ``GSENS``, ``w`` in ``SIZE``) and the derivatives ``dw/dt``,
+``df/dt`` are taken from the raw measured signals, so they are data, not
+functions of ``x`` (documented in ``docs/model.md``).
+
+Everything per sample is compiled with numba; the Python-level functions here
+are vectorised wrappers for the simulator and for tests.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from graph_calib.params import SPECS, XYZ
+
+BIAS, BIAS_TC, BIAS_TC2, BIAS_DTDT, SCALE, SCALE_TC, SCALE_TC2, SCALE_ASYM, CROSS, GSENS, NONLIN, SIZE, LAG = range(13)
+
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+# parameter name (without the triad prefix) -> code for per-axis parameters
+_PER_AXIS = {
+    "bias": BIAS, "bias_tc": BIAS_TC, "bias_tc2": BIAS_TC2, "bias_dtdt": BIAS_DTDT,
+    "scale": SCALE, "scale_tc": SCALE_TC, "scale_tc2": SCALE_TC2, "scale_asym": SCALE_ASYM,
+    "nonlinearity": NONLIN,
+}
+
+
+def term_rows(layout, triad):
+    """Term rows ``(col, axis, code, aux)`` of the ``"gyro"`` or ``"accel"`` triad in ``layout``.
+
+    Returns
+    -------
+    ndarray of int64, shape (R, 4)
+        One row per (parameter element, axis) pair; ``aux`` is -1 where unused.
+    """
+    if triad not in ("gyro", "accel"):
+        raise ValueError(f"triad must be 'gyro' or 'accel', not {triad!r}")
+    rows = []
+    for name in layout.names:
+        s = layout.slice(name)
+        if name == "time_lag.accel" and triad == "accel":
+            rows.extend((s.start, i, LAG, -1) for i in range(3))
+            continue
+        prefix, _, short = name.partition(".")
+        if prefix != triad:
+            continue
+        elements = SPECS[name].elements
+        for k, el in enumerate(elements):
+            col = s.start + k
+            if short in _PER_AXIS:
+                rows.append((col, _AXIS[el], _PER_AXIS[short], -1))
+            elif short == "misalignment":
+                rows.append((col, _AXIS[el[0]], CROSS, _AXIS[el[1]]))
+            elif short == "g_sensitivity":
+                rows.append((col, _AXIS[el[0]], GSENS, _AXIS[el[1]]))
+            elif short == "size_effect":
+                rows.append((col, _AXIS[el[0]], SIZE, _AXIS[el[1]]))
+            else:  # pragma: no cover - guarded by the catalogue
+                raise KeyError(f"no sensor term for {name}")
+    return np.array(rows, dtype=np.int64).reshape(-1, 4)
+
+
+@numba.njit(cache=True, inline="always")
+def _feature(code, axis, aux, s, dT, dTdt, other, domega, dsig):
+    if code == BIAS:
+        return 1.0
+    if code == BIAS_TC:
+        return dT[axis]
+    if code == BIAS_TC2:
+        return dT[axis] * dT[axis]
+    if code == BIAS_DTDT:
+        return dTdt[axis]
+    if code == SCALE:
+        return s[axis]
+    if code == SCALE_TC:
+        return s[axis] * dT[axis]
+    if code == SCALE_TC2:
+        return s[axis] * dT[axis] * dT[axis]
+    if code == SCALE_ASYM:
+        return abs(s[axis])
+    if code == CROSS:
+        return s[aux]
+    if code == GSENS:
+        return other[aux]
+    if code == NONLIN:
+        return s[axis] * s[axis]
+    if code == SIZE:
+        # (w' x e + w x (w x e))[axis] with e = e_aux, w = other, w' = domega
+        e0 = 1.0 if aux == 0 else 0.0
+        e1 = 1.0 if aux == 1 else 0.0
+        e2 = 1.0 if aux == 2 else 0.0
+        w0, w1, w2 = other[0], other[1], other[2]
+        a0 = domega[1] * e2 - domega[2] * e1
+        a1 = domega[2] * e0 - domega[0] * e2
+        a2 = domega[0] * e1 - domega[1] * e0
+        c0 = w1 * e2 - w2 * e1
+        c1 = w2 * e0 - w0 * e2
+        c2 = w0 * e1 - w1 * e0
+        if axis == 0:
+            return a0 + (w1 * c2 - w2 * c1)
+        if axis == 1:
+            return a1 + (w2 * c0 - w0 * c2)
+        return a2 + (w0 * c1 - w1 * c0)
+    if code == LAG:
+        return -dsig[axis]
+    return 0.0
+
+
+@numba.njit(cache=True, inline="always")
+def _dfeature(code, axis, aux, s, dT, k):
+    """Derivative of the feature with respect to ``s[k]``."""
+    if code == SCALE:
+        return 1.0 if k == axis else 0.0
+    if code == SCALE_TC:
+        return dT[axis] if k == axis else 0.0
+    if code == SCALE_TC2:
+        return dT[axis] * dT[axis] if k == axis else 0.0
+    if code == SCALE_ASYM:
+        if k != axis:
+            return 0.0
+        return 1.0 if s[axis] >= 0.0 else -1.0
+    if code == CROSS:
+        return 1.0 if k == aux else 0.0
+    if code == NONLIN:
+        return 2.0 * s[axis] if k == axis else 0.0
+    return 0.0
+
+
+@numba.njit(cache=True)
+def _error(rows, x, s, dT, dTdt, other, domega, dsig, out):
+    out[0] = 0.0
+    out[1] = 0.0
+    out[2] = 0.0
+    for r in range(rows.shape[0]):
+        col, axis, code, aux = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
+        out[axis] += x[col] * _feature(code, axis, aux, s, dT, dTdt, other, domega, dsig)
+
+
+@numba.njit(cache=True)
+def correct_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, s, J, want_jacobian):
+    """Invert one sample: ``s`` with ``s + Phi(s) x = m``; ``J = ds/dx`` (3, n) when asked.
+
+    ``J`` is overwritten only in the columns that ``rows`` name (others must be zero).
+    """
+    err = np.empty(3)
+    s[0] = m[0]
+    s[1] = m[1]
+    s[2] = m[2]
+    A = np.eye(3)
+    # Newton's method on s + err(s) - m = 0 (quadratic convergence; exact in one step
+    # when the model is linear in s)
+    for it in range(n_iter + 1):
+        A[:, :] = 0.0
+        A[0, 0] = 1.0
+        A[1, 1] = 1.0
+        A[2, 2] = 1.0
+        for r in range(rows.shape[0]):
+            col, axis, code, aux = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
+            for k in range(3):
+                A[axis, k] += x[col] * _dfeature(code, axis, aux, s, dT, k)
+        if it == n_iter:
+            break
+        _error(rows, x, s, dT, dTdt, other, domega, dsig, err)
+        res = np.empty(3)
+        for i in range(3):
+            res[i] = s[i] + err[i] - m[i]
+        step = np.linalg.solve(A, res)
+        for i in range(3):
+            s[i] -= step[i]
+    if not want_jacobian:
+        return
+    Ai = np.linalg.inv(A)
+    for r in range(rows.shape[0]):
+        for i in range(3):
+            J[i, rows[r, 0]] = 0.0
+    for r in range(rows.shape[0]):
+        col, axis, code, aux = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
+        phi = _feature(code, axis, aux, s, dT, dTdt, other, domega, dsig)
+        for i in range(3):
+            J[i, col] -= Ai[i, axis] * phi
+
+
+@numba.njit(cache=True, parallel=True)
+def _forward_many(rows, x, s, dT, dTdt, other, domega, dsig, out):
+    for j in numba.prange(s.shape[0]):
+        e = np.empty(3)
+        _error(rows, x, s[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], e)
+        out[j, 0] = s[j, 0] + e[0]
+        out[j, 1] = s[j, 1] + e[1]
+        out[j, 2] = s[j, 2] + e[2]
+
+
+@numba.njit(cache=True, parallel=True)
+def _inverse_many(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, out, J, want_jacobian):
+    for j in numba.prange(m.shape[0]):
+        correct_sample(rows, x, m[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], n_iter,
+                       out[j], J[j], want_jacobian)
+
+
+def _as3(a, n):
+    if a is None:
+        return np.zeros((n, 3))
+    a = np.ascontiguousarray(a, dtype=float)
+    if a.ndim == 1:
+        a = np.broadcast_to(a, (n, 3)).copy()
+    if a.shape != (n, 3):
+        raise ValueError(f"expected shape ({n}, 3), got {a.shape}")
+    return a
+
+
+def measure(layout, x, triad, signal, *, dT=None, dTdt=None, other=None, domega=None, dsignal=None):
+    """Forward model: what a triad measures, ``signal + Phi(signal) @ x``.
+
+    Parameters
+    ----------
+    layout : graph_calib.params.Layout
+    x : ndarray, shape (layout.size,)
+        Calibration vector (SI).
+    triad : {"gyro", "accel"}
+    signal : ndarray, shape (N, 3)
+        True angular rate ``omega_ib_b`` (rad/s) or specific force ``f_b`` (m/s^2).
+    dT, dTdt : ndarray, shape (N, 3), optional
+        Temperature offset from ``T_ref`` (degC) and its rate (degC/s) of the triad's three sensors.
+    other : ndarray, shape (N, 3), optional
+        Gyro: specific force ``f_b`` (for ``g_sensitivity``); accel: angular rate ``omega_nb_b``
+        (for ``size_effect``).
+    domega : ndarray, shape (N, 3), optional
+        Angular acceleration, rad/s^2 (``size_effect``).
+    dsignal : ndarray, shape (N, 3), optional
+        Time derivative of ``signal`` (``time_lag.accel``).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    signal = np.ascontiguousarray(signal, dtype=float)
+    n = signal.shape[0]
+    rows = term_rows(layout, triad)
+    out = np.empty_like(signal)
+    _forward_many(rows, np.asarray(x, dtype=float), signal, _as3(dT, n), _as3(dTdt, n),
+                  _as3(other, n), _as3(domega, n), _as3(dsignal, n), out)
+    return out
+
+
+def correct(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domega=None,
+            dsignal=None, n_iter=3, jacobian=False):
+    """Inverse model: the true signal from the measured one, and optionally ``d true / dx``.
+
+    Parameters are those of :func:`measure`, with ``measured`` in place of ``signal``
+    (``other``, ``domega`` and ``dsignal`` from the raw measurements).
+
+    Returns
+    -------
+    signal : ndarray, shape (N, 3)
+    J : ndarray, shape (N, 3, layout.size)
+        Only when ``jacobian`` is true; a tuple ``(signal, J)`` is then returned.
+    """
+    measured = np.ascontiguousarray(measured, dtype=float)
+    n = measured.shape[0]
+    rows = term_rows(layout, triad)
+    out = np.empty_like(measured)
+    J = np.zeros((n, 3, layout.size)) if jacobian else np.zeros((n, 3, 1))
+    _inverse_many(rows, np.asarray(x, dtype=float), measured, _as3(dT, n), _as3(dTdt, n),
+                  _as3(other, n), _as3(domega, n), _as3(dsignal, n), n_iter, out, J, jacobian)
+    return (out, J) if jacobian else out
+
+
+__all__ = ["term_rows", "measure", "correct", "correct_sample", "XYZ"]
