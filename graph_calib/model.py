@@ -1,0 +1,663 @@
+r"""The shared calibration model: one place for every equation both solvers use.
+
+The record is cut into keyframe intervals (about 0.1-1 s).  For interval ``k``,
+``R_k = C_nb`` at its start, and with the gyro and accelerometer samples
+corrected by the calibration ``x`` (:mod:`graph_calib.sensor_model`):
+
+Rotation (process) model
+    ``R_{k+1} = E(T_k) @ R_k @ dR_k(x)``, with ``dR_k`` the preintegrated
+    rotation of the corrected increments (two-sample coning correction) and
+    ``E(T) = Exp(-omega_ie_n * T)`` the turn of the level frame with the Earth.
+    Residual ``Log((E R_k dR_k)^T R_{k+1})``, covariance ``q_g^2 T_k I``
+    (``q_g`` the gyro angle random walk).
+
+Gravity measurement
+    The specific force integrated in the level frame over the interval, each
+    sample rotated with its own attitude,
+    ``dv_n = sum_j C_nb(t_{j-1}) (dv_j + 1/2 dth_j x dv_j + 1/12 dth_j x (dth_j x dv_j))``,
+    equals ``g_up * T_k`` plus the change of the velocity of the accelerometer
+    point, ``v_n = C_nb (omega_nb_b x l) `` (the rotation centre is fixed), so
+    ``r = (dv_n - [v_n(t_{k+1}) - v_n(t_k)]) / T_k - [0, 0, g]``.  With
+    ``C_nb(t) = E(t - t_k) R_k dR(t)``, ``dv_n = R_k S - [omega_ie_n x] R_k S1``
+    where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} - t_k) dR_{j-1} u_j``
+    are preintegrated once per calibration.  Covariance
+    ``q_a^2 / T_k`` per axis plus ``g^2 q_g^2 T_k / 3`` on the horizontal axes
+    (attitude noise inside the interval).
+
+Encoder measurement
+    A valid table reading at ``t_m`` (sample ``j``, ``dt_m = t_m - t_j``):
+    ``C_meas = C_nf(t_m) C_fb Exp(mount) Exp(w_m time_lag) Exp(K f_m)`` against
+    ``C_pred = E(t_m - t_k) R_k dR_{k,j} Exp(w_m dt_m)``, residual
+    ``Log(C_meas^T C_pred)``.  ``w_m`` and ``f_m`` are the raw measured rate and
+    specific force at the reading (data, not functions of ``x``); ``K`` is
+    ``damping.stiffness`` when modelled.  Covariance ``sigma_enc^2 + q_g^2 (t_m - t_k)``.
+
+Jacobians are with respect to the right perturbation of ``R_k``
+(``R_k Exp(delta)``) and the calibration vector; the preintegration carries its
+first-order Jacobian in ``x``, so a small change ``dx`` from the linearisation
+point is applied as ``dR Exp(J dx)``, ``S + J_S dx``; the caller re-preintegrates
+when ``dx`` grows (:meth:`CalibrationModel.needs_repreintegration`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy.signal import savgol_filter
+
+from graph_calib.constants import omega_ie_n as _omega_ie_n
+from graph_calib.params import Layout, grade as _grade
+from graph_calib.rotations import (
+    exp_so3,
+    exp_so3_nb,
+    log_so3,
+    quat_to_dcm,
+    right_jacobian,
+    right_jacobian_inv,
+    right_jacobian_nb,
+    skew,
+)
+from graph_calib.sensor_model import correct_sample, term_rows
+
+# ---------------------------------------------------------------------------
+# options
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """How an experiment is turned into a calibration problem.
+
+    Attributes
+    ----------
+    keyframe_s : float
+        Keyframe interval, s.
+    grade : str
+        IMU grade for default priors and noise (``params.GRADES``).
+    extra_effects : tuple of str
+        Further effects of ``model.md`` added to the declared model.
+    exclude : tuple of str
+        Declared parameters not estimated (e.g. ``lever_arm`` without a table).
+    prior_sigma : dict
+        Overrides of the grade's prior sigmas, ``{parameter name: sigma}`` (SI).
+    gyro_noise, accel_noise, encoder_noise : float or None
+        Overrides of the grade's noise (rad/sqrt(s), m/s/sqrt(s), rad).
+    initial_attitude_sigma : float
+        Prior sigma of the first keyframe attitude around the alignment, rad.
+    moving_sigma : float or None
+        Without a table the bench may translate: gravity measurements of keyframes
+        that are not static get this sigma (m/s^2).  None: every keyframe counts.
+    n_newton : int
+        Newton steps of the sensor-model inversion.
+    """
+
+    keyframe_s: float = 1.0
+    grade: str = "navigation"
+    extra_effects: tuple = ()
+    exclude: tuple = ()
+    prior_sigma: dict | None = None
+    gyro_noise: float | None = None
+    accel_noise: float | None = None
+    encoder_noise: float | None = None
+    initial_attitude_sigma: float = 0.05
+    moving_sigma: float | None = None
+    n_newton: int = 2
+
+
+# ---------------------------------------------------------------------------
+# the per-sample kernel
+# ---------------------------------------------------------------------------
+
+
+@numba.njit(cache=True, inline="always")
+def _cross(a, b, out):
+    out[0] = a[1] * b[2] - a[2] * b[1]
+    out[1] = a[2] * b[0] - a[0] * b[2]
+    out[2] = a[0] * b[1] - a[1] * b[0]
+
+
+@numba.njit(cache=True, inline="always")
+def _skew_mul(a, J, out):
+    """out = [a x] @ J for J of shape (3, n)."""
+    for c in range(J.shape[1]):
+        out[0, c] = a[1] * J[2, c] - a[2] * J[1, c]
+        out[1, c] = a[2] * J[0, c] - a[0] * J[2, c]
+        out[2, c] = a[0] * J[1, c] - a[1] * J[0, c]
+
+
+@numba.njit(cache=True, parallel=True)
+def _preintegrate(dtheta, dv, dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
+                  w_raw, f_raw, dw_raw, df_raw, tap_idx, tap_lo, n_newton, nc,
+                  dR, JR, S, JS, S1, JS1, w_first, Jw_first, w_last, Jw_last, tapR, tapJ):
+    K = k0.shape[0] - 1
+    for k in numba.prange(K):
+        R = np.eye(3)
+        J = np.zeros((3, nc))
+        s = np.zeros(3)
+        js = np.zeros((3, nc))
+        s1 = np.zeros(3)
+        js1 = np.zeros((3, nc))
+        w = np.empty(3)
+        Jw = np.zeros((3, nc))
+        fc = np.empty(3)
+        Jf = np.zeros((3, nc))
+        pth = np.zeros(3)
+        pJth = np.zeros((3, nc))
+        th = np.empty(3)
+        Jth = np.zeros((3, nc))
+        vv = np.empty(3)
+        Jvv = np.zeros((3, nc))
+        phi = np.empty(3)
+        Jphi = np.zeros((3, nc))
+        u = np.empty(3)
+        Ju = np.zeros((3, nc))
+        c1 = np.empty(3)
+        c2 = np.empty(3)
+        tmp = np.zeros((3, nc))
+        tmp2 = np.zeros((3, nc))
+        E = np.empty((3, 3))
+        Jr = np.empty((3, 3))
+        Rn = np.empty((3, 3))
+        j0 = k0[k]
+        if j0 > 0:
+            correct_sample(grows, x, w_raw[j0 - 1], dTg[j0 - 1], dTdtg[j0 - 1], f_raw[j0 - 1],
+                           dw_raw[j0 - 1], dw_raw[j0 - 1], n_newton, w, Jw, True)
+            for i in range(3):
+                pth[i] = w[i] * dt[j0 - 1]
+                for c in range(nc):
+                    pJth[i, c] = Jw[i, c] * dt[j0 - 1]
+        tau = 0.0
+        tp = tap_lo[k]
+        for j in range(j0, k0[k + 1]):
+            h = dt[j]
+            correct_sample(grows, x, w_raw[j], dTg[j], dTdtg[j], f_raw[j], dw_raw[j], dw_raw[j],
+                           n_newton, w, Jw, True)
+            correct_sample(arows, x, f_raw[j], dTa[j], dTdta[j], w_raw[j], dw_raw[j], df_raw[j],
+                           n_newton, fc, Jf, True)
+            for i in range(3):
+                th[i] = w[i] * h
+                vv[i] = fc[i] * h
+                for c in range(nc):
+                    Jth[i, c] = Jw[i, c] * h
+                    Jvv[i, c] = Jf[i, c] * h
+            if j == j0:
+                for i in range(3):
+                    w_first[k, i] = w[i]
+                    for c in range(nc):
+                        Jw_first[k, i, c] = Jw[i, c]
+            # coning: phi = th + (pth x th) / 12
+            _cross(pth, th, c1)
+            _skew_mul(pth, Jth, tmp)
+            _skew_mul(th, pJth, tmp2)
+            for i in range(3):
+                phi[i] = th[i] + c1[i] / 12.0
+                for c in range(nc):
+                    Jphi[i, c] = Jth[i, c] + (tmp[i, c] - tmp2[i, c]) / 12.0
+            # velocity increment rotated to the sample start: u = v + th x v / 2 + th x (th x v) / 12
+            _cross(th, vv, c1)
+            _cross(th, c1, c2)
+            # d(th x v) = [th x] dv - [v x] dth
+            _skew_mul(th, Jvv, tmp)
+            _skew_mul(vv, Jth, tmp2)
+            for i in range(3):
+                for c in range(nc):
+                    tmp[i, c] -= tmp2[i, c]          # tmp = d(c1)
+            _skew_mul(th, tmp, tmp2)                 # [th x] d(c1)
+            for i in range(3):
+                u[i] = vv[i] + 0.5 * c1[i] + c2[i] / 12.0
+                for c in range(nc):
+                    Ju[i, c] = Jvv[i, c] + 0.5 * tmp[i, c] + tmp2[i, c] / 12.0
+            _skew_mul(c1, Jth, tmp2)                 # [c1 x] dth ; d(th x c1) = [th x] dc1 - [c1 x] dth
+            for i in range(3):
+                for c in range(nc):
+                    Ju[i, c] -= tmp2[i, c] / 12.0
+            # accumulate S += R u, dS = R (du - [u x] J)
+            _skew_mul(u, J, tmp)
+            for i in range(3):
+                for c in range(nc):
+                    tmp[i, c] = Ju[i, c] - tmp[i, c]
+            for i in range(3):
+                ru = R[i, 0] * u[0] + R[i, 1] * u[1] + R[i, 2] * u[2]
+                s[i] += ru
+                s1[i] += tau * ru
+                for c in range(nc):
+                    d = R[i, 0] * tmp[0, c] + R[i, 1] * tmp[1, c] + R[i, 2] * tmp[2, c]
+                    js[i, c] += d
+                    js1[i, c] += tau * d
+            # rotation: R <- R Exp(phi); J <- Exp(phi)^T J + Jr(phi) dphi
+            exp_so3_nb(phi[0], phi[1], phi[2], E)
+            right_jacobian_nb(phi[0], phi[1], phi[2], Jr)
+            for i in range(3):
+                for c in range(nc):
+                    tmp[i, c] = (E[0, i] * J[0, c] + E[1, i] * J[1, c] + E[2, i] * J[2, c]
+                                 + Jr[i, 0] * Jphi[0, c] + Jr[i, 1] * Jphi[1, c] + Jr[i, 2] * Jphi[2, c])
+            for i in range(3):
+                for c in range(nc):
+                    J[i, c] = tmp[i, c]
+                for m in range(3):
+                    Rn[i, m] = R[i, 0] * E[0, m] + R[i, 1] * E[1, m] + R[i, 2] * E[2, m]
+            for i in range(3):
+                for m in range(3):
+                    R[i, m] = Rn[i, m]
+            tau += h
+            while tp < tap_idx.shape[0] and tap_idx[tp] == j:
+                for i in range(3):
+                    for m in range(3):
+                        tapR[tp, i, m] = R[i, m]
+                    for c in range(nc):
+                        tapJ[tp, i, c] = J[i, c]
+                tp += 1
+            for i in range(3):
+                pth[i] = th[i]
+                for c in range(nc):
+                    pJth[i, c] = Jth[i, c]
+        for i in range(3):
+            S[k, i] = s[i]
+            S1[k, i] = s1[i]
+            w_last[k, i] = w[i]
+            for m in range(3):
+                dR[k, i, m] = R[i, m]
+            for c in range(nc):
+                JR[k, i, c] = J[i, c]
+                JS[k, i, c] = js[i, c]
+                JS1[k, i, c] = js1[i, c]
+                Jw_last[k, i, c] = Jw[i, c]
+
+
+# ---------------------------------------------------------------------------
+# preintegrated quantities
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Preintegrated:
+    """Everything the factors need from the samples, at one calibration ``x_lin``.
+
+    Shapes: K keyframes, M encoder readings, P = layout size.
+
+    Attributes
+    ----------
+    x_lin : (P,)
+    dR : (K, 3, 3)      preintegrated rotation of each keyframe
+    J_dR : (K, 3, P)    its right-perturbation Jacobian in x
+    S, J_S : (K, 3), (K, 3, P)     velocity increment in the keyframe-start body frame, m/s
+    S1, J_S1 : (K, 3), (K, 3, P)   the same weighted by time since the keyframe start, m s
+    w_b, J_w_b : (K+1, 3), (K+1, 3, P)  corrected angular rate omega_ib_b at each boundary, rad/s
+    tap_dR, tap_J : (M, 3, 3), (M, 3, P)  partial preintegration up to each encoder reading
+    """
+
+    x_lin: np.ndarray
+    dR: np.ndarray
+    J_dR: np.ndarray
+    S: np.ndarray
+    J_S: np.ndarray
+    S1: np.ndarray
+    J_S1: np.ndarray
+    w_b: np.ndarray
+    J_w_b: np.ndarray
+    tap_dR: np.ndarray
+    tap_J: np.ndarray
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """One kind of factor, stacked: residual, Jacobians and one-sigma noise.
+
+    Attributes
+    ----------
+    r : (F, 3)
+    key : (F,) int       keyframe whose attitude the factor touches (the first one)
+    H_R : (F, 3, 3)      d r / d delta of that keyframe
+    H_R_next : (F, 3, 3) or None   d r / d delta of keyframe key+1 (rotation factors)
+    H_x : (F, 3, P)      d r / d x
+    sigma : (F, 3) or (F, 3, 3)   one sigma per component, or a full covariance per factor
+    """
+
+    r: np.ndarray
+    key: np.ndarray
+    H_R: np.ndarray
+    H_R_next: np.ndarray | None
+    H_x: np.ndarray
+    sigma: np.ndarray
+
+    def whitened(self):
+        """Residuals divided by their sigmas (diagonal) or by the Cholesky factor (full)."""
+        if self.sigma.ndim == 2:
+            return self.r / self.sigma
+        L = np.linalg.cholesky(self.sigma)
+        return np.linalg.solve(L, self.r[..., None])[..., 0]
+
+
+def _savgol_derivative(y, dt, window_s):
+    n = y.shape[0]
+    win = int(round(window_s / dt)) | 1
+    win = max(5, min(win, (n - 1) // 2 * 2 - 1 if n > 6 else 5))
+    if n <= win:
+        slope = np.polyfit(np.arange(n) * dt, y, 1)[0] if n > 1 else np.zeros(y.shape[1:])
+        return np.broadcast_to(slope, y.shape).copy()
+    return savgol_filter(y, win, 2, deriv=1, delta=dt, axis=0, mode="interp")
+
+
+class CalibrationModel:
+    """The calibration problem of one experiment: data, layout, priors, noise, factors.
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    options : ModelOptions
+    t_ref_degC : float, optional
+        Reference temperature; default the mean of the six sensors' temperatures.
+    q_nb0 : ndarray, shape (4,), optional
+        Attitude at the start of the record (alignment); needed by :meth:`initial_attitudes`.
+
+    Notes
+    -----
+    Both solvers see the problem only through :meth:`preintegrate`,
+    :meth:`rotation_factors`, :meth:`gravity_factors`, :meth:`encoder_factors`,
+    :meth:`prior` and :meth:`initial_attitudes`.
+    """
+
+    def __init__(self, experiment, *, options=ModelOptions(), t_ref_degC=None, static_mask=None):
+        self.experiment = experiment
+        self.options = options
+        exclude = tuple(options.exclude)
+        if experiment.table is None:
+            # without a table nothing ties the attitude to the faceplate or the rotation centre
+            exclude = tuple(sorted(set(exclude) | {"mount", "time_lag.table", "damping.stiffness"}))
+        self.layout = Layout.declared(extra=tuple(options.extra_effects), exclude=exclude)
+        self.grade = _grade(options.grade)
+        self.t_ref_degC = float(experiment.default_t_ref() if t_ref_degC is None else t_ref_degC)
+        self.gravity = float(experiment.gravity_mps2)
+        self.omega_ie_n = _omega_ie_n(experiment.latitude_rad)
+        self.gyro_noise = float(options.gyro_noise if options.gyro_noise is not None else self.grade.gyro_noise)
+        self.accel_noise = float(options.accel_noise if options.accel_noise is not None else self.grade.accel_noise)
+        self.encoder_noise = float(options.encoder_noise if options.encoder_noise is not None
+                                   else self.grade.encoder_noise)
+        self._prepare_samples()
+        self._prepare_keyframes()
+        self._prepare_table()
+        self._static_keyframes(static_mask)
+
+    # -- data preparation ---------------------------------------------------
+
+    def _prepare_samples(self):
+        e = self.experiment
+        dt = e.dt
+        self.dt = dt
+        self.w_raw = e.dtheta / dt[:, None]
+        self.f_raw = e.dv / dt[:, None]
+        h = 1.0 / e.rate_hz
+        self.dw_raw = np.gradient(self.w_raw, e.t, axis=0)
+        self.df_raw = np.gradient(self.f_raw, e.t, axis=0)
+        T = e.sensor_temperatures()
+        self.temperatures = T
+        dT = T - self.t_ref_degC
+        dTdt = _savgol_derivative(T, h, 60.0)
+        self.dTg = np.ascontiguousarray(dT[:, :3])
+        self.dTa = np.ascontiguousarray(dT[:, 3:])
+        self.dTdtg = np.ascontiguousarray(dTdt[:, :3])
+        self.dTdta = np.ascontiguousarray(dTdt[:, 3:])
+        self.grows_full = term_rows(self.layout, "gyro")
+        self.arows_full = term_rows(self.layout, "accel")
+        cols = np.unique(np.concatenate([self.grows_full[:, 0], self.arows_full[:, 0]]))
+        self.kernel_cols = cols.astype(np.int64)
+        remap = -np.ones(self.layout.size, dtype=np.int64)
+        remap[cols] = np.arange(cols.size)
+        self.grows = self.grows_full.copy()
+        self.grows[:, 0] = remap[self.grows[:, 0]]
+        self.arows = self.arows_full.copy()
+        self.arows[:, 0] = remap[self.arows[:, 0]]
+
+    def _prepare_keyframes(self):
+        e = self.experiment
+        n = e.n_samples
+        per = max(1, int(round(self.options.keyframe_s * e.rate_hz)))
+        k0 = np.arange(0, n, per, dtype=np.int64)
+        if n - k0[-1] < max(1, per // 2) and k0.size > 1:
+            k0 = k0[:-1]
+        self.k0 = np.append(k0, n).astype(np.int64)
+        self.n_keyframes = self.k0.size - 1
+        t_start = e.t - self.dt
+        self.t_key = np.append(t_start[self.k0[:-1]], e.t[-1])  # time of each boundary, (K+1,)
+        self.T_key = np.diff(self.t_key)
+
+    def _prepare_table(self):
+        e = self.experiment
+        tab = e.table
+        self.has_table = tab is not None
+        empty3 = np.zeros((0, 3))
+        if tab is None or not np.any(tab.valid):
+            self.tap_idx = np.zeros(0, dtype=np.int64)
+            self.tap_key = np.zeros(0, dtype=np.int64)
+            self.tap_dt = np.zeros(0)
+            self.tap_tau = np.zeros(0)
+            self.tap_C_nf = np.zeros((0, 3, 3))
+            self.tap_w = empty3
+            self.tap_f = empty3
+            self.C_fb = np.eye(3) if tab is None else quat_to_dcm(tab.q_fb_nominal)
+        else:
+            tm = tab.t[tab.valid]
+            q = tab.q_nf[tab.valid]
+            j = np.searchsorted(e.t, tm, side="right") - 1
+            keep = (j >= 0) & (tm <= e.t[-1])
+            tm, q, j = tm[keep], q[keep], j[keep]
+            self.tap_idx = j.astype(np.int64)
+            self.tap_key = (np.searchsorted(self.k0, j, side="right") - 1).astype(np.int64)
+            self.tap_dt = tm - e.t[j]
+            self.tap_tau = tm - self.t_key[self.tap_key]
+            self.tap_C_nf = quat_to_dcm(q)
+            self.tap_w = self.w_raw[j]
+            self.tap_f = self.f_raw[j]
+            self.C_fb = quat_to_dcm(tab.q_fb_nominal)
+        self.tap_lo = np.searchsorted(self.tap_idx, self.k0[:-1], side="left").astype(np.int64)
+
+    def _static_keyframes(self, static_mask):
+        if static_mask is None:
+            self.static_key = np.ones(self.n_keyframes, dtype=bool)
+        else:
+            m = np.asarray(static_mask, dtype=bool)
+            self.static_key = np.logical_and.reduceat(m, self.k0[:-1])
+
+    # -- priors -------------------------------------------------------------
+
+    def prior(self):
+        """Prior mean and one sigma of the calibration vector, shapes (P,), (P,)."""
+        sig = self.grade.prior_vector(self.layout)
+        for name, value in (self.options.prior_sigma or {}).items():
+            if name in self.layout:
+                sig[self.layout.slice(name)] = value
+        return self.layout.zeros(), sig
+
+    def priors_used(self):
+        """``{parameter name: sigma}`` actually used (for the result file)."""
+        _, sig = self.prior()
+        return {n: sig[self.layout.slice(n)].tolist() for n in self.layout.names}
+
+    # -- preintegration -------------------------------------------------------
+
+    def preintegrate(self, x):
+        """Preintegrate every keyframe and encoder tap at calibration ``x`` (P,)."""
+        x = np.ascontiguousarray(x, dtype=float)
+        K = self.n_keyframes
+        M = self.tap_idx.size
+        nc = self.kernel_cols.size
+        xc = x[self.kernel_cols] if nc else np.zeros(0)
+        dR = np.empty((K, 3, 3))
+        JR = np.zeros((K, 3, nc))
+        S = np.empty((K, 3))
+        JS = np.zeros((K, 3, nc))
+        S1 = np.empty((K, 3))
+        JS1 = np.zeros((K, 3, nc))
+        wf = np.empty((K, 3))
+        Jwf = np.zeros((K, 3, nc))
+        wl = np.empty((K, 3))
+        Jwl = np.zeros((K, 3, nc))
+        tapR = np.empty((M, 3, 3))
+        tapJ = np.zeros((M, 3, nc))
+        e = self.experiment
+        _preintegrate(e.dtheta, e.dv, self.dt, self.k0, xc, self.grows, self.arows,
+                      self.dTg, self.dTdtg, self.dTa, self.dTdta, self.w_raw, self.f_raw,
+                      self.dw_raw, self.df_raw, self.tap_idx, self.tap_lo, self.options.n_newton, nc,
+                      dR, JR, S, JS, S1, JS1, wf, Jwf, wl, Jwl, tapR, tapJ)
+        P = self.layout.size
+
+        def full(Jc):
+            out = np.zeros(Jc.shape[:-1] + (P,))
+            out[..., self.kernel_cols] = Jc
+            return out
+
+        w_b = np.empty((K + 1, 3))
+        Jw_b = np.zeros((K + 1, 3, nc))
+        w_b[0], Jw_b[0] = wf[0], Jwf[0]
+        w_b[K], Jw_b[K] = wl[K - 1], Jwl[K - 1]
+        w_b[1:K] = 0.5 * (wl[:-1] + wf[1:])
+        Jw_b[1:K] = 0.5 * (Jwl[:-1] + Jwf[1:])
+        return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=full(JR), S=S, J_S=full(JS), S1=S1,
+                             J_S1=full(JS1), w_b=w_b, J_w_b=full(Jw_b), tap_dR=tapR, tap_J=full(tapJ))
+
+    def needs_repreintegration(self, pre, x, *, tol=1e-4):
+        """Whether ``x`` moved so far from ``pre.x_lin`` that first-order updates lose accuracy.
+
+        The test is the largest first-order change of a keyframe rotation, rad.
+        """
+        dx = np.asarray(x) - pre.x_lin
+        return float(np.max(np.abs(pre.J_dR @ dx))) > tol
+
+    def _updated(self, pre, x):
+        dx = np.asarray(x) - pre.x_lin
+        dR = pre.dR @ exp_so3(pre.J_dR @ dx)
+        S = pre.S + pre.J_S @ dx
+        S1 = pre.S1 + pre.J_S1 @ dx
+        w_b = pre.w_b + pre.J_w_b @ dx
+        return dR, S, S1, w_b
+
+    def earth_turn(self, T):
+        """``E(T) = Exp(-omega_ie_n T)``, shape (..., 3, 3)."""
+        T = np.asarray(T, dtype=float)
+        return exp_so3(-T[..., None] * self.omega_ie_n)
+
+    # -- attitudes ------------------------------------------------------------
+
+    def propagate(self, R0, pre, x):
+        """Dead-reckoned attitude at every keyframe boundary from ``R0``, shape (K+1, 3, 3)."""
+        dR, *_ = self._updated(pre, x)
+        E = self.earth_turn(self.T_key)
+        R = np.empty((self.n_keyframes + 1, 3, 3))
+        R[0] = R0
+        for k in range(self.n_keyframes):  # keyframe rate, not sample rate
+            R[k + 1] = E[k] @ R[k] @ dR[k]
+        return R
+
+    # -- factors --------------------------------------------------------------
+
+    def rotation_factors(self, R, pre, x):
+        """Residuals between consecutive keyframe attitudes ``R`` (K+1, 3, 3)."""
+        dR, *_ = self._updated(pre, x)
+        E = self.earth_turn(self.T_key)
+        A = E @ R[:-1] @ dR
+        r = log_so3(np.swapaxes(A, 1, 2) @ R[1:])
+        Jr_inv = right_jacobian_inv(r)
+        Jl_inv = right_jacobian_inv(-r)
+        H_next = Jr_inv
+        H_prev = -Jl_inv @ np.swapaxes(dR, 1, 2)
+        H_x = -Jl_inv @ pre.J_dR
+        sigma = self.gyro_noise * np.sqrt(self.T_key)[:, None] * np.ones(3)
+        return Residuals(r=r, key=np.arange(self.n_keyframes), H_R=H_prev, H_R_next=H_next,
+                         H_x=H_x, sigma=sigma)
+
+    def _lever_arm(self, x):
+        return self.layout.get(x, "lever_arm", np.zeros(3))
+
+    def gravity_factors(self, R, pre, x):
+        """Gravity (reaction-force) mismatch of every keyframe, m/s^2; ``R`` (K+1 or K, 3, 3)."""
+        K = self.n_keyframes
+        Rk = R[:K]
+        dR, S, S1, w_b = self._updated(pre, x)
+        W = skew(self.omega_ie_n)
+        T = self.T_key
+        l = self._lever_arm(x)
+        E = self.earth_turn(T)
+        C1 = E @ Rk @ dR                                         # attitude at the keyframe end
+        dv_n = np.einsum("kij,kj->ki", Rk, S) - np.einsum("ij,kjl,kl->ki", W, Rk, S1)
+        a0 = np.cross(w_b[:-1], l)                               # omega x l at the start
+        a1 = np.cross(w_b[1:], l)
+        v0 = np.einsum("kij,kj->ki", Rk, a0) - np.cross(self.omega_ie_n, np.einsum("kij,j->ki", Rk, l))
+        v1 = np.einsum("kij,kj->ki", C1, a1) - np.cross(self.omega_ie_n, np.einsum("kij,j->ki", C1, l))
+        g_up = np.array([0.0, 0.0, self.gravity])
+        r = (dv_n - (v1 - v0)) / T[:, None] - g_up
+        # Jacobian in the right perturbation of R_k
+        H_R = -Rk @ skew(S) + W @ Rk @ skew(S1)
+        H_R += -Rk @ skew(a0) + W @ Rk @ skew(l)                 # -(-dv0)
+        dRT = np.swapaxes(dR, 1, 2)
+        H_R -= (-C1 @ skew(a1) + W @ C1 @ skew(l)) @ dRT
+        # Jacobian in x
+        H_x = Rk @ pre.J_S - W @ Rk @ pre.J_S1
+        # v0 = Rk (w0 x l) - ...: d/dw0 = -Rk [l x]; d/dl = Rk [w0 x] - W Rk
+        H_x -= Rk @ skew(l) @ pre.J_w_b[:-1]
+        H_x -= -C1 @ skew(l) @ pre.J_w_b[1:]
+        # C1 depends on x through dR: d(C1 a) = -C1 [a x] J
+        H_x -= (-C1 @ skew(a1) + W @ C1 @ skew(l)) @ pre.J_dR
+        if "lever_arm" in self.layout:
+            s = self.layout.slice("lever_arm")
+            H_x[:, :, s] += Rk @ skew(w_b[:-1]) - W @ Rk
+            H_x[:, :, s] -= C1 @ skew(w_b[1:]) - W @ C1
+        r_scale = 1.0 / T[:, None, None]
+        H_R = H_R * r_scale
+        H_x = H_x * r_scale
+        var = np.empty((K, 3))
+        var[:] = (self.accel_noise**2 / T)[:, None]
+        var[:, :2] += (self.gravity * self.gyro_noise) ** 2 * T[:, None] / 3.0
+        sigma = np.sqrt(var)
+        if self.options.moving_sigma is not None:
+            sigma[~self.static_key] = np.maximum(sigma[~self.static_key], self.options.moving_sigma)
+        return Residuals(r=r, key=np.arange(K), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+
+    def encoder_factors(self, R, pre, x):
+        """Gyro attitude against every valid table reading, rad; ``R`` (K+1 or K, 3, 3)."""
+        M = self.tap_idx.size
+        P = self.layout.size
+        if M == 0:
+            z = np.zeros((0, 3))
+            return Residuals(r=z, key=np.zeros(0, dtype=np.int64), H_R=np.zeros((0, 3, 3)), H_R_next=None,
+                             H_x=np.zeros((0, 3, P)), sigma=z)
+        dx = np.asarray(x) - pre.x_lin
+        tapR = pre.tap_dR @ exp_so3(pre.tap_J @ dx)
+        Ew = exp_so3(self.tap_w * self.tap_dt[:, None])
+        Bp = tapR @ Ew
+        Rk = R[self.tap_key]
+        C_pred = self.earth_turn(self.tap_tau) @ Rk @ Bp
+        mount = self.layout.get(x, "mount", np.zeros(3))
+        lag = self.layout.get(x, "time_lag.table", np.zeros(1))[0]
+        Kd = self.layout.get(x, "damping.stiffness", np.zeros(9)).reshape(3, 3)
+        a_lag = self.tap_w * lag
+        a_damp = self.tap_f @ Kd.T
+        B = exp_so3(a_lag) @ exp_so3(a_damp)
+        C_meas = self.tap_C_nf @ self.C_fb @ exp_so3(mount) @ B
+        r = log_so3(np.swapaxes(C_meas, 1, 2) @ C_pred)
+        Jr_inv = right_jacobian_inv(r)
+        Jl_inv = right_jacobian_inv(-r)
+        H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
+        H_x = Jr_inv @ np.swapaxes(Ew, 1, 2) @ pre.tap_J
+        if "mount" in self.layout:
+            H_x[:, :, self.layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
+        if "time_lag.table" in self.layout:
+            Ed = exp_so3(a_damp)
+            col = -Jl_inv @ np.swapaxes(Ed, 1, 2) @ right_jacobian(a_lag) @ self.tap_w[..., None]
+            H_x[:, :, self.layout.slice("time_lag.table")] = col
+        if "damping.stiffness" in self.layout:
+            G = -Jl_inv @ right_jacobian(a_damp)                   # (M, 3, 3) per d(a_damp)
+            # a_damp_i = sum_j K_ij f_j  ->  d a_damp / d K_ij = e_i f_j
+            dK = np.einsum("mab,mj->mabj", G, self.tap_f).reshape(M, 3, 9)
+            H_x[:, :, self.layout.slice("damping.stiffness")] = dK
+        var = self.encoder_noise**2 + self.gyro_noise**2 * self.tap_tau
+        sigma = np.sqrt(var)[:, None] * np.ones(3)
+        return Residuals(r=r, key=self.tap_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+
+    def initial_attitudes(self, q_nb0, x=None, pre=None):
+        """Attitude at every keyframe boundary dead-reckoned from the alignment ``q_nb0``."""
+        if pre is None:
+            x = self.prior()[0] if x is None else x
+            pre = self.preintegrate(x)
+        return self.propagate(quat_to_dcm(q_nb0), pre, pre.x_lin if x is None else x)
