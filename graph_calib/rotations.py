@@ -55,7 +55,8 @@ def right_jacobian(a):
     theta = np.sqrt(theta2)
     small = theta2 < 1e-10
     safe = np.where(small, 1.0, theta)
-    A = np.where(small, 0.5 - theta2 / 24.0, (1.0 - np.cos(safe)) / (safe * safe))
+    # 1 - cos(t) = 2 sin^2(t/2): no cancellation for small t (A multiplies [a x], of size t)
+    A = np.where(small, 0.5 - theta2 / 24.0, 2.0 * np.sin(0.5 * safe) ** 2 / (safe * safe))
     B = np.where(small, 1.0 / 6.0 - theta2 / 120.0, (safe - np.sin(safe)) / (safe**3))
     K = skew(a)
     return np.eye(3) - A * K + B * (K @ K)
@@ -209,7 +210,7 @@ def right_jacobian_nb(ax, ay, az, out):
         B = 1.0 / 6.0 - t2 / 120.0
     else:
         t = np.sqrt(t2)
-        A = (1.0 - np.cos(t)) / t2
+        A = 2.0 * np.sin(0.5 * t) ** 2 / t2  # = (1 - cos t) / t^2 without cancellation
         B = (t - np.sin(t)) / (t2 * t)
     # I - A K + B K^2
     out[0, 0] = 1.0 - B * (ay * ay + az * az)
