@@ -26,10 +26,11 @@ Gravity measurement
 
 Encoder measurement
     A valid table reading at ``t_m`` (sample ``j``, ``dt_m = t_m - t_j``):
-    ``C_meas = C_nf(t_m) C_fb Exp(mount) Exp(w_m time_lag) Exp(K f_m)`` against
+    ``C_meas = C_nf(t_m) C_fb Exp(mount) Exp(w_nb time_lag) Exp(K f_m)`` against
     ``C_pred = E(t_m - t_k) R_k dR_{k,j} Exp(w_m dt_m)``, residual
     ``Log(C_meas^T C_pred)``.  ``w_m`` and ``f_m`` are the raw measured rate and
-    specific force at the reading (data, not functions of ``x``); ``K`` is
+    specific force of the sample interval holding ``t_m``, ``w_nb = w_m - (C_nf
+    C_fb)^T omega_ie_n`` (data, not functions of ``x``); ``K`` is
     ``damping.stiffness`` when modelled.  Covariance ``sigma_enc^2 + q_g^2 (t_m - t_k)``.
 
 Jacobians are with respect to the right perturbation of ``R_k``
@@ -430,6 +431,7 @@ class CalibrationModel:
         empty3 = np.zeros((0, 3))
         if tab is None or not np.any(tab.valid):
             self.tap_idx = np.zeros(0, dtype=np.int64)
+            self.tap_t = np.zeros(0)
             self.tap_key = np.zeros(0, dtype=np.int64)
             self.tap_dt = np.zeros(0)
             self.tap_tau = np.zeros(0)
@@ -444,13 +446,20 @@ class CalibrationModel:
             keep = (j >= 0) & (tm <= e.t[-1])
             tm, q, j = tm[keep], q[keep], j[keep]
             self.tap_idx = j.astype(np.int64)
+            self.tap_t = tm
             self.tap_key = (np.searchsorted(self.k0, j, side="right") - 1).astype(np.int64)
             self.tap_dt = tm - e.t[j]
             self.tap_tau = tm - self.t_key[self.tap_key]
             self.tap_C_nf = quat_to_dcm(q)
-            self.tap_w = self.w_raw[j]
-            self.tap_f = self.f_raw[j]
+            nxt = np.minimum(j + 1, e.n_samples - 1)      # the sample interval holding t_m
+            self.tap_w = self.w_raw[nxt]
+            self.tap_f = self.f_raw[nxt]
             self.C_fb = quat_to_dcm(tab.q_fb_nominal)
+            # rate of the faceplate against the level frame (for the lag), from the readings' attitude
+            C_bn = np.swapaxes(self.tap_C_nf @ self.C_fb, 1, 2)
+            self.tap_w_nb = self.tap_w - C_bn @ self.omega_ie_n
+        if tab is None or not np.any(tab.valid):
+            self.tap_w_nb = empty3
         self.tap_lo = np.searchsorted(self.tap_idx, self.k0[:-1], side="left").astype(np.int64)
 
     def _static_keyframes(self, static_mask):
@@ -631,7 +640,7 @@ class CalibrationModel:
         mount = self.layout.get(x, "mount", np.zeros(3))
         lag = self.layout.get(x, "time_lag.table", np.zeros(1))[0]
         Kd = self.layout.get(x, "damping.stiffness", np.zeros(9)).reshape(3, 3)
-        a_lag = self.tap_w * lag
+        a_lag = self.tap_w_nb * lag
         a_damp = self.tap_f @ Kd.T
         B = exp_so3(a_lag) @ exp_so3(a_damp)
         C_meas = self.tap_C_nf @ self.C_fb @ exp_so3(mount) @ B
@@ -644,7 +653,7 @@ class CalibrationModel:
             H_x[:, :, self.layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
         if "time_lag.table" in self.layout:
             Ed = exp_so3(a_damp)
-            col = -Jl_inv @ np.swapaxes(Ed, 1, 2) @ right_jacobian(a_lag) @ self.tap_w[..., None]
+            col = -Jl_inv @ np.swapaxes(Ed, 1, 2) @ right_jacobian(a_lag) @ self.tap_w_nb[..., None]
             H_x[:, :, self.layout.slice("time_lag.table")] = col
         if "damping.stiffness" in self.layout:
             G = -Jl_inv @ right_jacobian(a_damp)                   # (M, 3, 3) per d(a_damp)

@@ -1,0 +1,299 @@
+"""The factor-graph batch calibrator: GTSAM over the shared model.
+
+Variables: a ``Rot3`` ``X(k)`` at every keyframe boundary and the calibration
+vector ``C(0)``.  Factors, all ``gtsam.CustomFactor`` whose residuals and
+Jacobians come from :class:`graph_calib.model.CalibrationModel`:
+
+- a calibrated rotation preintegration factor ``(X(k), X(k+1), C(0))`` per keyframe,
+- a gravity factor ``(X(k), C(0))`` per keyframe,
+- an encoder factor ``(X(k), C(0))`` per keyframe holding that keyframe's valid
+  table readings (stacked, 3 rows per reading),
+- priors on ``X(0)`` (the alignment) and ``C(0)`` (the grade's priors).
+
+Python factors are slow when GTSAM's own optimiser calls them
+(``shared/notes/engineering-facts.md``), so the Levenberg-Marquardt loop is our
+own around ``graph.linearize``, ``GaussianFactorGraph.optimize`` and
+``Values.retract``.  The factors' callbacks read from a cache that evaluates
+every factor of a kind in one vectorised call of the model whenever GTSAM hands
+them values that differ from the cached ones; each callback fills its Jacobians
+only when GTSAM asks.  The preintegration is redone when the calibration moves
+too far from its linearisation point.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import C, X
+
+from graph_calib.rotations import quat_to_dcm
+
+
+@dataclass(frozen=True)
+class GraphOptions:
+    """Options of the batch solver.
+
+    Attributes
+    ----------
+    max_iterations : int
+    lambda_initial : float
+        Initial Levenberg-Marquardt damping.
+    rel_tol : float
+        Stop when the relative decrease of the cost is below this.
+    step_tol_sigma : float
+        ... or when every calibration step is below this fraction of its prior-free sigma proxy.
+    robust : str or None
+        ``"huber"`` or ``"cauchy"`` on gravity and encoder factors; None for least squares.
+    robust_k : float
+        Threshold of the robust loss, in whitened units.
+    repreintegrate_tol : float
+        Largest first-order keyframe rotation change (rad) before re-preintegration.
+    """
+
+    max_iterations: int = 30
+    lambda_initial: float = 1e-6
+    rel_tol: float = 1e-10
+    step_tol_sigma: float = 1e-4
+    robust: str | None = None
+    robust_k: float = 3.0
+    repreintegrate_tol: float = 1e-5
+
+
+@dataclass(frozen=True)
+class GraphResult:
+    """Outcome of :func:`solve`.
+
+    Attributes
+    ----------
+    x : ndarray (P,)
+        Calibration estimate (SI, ``layout`` order).
+    covariance : ndarray (P, P)
+        Its marginal covariance.
+    layout : graph_calib.params.Layout
+    attitudes : ndarray (K+1, 3, 3)
+        Keyframe attitudes ``C_nb``.
+    residuals : dict
+        Whitened residual series per factor kind: ``{kind: (times (F,), whitened (F, 3))}``.
+    iterations : int
+    cost_history : list of float
+    seconds : float
+    """
+
+    x: np.ndarray
+    covariance: np.ndarray
+    layout: object
+    attitudes: np.ndarray
+    residuals: dict
+    iterations: int
+    cost_history: list = field(default_factory=list)
+    seconds: float = 0.0
+
+
+class _Cache:
+    """Vectorised evaluation of every factor at one set of values."""
+
+    def __init__(self, model, pre):
+        self.model = model
+        self.pre = pre
+        self.K = model.n_keyframes
+        self.R = None
+        self.x = None
+        self.enc_groups = None
+        self.evaluations = 0
+
+    def _read(self, values):
+        R = np.empty((self.K + 1, 3, 3))
+        for k in range(self.K + 1):
+            R[k] = values.atRot3(X(k)).matrix()
+        return R, np.asarray(values.atVector(C(0)), dtype=float)
+
+    def ensure(self, values, k):
+        """Make sure the cache holds ``values`` (checked on the variables of keyframe ``k``)."""
+        if self.R is not None:
+            if np.array_equal(values.atVector(C(0)), self.x) and np.array_equal(
+                values.atRot3(X(k)).matrix(), self.R[k]
+            ):
+                return
+        R, x = self._read(values)
+        self.evaluate(R, x)
+
+    def evaluate(self, R, x):
+        m = self.model
+        self.R, self.x = R, x
+        self.rot = m.rotation_factors(R, self.pre, x)
+        self.grav = m.gravity_factors(R, self.pre, x)
+        self.enc = m.encoder_factors(R, self.pre, x)
+        self.evaluations += 1
+
+
+def _rotation_error(cache, k, this, values, H):
+    cache.ensure(values, k)
+    f = cache.rot
+    if H is not None:
+        H[0] = f.H_R[k]
+        H[1] = f.H_R_next[k]
+        H[2] = f.H_x[k]
+    return f.r[k]
+
+
+def _gravity_error(cache, k, this, values, H):
+    cache.ensure(values, k)
+    f = cache.grav
+    if H is not None:
+        H[0] = f.H_R[k]
+        H[1] = f.H_x[k]
+    return f.r[k]
+
+
+def _encoder_error(cache, k, lo, hi, this, values, H):
+    cache.ensure(values, k)
+    f = cache.enc
+    if H is not None:
+        H[0] = f.H_R[lo:hi].reshape(-1, 3)
+        H[1] = f.H_x[lo:hi].reshape(-1, f.H_x.shape[2])
+    return f.r[lo:hi].reshape(-1)
+
+
+def _noise(sigmas, robust, k):
+    base = gtsam.noiseModel.Diagonal.Sigmas(np.asarray(sigmas, dtype=float))
+    if robust is None:
+        return base
+    est = {"huber": gtsam.noiseModel.mEstimator.Huber, "cauchy": gtsam.noiseModel.mEstimator.Cauchy}[robust]
+    return gtsam.noiseModel.Robust.Create(est.Create(k), base)
+
+
+def build_graph(model, cache, *, R_prior, x_prior, x_sigma, robust=None, robust_k=3.0):
+    """The nonlinear factor graph of ``model`` (callbacks bound to ``cache``)."""
+    from functools import partial
+
+    graph = gtsam.NonlinearFactorGraph()
+    K = model.n_keyframes
+    att_sigma = model.options.initial_attitude_sigma
+    graph.add(gtsam.PriorFactorRot3(X(0), gtsam.Rot3(R_prior), gtsam.noiseModel.Isotropic.Sigma(3, att_sigma)))
+    graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
+    rot_sigma = cache.rot.sigma
+    grav_sigma = cache.grav.sigma
+    for k in range(K):
+        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(rot_sigma[k]), [X(k), X(k + 1), C(0)],
+                                     partial(_rotation_error, cache, k)))
+        graph.add(gtsam.CustomFactor(_noise(grav_sigma[k], robust, robust_k), [X(k), C(0)],
+                                     partial(_gravity_error, cache, k)))
+    keys = cache.enc.key
+    if keys.size:
+        bounds = np.flatnonzero(np.diff(keys)) + 1
+        starts = np.concatenate([[0], bounds])
+        ends = np.concatenate([bounds, [keys.size]])
+        for lo, hi in zip(starts, ends):
+            k = int(keys[lo])
+            graph.add(gtsam.CustomFactor(_noise(cache.enc.sigma[lo:hi].reshape(-1), robust, robust_k),
+                                         [X(k), C(0)], partial(_encoder_error, cache, k, int(lo), int(hi))))
+    return graph
+
+
+def _values(R, x):
+    v = gtsam.Values()
+    for k in range(R.shape[0]):
+        v.insert(X(k), gtsam.Rot3(R[k]))
+    v.insert(C(0), np.asarray(x, dtype=float))
+    return v
+
+
+def _ordering(K):
+    o = gtsam.Ordering()
+    for k in range(K + 1):
+        o.push_back(X(k))
+    o.push_back(C(0))
+    return o
+
+
+def _damped(gfg, values_keys, lam, dims):
+    damped = gtsam.GaussianFactorGraph()
+    damped.push_back(gfg)
+    s = np.sqrt(lam)
+    for key, d in zip(values_keys, dims):
+        damped.add(gtsam.JacobianFactor(key, s * np.eye(d), np.zeros(d), gtsam.noiseModel.Unit.Create(d)))
+    return damped
+
+
+def solve(model, *, q_nb0, options=GraphOptions(), progress=None):
+    """Calibrate by Levenberg-Marquardt over the factor graph of ``model``.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+    q_nb0 : ndarray, shape (4,)
+        Prior attitude at the start of the record (alignment), scalar first.
+    options : GraphOptions
+    progress : callable, optional
+        Called as ``progress(iteration, cost)``.
+
+    Returns
+    -------
+    GraphResult
+    """
+    t0 = time.perf_counter()
+    x_prior, x_sigma = model.prior()
+    R_prior = quat_to_dcm(q_nb0)
+    x = x_prior.copy()
+    pre = model.preintegrate(x)
+    R = model.propagate(R_prior, pre, x)
+    cache = _Cache(model, pre)
+    cache.evaluate(R, x)
+    graph = build_graph(model, cache, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma,
+                        robust=options.robust, robust_k=options.robust_k)
+    K = model.n_keyframes
+    P = model.layout.size
+    keys = [X(k) for k in range(K + 1)] + [C(0)]
+    dims = [3] * (K + 1) + [P]
+    ordering = _ordering(K)
+    values = _values(R, x)
+    cost = graph.error(values)
+    history = [cost]
+    lam = options.lambda_initial
+    it = 0
+    for it in range(1, options.max_iterations + 1):
+        gfg = graph.linearize(values)
+        while True:
+            delta = _damped(gfg, keys, lam, dims).optimize(ordering)
+            trial = values.retract(delta)
+            x_trial = np.asarray(trial.atVector(C(0)))
+            if model.needs_repreintegration(cache.pre, x_trial, tol=options.repreintegrate_tol):
+                cache.pre = model.preintegrate(x_trial)
+                cache.R = None
+                cost = graph.error(values)   # the same values under the refreshed preintegration
+            new_cost = graph.error(trial)
+            if new_cost <= cost or lam > 1e8:
+                break
+            lam *= 10.0
+        step = np.asarray(delta.at(C(0)))
+        accepted = new_cost <= cost
+        if accepted:
+            values = trial
+            lam = max(lam / 10.0, 1e-12)
+        rel = (cost - new_cost) / max(cost, 1e-300)
+        cost = min(cost, new_cost)
+        history.append(cost)
+        if progress is not None:
+            progress(it, cost)
+        if accepted and (abs(rel) < options.rel_tol or np.all(np.abs(step) < options.step_tol_sigma * x_sigma)):
+            break
+        if not accepted and lam > 1e8:
+            break
+    # covariance: re-preintegrate at the solution so the Jacobians are exact there
+    x = np.asarray(values.atVector(C(0)), dtype=float)
+    cache.pre = model.preintegrate(x)
+    cache.R = None
+    marginals = gtsam.Marginals(graph, values)
+    cov = np.asarray(marginals.marginalCovariance(C(0)))
+    cache.ensure(values, 0)
+    residuals = {
+        "rotation": (model.t_key[1:], cache.rot.whitened()),
+        "gravity": (model.t_key[:-1], cache.grav.whitened()),
+        "encoder": (model.tap_t, cache.enc.whitened()),
+    }
+    return GraphResult(x=x, covariance=0.5 * (cov + cov.T), layout=model.layout, attitudes=cache.R.copy(),
+                       residuals=residuals, iterations=it, cost_history=history,
+                       seconds=time.perf_counter() - t0)
