@@ -50,7 +50,7 @@ def experiment_factory():
     return make_experiment
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def real_data():
     """Folder of the measured recordings; the test is skipped when it is absent."""
     if not REAL_DATA.is_dir():
