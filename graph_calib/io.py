@@ -546,11 +546,16 @@ def _attr_str_tuple(value):
 
 
 def _attr_scalar(value):
-    """A scalar attribute as a Python number or str; anything else left as is (refused later)."""
+    """A scalar attribute as a Python number or str; anything else left as is (refused later).
+
+    A one-element array counts as a scalar: MATLAB and some HDF5 writers store scalars so.
+    """
     if isinstance(value, (bytes, np.bytes_)):
         return value.decode("utf-8")
-    if isinstance(value, np.ndarray) and value.shape == ():
-        value = value[()]
+    if isinstance(value, np.ndarray) and value.size == 1 and value.dtype.kind in "fiuSO":
+        value = value.reshape(())[()]  # () or a 1-element array (as MATLAB writes scalars)
+        if isinstance(value, bytes):
+            value = value.decode("utf-8")
     if isinstance(value, np.generic):
         return value.item()
     return value

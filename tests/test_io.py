@@ -144,6 +144,17 @@ def test_defaults_of_optional_attributes(good_file):
     assert exp.description == ""
 
 
+def test_one_element_array_attributes_count_as_scalars(good_file):
+    with h5py.File(good_file, "r+") as f:  # as MATLAB writes scalar attributes
+        f.attrs["latitude_rad"] = np.array([[0.95]])
+        f.attrs["version"] = np.array([1], dtype=np.int32)
+        f["imu"].attrs["rate_hz"] = np.array([100.0], dtype=np.float32)
+        f.attrs["imu_id"] = np.array([b"TEST-IMU 0001"])
+    exp = read_experiment(good_file)
+    assert exp.latitude_rad == 0.95 and exp.rate_hz == 100.0 and exp.imu_id == "TEST-IMU 0001"
+    assert type(exp.rate_hz) is float
+
+
 def test_table_readings_outside_the_imu_span_and_truth_group_are_accepted(good_file):
     with h5py.File(good_file, "r+") as f:
         _replace_dataset(f, "table/t", f["table/t"][()] + 50.0)  # mostly after the last IMU sample
@@ -554,10 +565,6 @@ def test_manifest_is_read(campaign_dir):
     sig = camp.prior_sigmas()
     assert sig["gyro.bias"] == 1e-6 and sig["mount"] == params.GRADES["navigation"].prior_sigma["mount"]
     assert read_experiment(camp.experiments[1].file).n_samples == 600
-
-
-def _manifest(text_edit):
-    return lambda text: text_edit(text)
 
 
 MANIFEST_RULES = [
