@@ -19,7 +19,7 @@ Gravity measurement
     point, ``v_n = C_nb (omega_nb_b x l) `` (the rotation centre is fixed), so
     ``r = (dv_n - [v_n(t_{k+1}) - v_n(t_k)]) / T_k - [0, 0, g]``.  With
     ``C_nb(t) = E(t - t_k) R_k dR(t)``, ``dv_n = R_k S - [omega_ie_n x] R_k S1``
-    where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} - t_k) dR_{j-1} u_j``
+    where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} + h_j/2 - t_k) dR_{j-1} u_j``
     are preintegrated once per calibration.  Covariance
     ``q_a^2 / T_k`` per axis plus ``g^2 q_g^2 T_k / 3`` on the horizontal axes
     (attitude noise inside the interval).
@@ -219,14 +219,16 @@ def _preintegrate(dtheta, dv, dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
             for i in range(3):
                 for c in range(nc):
                     tmp[i, c] = Ju[i, c] - tmp[i, c]
+            # the level frame turns during the sample too: weight by the mid-sample time
+            tm = tau + 0.5 * h
             for i in range(3):
                 ru = R[i, 0] * u[0] + R[i, 1] * u[1] + R[i, 2] * u[2]
                 s[i] += ru
-                s1[i] += tau * ru
+                s1[i] += tm * ru
                 for c in range(nc):
                     d = R[i, 0] * tmp[0, c] + R[i, 1] * tmp[1, c] + R[i, 2] * tmp[2, c]
                     js[i, c] += d
-                    js1[i, c] += tau * d
+                    js1[i, c] += tm * d
             # rotation: R <- R Exp(phi); J <- Exp(phi)^T J + Jr(phi) dphi
             exp_so3_nb(phi[0], phi[1], phi[2], E)
             right_jacobian_nb(phi[0], phi[1], phi[2], Jr)
