@@ -29,9 +29,10 @@ Units
     :mod:`graph_calib.constants`.
 
 Attitude errors
-    Solvers perturb rotations on the right, ``C_nb = C_nb_hat @ Exp(delta_b)``
-    (GTSAM's ``Rot3.retract``); the Kalman filter states the same error in the
-    level frame, ``phi_n = C_nb_hat @ delta_b``, so ``C_nb = Exp(phi_n) @ C_nb_hat``.
+    Both solvers perturb keyframe rotations on the right,
+    ``C_nb = C_nb_hat @ Exp(delta_b)`` (GTSAM's ``Rot3.retract``); the Kalman
+    filter's attitude-error states are the same ``delta_b`` (the level-frame
+    error is ``phi_n = C_nb_hat @ delta_b``).
 
 Earth rate
     Never neglected: gyros measure ``omega_ib_b``; the level frame turns with
