@@ -161,10 +161,11 @@ def _preintegrate(dtheta, dv, dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
         E = np.empty((3, 3))
         Jr = np.empty((3, 3))
         Rn = np.empty((3, 3))
+        work = np.empty((8, 3))
         j0 = k0[k]
         if j0 > 0:
             correct_sample(grows, x, w_raw[j0 - 1], dTg[j0 - 1], dTdtg[j0 - 1], f_raw[j0 - 1],
-                           dw_raw[j0 - 1], dw_raw[j0 - 1], n_newton, w, Jw, True)
+                           dw_raw[j0 - 1], dw_raw[j0 - 1], n_newton, w, Jw, True, work)
             for i in range(3):
                 pth[i] = w[i] * dt[j0 - 1]
                 for c in range(nc):
@@ -174,9 +175,9 @@ def _preintegrate(dtheta, dv, dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
         for j in range(j0, k0[k + 1]):
             h = dt[j]
             correct_sample(grows, x, w_raw[j], dTg[j], dTdtg[j], f_raw[j], dw_raw[j], dw_raw[j],
-                           n_newton, w, Jw, True)
+                           n_newton, w, Jw, True, work)
             correct_sample(arows, x, f_raw[j], dTa[j], dTdta[j], w_raw[j], dw_raw[j], df_raw[j],
-                           n_newton, fc, Jf, True)
+                           n_newton, fc, Jf, True, work)
             for i in range(3):
                 th[i] = w[i] * h
                 vv[i] = fc[i] * h

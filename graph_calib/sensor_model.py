@@ -173,40 +173,74 @@ def _error(rows, x, s, dT, dTdt, other, domega, dsig, out):
         out[axis] += x[col] * _feature(code, axis, aux, s, dT, dTdt, other, domega, dsig)
 
 
+@numba.njit(cache=True, inline="always")
+def _inv3(A, out):
+    a, b, c = A[0, 0], A[0, 1], A[0, 2]
+    d, e, f = A[1, 0], A[1, 1], A[1, 2]
+    g, h, k = A[2, 0], A[2, 1], A[2, 2]
+    c00 = e * k - f * h
+    c01 = f * g - d * k
+    c02 = d * h - e * g
+    inv_det = 1.0 / (a * c00 + b * c01 + c * c02)
+    out[0, 0] = c00 * inv_det
+    out[1, 0] = c01 * inv_det
+    out[2, 0] = c02 * inv_det
+    out[0, 1] = (c * h - b * k) * inv_det
+    out[1, 1] = (a * k - c * g) * inv_det
+    out[2, 1] = (b * g - a * h) * inv_det
+    out[0, 2] = (b * f - c * e) * inv_det
+    out[1, 2] = (c * d - a * f) * inv_det
+    out[2, 2] = (a * e - b * d) * inv_det
+
+
+@numba.njit(cache=True, inline="always")
+def _slope(rows, x, s, dT, A):
+    """A = I + d(err)/ds at s."""
+    for i in range(3):
+        for k in range(3):
+            A[i, k] = 1.0 if i == k else 0.0
+    for r in range(rows.shape[0]):
+        col, axis, code, aux = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
+        if code < SCALE or code == GSENS or code > NONLIN:
+            continue
+        for k in range(3):
+            A[axis, k] += x[col] * _dfeature(code, axis, aux, s, dT, k)
+
+
 @numba.njit(cache=True)
-def correct_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, s, J, want_jacobian):
+def correct_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, s, J, want_jacobian, work):
     """Invert one sample: ``s`` with ``s + Phi(s) x = m``; ``J = ds/dx`` (3, n) when asked.
 
-    ``J`` is overwritten only in the columns that ``rows`` name (others must be zero).
+    Newton's method from ``s = m`` (exact in one step when the model is linear in
+    ``s``).  ``J`` is overwritten only in the columns that ``rows`` name (others
+    must be zero).  ``work`` is a scratch array of shape (8, 3).
     """
-    err = np.empty(3)
+    err = work[0]
+    A = work[2:5]
+    Ai = work[5:8]
+    nonlinear = False
+    for r in range(rows.shape[0]):
+        if rows[r, 2] == SCALE_ASYM or rows[r, 2] == NONLIN:
+            nonlinear = True
+    # a model linear in s is inverted exactly by one Newton step
+    steps = n_iter if nonlinear else 1
     s[0] = m[0]
     s[1] = m[1]
     s[2] = m[2]
-    A = np.eye(3)
-    # Newton's method on s + err(s) - m = 0 (quadratic convergence; exact in one step
-    # when the model is linear in s)
-    for it in range(n_iter + 1):
-        A[:, :] = 0.0
-        A[0, 0] = 1.0
-        A[1, 1] = 1.0
-        A[2, 2] = 1.0
-        for r in range(rows.shape[0]):
-            col, axis, code, aux = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
-            for k in range(3):
-                A[axis, k] += x[col] * _dfeature(code, axis, aux, s, dT, k)
-        if it == n_iter:
-            break
+    for _ in range(steps):
+        _slope(rows, x, s, dT, A)
+        _inv3(A, Ai)
         _error(rows, x, s, dT, dTdt, other, domega, dsig, err)
-        res = np.empty(3)
+        r0 = s[0] + err[0] - m[0]
+        r1 = s[1] + err[1] - m[1]
+        r2 = s[2] + err[2] - m[2]
         for i in range(3):
-            res[i] = s[i] + err[i] - m[i]
-        step = np.linalg.solve(A, res)
-        for i in range(3):
-            s[i] -= step[i]
+            s[i] -= Ai[i, 0] * r0 + Ai[i, 1] * r1 + Ai[i, 2] * r2
     if not want_jacobian:
         return
-    Ai = np.linalg.inv(A)
+    if nonlinear:
+        _slope(rows, x, s, dT, A)
+        _inv3(A, Ai)
     for r in range(rows.shape[0]):
         for i in range(3):
             J[i, rows[r, 0]] = 0.0
@@ -230,8 +264,9 @@ def _forward_many(rows, x, s, dT, dTdt, other, domega, dsig, out):
 @numba.njit(cache=True, parallel=True)
 def _inverse_many(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, out, J, want_jacobian):
     for j in numba.prange(m.shape[0]):
+        work = np.empty((8, 3))
         correct_sample(rows, x, m[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], n_iter,
-                       out[j], J[j], want_jacobian)
+                       out[j], J[j], want_jacobian, work)
 
 
 def _as3(a, n):
