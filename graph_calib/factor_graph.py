@@ -218,7 +218,7 @@ def _damped(gfg, values_keys, lam, dims):
     return damped
 
 
-def solve(model, *, q_nb0, options=GraphOptions(), progress=None):
+def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     """Calibrate by Levenberg-Marquardt over the factor graph of ``model``.
 
     Parameters
@@ -229,6 +229,10 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None):
     options : GraphOptions
     progress : callable, optional
         Called as ``progress(iteration, cost)``.
+    initial : tuple (R, x), optional
+        Starting keyframe attitudes (K+1, 3, 3) and calibration (P,) instead of
+        dead reckoning from the priors (e.g. a previous solution embedded in a
+        larger layout, for a score test of a further effect).
 
     Returns
     -------
@@ -237,9 +241,14 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None):
     t0 = time.perf_counter()
     x_prior, x_sigma = model.prior()
     R_prior = quat_to_dcm(q_nb0)
-    x = x_prior.copy()
-    pre = model.preintegrate(x)
-    R = model.propagate(R_prior, pre, x)
+    if initial is None:
+        x = x_prior.copy()
+        pre = model.preintegrate(x)
+        R = model.propagate(R_prior, pre, x)
+    else:
+        R = np.asarray(initial[0], dtype=float)
+        x = np.asarray(initial[1], dtype=float).copy()
+        pre = model.preintegrate(x)
     cache = _Cache(model, pre)
     cache.evaluate(R, x)
     graph = build_graph(model, cache, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma,
