@@ -312,10 +312,13 @@ def curvature_fit_offsets(imu, sensor_dT):
         cols = slice(0, 3) if p.startswith("gyro") else slice(3, 6)
         dT = sensor_dT[:, cols]
         for i, ax in enumerate("xyz"):
-            A = np.column_stack([np.ones(dT.shape[0]), dT[:, i]])
-            coef, *_ = np.linalg.lstsq(A, c2[i] * dT[:, i] ** 2, rcond=None)
-            out[f"{p}.{ax}"] = float(coef[0])
-            out[f"{ptc}.{ax}"] = float(coef[1])
+            d = dT[:, i]
+            y = c2[i] * d * d
+            dm, ym = d.mean(), y.mean()
+            var = np.mean((d - dm) ** 2)
+            slope = float(np.mean((d - dm) * (y - ym)) / var) if var > 0 else 0.0
+            out[f"{p}.{ax}"] = float(ym - slope * dm)
+            out[f"{ptc}.{ax}"] = slope
     return out
 
 
