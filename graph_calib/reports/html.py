@@ -6,7 +6,7 @@ calibration.
 
 >>> from graph_calib.reports import html
 >>> html.table(["a", "b"], [[1, "<x>"]])
-'<table><thead><tr><th>a</th><th>b</th></tr></thead><tbody><tr><td>1</td><td>&lt;x&gt;</td></tr></tbody></table>'
+'<table><thead><tr><th class="l">a</th><th>b</th></tr></thead><tbody><tr><td class="l">1</td><td>&lt;x&gt;</td></tr></tbody></table>'
 """
 
 from __future__ import annotations
