@@ -48,16 +48,18 @@ def run(args):
     options = options_from_args(args)
     exp = io.read_experiment(path)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
     solvers = ("sqrt-kf", "factor-graph") if args.solver == "both" else (args.solver,)
     problem = build_problem(exp, options=options)
+    out.mkdir(parents=True, exist_ok=True)
     m = problem.model
     print(f"{path.name}: {exp.n_samples} samples, {exp.t[-1] - exp.t[0] + 1 / exp.rate_hz:.0f} s, "
           f"{m.n_keyframes} keyframes, {m.layout.size} parameters, T_ref {m.t_ref_degC:.2f} degC", file=sys.stderr)
     results = {}
     for s in solvers:
-        def progress(i, cost, _s=s):
-            print(f"  {_s}: iteration {i}, cost {cost:.6g}", file=sys.stderr)
+        def progress(i, info, _s=s):
+            what = f"cost {info:.6g}" if isinstance(info, float) else (
+                f"calibration moved {info.max_dx_sigma:.3g} sigma, chi2/dof {info.chi2_per_dof:.3g}")
+            print(f"  {_s}: pass {i}, {what}", file=sys.stderr)
 
         res = (run_factor_graph if s == "factor-graph" else run_sqrt_kf)(problem, options=options, progress=progress)[0]
         io.write_result(res, out / f"{s}.json")

@@ -1,0 +1,58 @@
+"""`graph-calib calibrate` end to end: simulate, calibrate, files, bad input."""
+
+import json
+
+import pytest
+
+from graph_calib import io
+from graph_calib.cli import main
+
+
+@pytest.fixture(scope="module")
+def experiment_file(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim")
+    assert main(["simulate", "nav-subrange-short", "--out", str(out), "--seed", "3", "--hours", "0.1"]) == 0
+    files = sorted(out.glob("*.h5"))
+    assert len(files) == 1
+    return files[0]
+
+
+def test_calibrate_factor_graph_writes_a_valid_result(experiment_file, tmp_path, capsys):
+    assert main(["calibrate", str(experiment_file), "--out", str(tmp_path), "--solver", "factor-graph"]) == 0
+    res = io.read_result(tmp_path / "factor-graph.json")
+    assert res.solver == "factor-graph"
+    assert "gyro.bias.x" in res.values and res.sigmas["gyro.bias.x"] > 0
+    assert res.covariance.shape == (len(res.values), len(res.values))
+    assert not (tmp_path / "comparison.json").exists()
+    assert "gyro bias [deg/h]" in capsys.readouterr().out
+
+
+def test_calibrate_both_writes_comparison(experiment_file, tmp_path):
+    pytest.importorskip("kf_reference")
+    assert main(["calibrate", str(experiment_file), "--out", str(tmp_path)]) == 0
+    cmp_ = json.loads((tmp_path / "comparison.json").read_text())
+    assert cmp_["format"] == "imu-calibration-comparison"
+    row = cmp_["parameters"]["gyro.bias.x"]
+    assert set(row) >= {"sqrt-kf", "factor-graph", "difference_in_sigma", "sigma_ratio"}
+    for s in ("sqrt-kf", "factor-graph"):
+        assert io.read_result(tmp_path / f"{s}.json").solver == s
+
+
+def test_missing_experiment_is_exit_2_with_one_line(tmp_path, capsys):
+    missing = tmp_path / "nope.h5"
+    assert main(["calibrate", str(missing), "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert f"{missing}: no such file" in err and "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_unknown_effect_is_exit_2(experiment_file, tmp_path, capsys):
+    assert main(["calibrate", str(experiment_file), "--out", str(tmp_path / "o"), "--effect", "gyro.wobble"]) == 2
+    assert "--effect: unknown effect 'gyro.wobble'" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_solver_is_exit_2(experiment_file, tmp_path):
+    with pytest.raises(SystemExit) as e:
+        main(["calibrate", str(experiment_file), "--out", str(tmp_path), "--solver", "magic"])
+    assert e.value.code == 2
