@@ -1,0 +1,433 @@
+r"""Calibration with the iterated, linearised square-root Kalman filter.
+
+Every equation comes from :class:`graph_calib.model.CalibrationModel`: one pass
+computes all factors at a linearisation point (attitudes ``R_lin``, calibration
+``x_lin``), stacks them into the matrices of a linear Gaussian recursion and
+runs :func:`kf_reference.sqrt_kf.run` over the keyframes; a smoother of the
+attitude chain given the final calibration (:func:`kf_reference.sqrt_kf.smooth_attitude`)
+follows.  Passes repeat with the smoothed trajectory and the final calibration as
+the new linearisation point until both stop moving: each pass is one
+Gauss-Newton step of the batch problem.  ``docs/kf_reference.md`` gives the
+derivation and why the fixed point is the batch (factor-graph) solution.
+
+Factor conventions (``graph_calib.model.Residuals``)
+    rotation ``k``: ``0 = r + H_R delta_k + H_R_next delta_{k+1} + H_x dx - w``;
+    gravity and encoder: ``0 = r + H_R delta_key + H_x dx + v``, so the filter's
+    measurement is ``z = -r`` with row ``h = [H_R, H_x]``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from graph_calib.params import Layout
+from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
+from kf_reference import sqrt_kf
+from kf_reference.sqrt_kf import ATT
+
+#: Kind codes of the innovation series.
+GRAVITY, ENCODER = 0, 1
+KIND_NAMES = ("gravity", "encoder")
+
+
+@dataclass(frozen=True)
+class PassInfo:
+    """Convergence figures of one filter pass.
+
+    Attributes
+    ----------
+    index : int
+        Pass number, from 1.
+    max_dx_sigma : float
+        Largest ``|dx_hat_i| / sigma_i``: how far the pass moved the calibration, in its sigmas.
+    max_attitude_correction : float
+        Largest smoothed attitude correction ``|delta_{k|K}|`` over the keyframes, rad.
+    max_attitude_correction_sigma : float
+        The same in units of its sigma given the calibration (largest per-axis ratio).
+    chi2_per_dof : float
+        Mean squared normalised innovation over every scalar measurement.
+    seconds_model : float
+        Preintegration and factors.
+    seconds_filter : float
+        The filter recursion.
+    """
+
+    index: int
+    max_dx_sigma: float
+    max_attitude_correction: float
+    max_attitude_correction_sigma: float
+    chi2_per_dof: float
+    seconds_model: float
+    seconds_filter: float
+
+
+@dataclass(frozen=True)
+class FilterResult:
+    """What the filter concludes about one experiment.
+
+    Shapes: ``P`` calibration elements, ``K`` keyframes, ``m`` scalar measurements.
+
+    Attributes
+    ----------
+    layout : graph_calib.params.Layout
+    x : ndarray, shape (P,)
+        Calibration estimate, SI.
+    covariance : ndarray, shape (P, P)
+    t_key : ndarray, shape (K+1,)
+        Time of each keyframe boundary, s.
+    C_nb : ndarray, shape (K+1, 3, 3)
+        Smoothed attitude at each boundary (given every measurement): the final
+        linearisation point, the batch solution's attitudes.
+    C_nb_filtered : ndarray, shape (K+1, 3, 3)
+        Filtered attitude at each boundary (given the measurements up to it; the last one predicted).
+    attitude_sigma_filtered : ndarray, shape (K+1, 3)
+        One sigma of the filtered attitude error (right perturbation, body axes), rad.
+    innovation_t : ndarray, shape (m,)
+        Time of each scalar measurement: the keyframe start for gravity, the reading time for encoders.
+    innovation_kind : ndarray of int, shape (m,)
+        :data:`GRAVITY` or :data:`ENCODER`.
+    innovation_axis : ndarray of int, shape (m,)
+        Component 0, 1, 2 of the factor's residual (``n`` axes for gravity; the rotation
+        vector of the encoder residual).
+    innovation : ndarray, shape (m,)
+        Normalised innovations ``nu / sqrt(var(nu))`` of the last pass; N(0, 1) for a consistent model.
+    passes : tuple of PassInfo
+    converged : bool
+        Whether the last pass met the tolerances (else ``max_passes`` ended the iteration).
+    initial_iterations : int
+        Attitude-only iterations of :func:`initial_attitudes` before the first pass.
+    """
+
+    layout: Layout
+    x: np.ndarray
+    covariance: np.ndarray
+    t_key: np.ndarray
+    C_nb: np.ndarray
+    C_nb_filtered: np.ndarray
+    attitude_sigma_filtered: np.ndarray
+    innovation_t: np.ndarray
+    innovation_kind: np.ndarray
+    innovation_axis: np.ndarray
+    innovation: np.ndarray
+    passes: tuple
+    converged: bool
+    initial_iterations: int = 0
+
+    @property
+    def n_passes(self):
+        return len(self.passes)
+
+    @property
+    def sigma(self):
+        """One sigma of every calibration element, shape (P,)."""
+        return np.sqrt(np.diag(self.covariance))
+
+    def innovation_stats(self):
+        """``{kind name: {"count", "rms", "rms_axis"}}`` of the normalised innovations."""
+        out = {}
+        for code, name in enumerate(KIND_NAMES):
+            m = self.innovation_kind == code
+            if not np.any(m):
+                continue
+            v = self.innovation[m]
+            ax = self.innovation_axis[m]
+            out[name] = {
+                "count": int(v.size),
+                "rms": float(np.sqrt(np.mean(v**2))),
+                "rms_axis": [float(np.sqrt(np.mean(v[ax == a] ** 2))) if np.any(ax == a) else 0.0
+                             for a in range(3)],
+            }
+        return out
+
+
+# ---------------------------------------------------------------------------
+# one pass
+# ---------------------------------------------------------------------------
+
+
+def _diagonal_noise(res):
+    """``(r, H_R, H_x, sigma)`` with per-component sigmas; a full covariance is whitened first."""
+    if res.sigma.ndim == 2:
+        return res.r, res.H_R, res.H_x, res.sigma
+    Linv = np.linalg.inv(np.linalg.cholesky(res.sigma))
+    return (np.einsum("fij,fj->fi", Linv, res.r), Linv @ res.H_R, Linv @ res.H_x,
+            np.ones(res.r.shape))
+
+
+def _transition(rot):
+    """``B, A, G, c`` of ``delta_{k+1} = B delta_k + A dx + c + G w`` from the rotation factors."""
+    N_inv = np.linalg.inv(rot.H_R_next)
+    if rot.sigma.ndim == 2:
+        G = N_inv * rot.sigma[:, None, :]
+    else:
+        G = N_inv @ np.linalg.cholesky(rot.sigma)
+    B = -N_inv @ rot.H_R
+    A = -N_inv @ rot.H_x
+    c = -np.einsum("kij,kj->ki", N_inv, rot.r)
+    return (np.ascontiguousarray(B), np.ascontiguousarray(A), np.ascontiguousarray(G),
+            np.ascontiguousarray(c))
+
+
+def _measurements(model, grav, enc):
+    """Scalar measurement rows sorted by keyframe: ``key, H, z, sigma, t, kind, axis``.
+
+    Within a keyframe the gravity rows come first, then the encoder rows in time order.
+    """
+    parts = ((grav, GRAVITY, model.t_key[grav.key]), (enc, ENCODER, model.tap_t))
+    key = np.concatenate([np.repeat(res.key, 3) for res, _, _ in parts])
+    dest = np.empty(key.size, dtype=np.int64)
+    dest[np.argsort(key, kind="stable")] = np.arange(key.size)        # row of each factor component
+    m, n = key.size, 3 + grav.H_x.shape[2]
+    H, z, sig, t_out = np.empty((m, n)), np.empty(m), np.empty(m), np.empty(m)
+    kind_out, axis = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
+    start = 0
+    for res, kind, t in parts:
+        r, H_R, H_x, sg = _diagonal_noise(res)
+        F3 = 3 * r.shape[0]
+        d = dest[start:start + F3]
+        start += F3
+        H[d, :3] = H_R.reshape(F3, 3)
+        H[d, 3:] = H_x.reshape(F3, n - 3)
+        z[d] = -r.reshape(-1)
+        sig[d] = sg.reshape(-1)
+        t_out[d] = np.repeat(t, 3)
+        kind_out[d] = kind
+        axis[d] = np.tile(np.arange(3), F3 // 3)
+    return np.sort(key, kind="stable"), H, z, sig, t_out, kind_out, axis
+
+
+@dataclass(frozen=True)
+class _Linearised:
+    """The linear Gaussian recursion of the factors at one linearisation point (see :mod:`sqrt_kf`)."""
+
+    B: np.ndarray
+    A: np.ndarray
+    G: np.ndarray
+    c: np.ndarray
+    H: np.ndarray
+    z: np.ndarray
+    sigma: np.ndarray
+    lo: np.ndarray
+    t: np.ndarray
+    kind: np.ndarray
+    axis: np.ndarray
+    s0: np.ndarray
+    Ut0: np.ndarray
+
+
+def _linearise(model, pre, R_lin, x_lin, *, R_prior, x_prior, x_sigma):
+    """Every factor at ``(R_lin, x_lin)`` (``pre`` preintegrated at ``x_lin``), as a :class:`_Linearised`."""
+    rot = model.rotation_factors(R_lin, pre, x_lin)
+    grav = model.gravity_factors(R_lin, pre, x_lin)
+    enc = model.encoder_factors(R_lin, pre, x_lin)
+    B, A, G, c = _transition(rot)
+    key, H, z, sig, t, kind, axis = _measurements(model, grav, enc)
+    lo = np.searchsorted(key, np.arange(model.n_keyframes + 2)).astype(np.int64)
+    CAL = sqrt_kf.cal_slice(x_lin.size)
+    s0 = np.zeros(sqrt_kf.N_ATT + x_lin.size)
+    s0[ATT] = log_so3(R_lin[0].T @ R_prior)
+    s0[CAL] = x_prior - x_lin
+    Ut0 = np.diag(np.concatenate([np.full(3, model.options.initial_attitude_sigma), x_sigma]))
+    return _Linearised(B=B, A=A, G=G, c=c, H=H, z=z, sigma=sig, lo=lo, t=t, kind=kind, axis=axis, s0=s0, Ut0=Ut0)
+
+
+def _smooth_attitudes(lin, dx):
+    """Smoothed attitude errors and their sigmas given the calibration error ``dx``, (K+1, 3) each.
+
+    ``E[delta_k | all] = E[delta_k | all, dx = dx_hat]`` because the latter is affine in ``dx``.
+    """
+    CAL = sqrt_kf.cal_slice(dx.size)
+    K = lin.B.shape[0]
+    mean, sig = np.empty((K + 1, 3)), np.empty((K + 1, 3))
+    sqrt_kf.smooth_attitude(np.ascontiguousarray(lin.Ut0[ATT, ATT]), lin.s0[ATT].copy(), lin.B, lin.G,
+                            lin.c + lin.A @ dx, np.ascontiguousarray(lin.H[:, ATT]), lin.z - lin.H[:, CAL] @ dx,
+                            lin.sigma, lin.lo, mean, sig)
+    return mean, sig
+
+
+@dataclass(frozen=True)
+class _Pass:
+    dx: np.ndarray
+    cov_x: np.ndarray
+    delta_filtered: np.ndarray
+    sigma_filtered: np.ndarray
+    delta_smoothed: np.ndarray
+    sigma_smoothed: np.ndarray
+    t: np.ndarray
+    kind: np.ndarray
+    axis: np.ndarray
+    innovation: np.ndarray
+    seconds_model: float
+    seconds_filter: float
+
+
+def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
+    """One linearised pass at ``(R_lin, x_lin)``: the filter, then the attitude smoother.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+    R_lin : ndarray, shape (K+1, 3, 3)
+        Linearisation attitudes ``C_nb`` at the keyframe boundaries.
+    x_lin : ndarray, shape (P,)
+        Linearisation calibration.
+    R_prior : ndarray, shape (3, 3)
+        Prior attitude at the first boundary, sigma ``model.options.initial_attitude_sigma``.
+    x_prior, x_sigma : ndarray, shape (P,)
+        Prior mean and sigma of the calibration.
+    pre : graph_calib.model.Preintegrated, optional
+        The preintegration at ``x_lin``; computed here when not given.
+
+    Returns
+    -------
+    _Pass
+        ``dx`` (the calibration error given every measurement) and its covariance;
+        the filtered attitude errors ``delta_filtered`` (K+1, 3) and their sigmas;
+        the smoothed ones ``delta_smoothed`` (given every measurement and ``dx``)
+        and their sigmas (given ``dx``); the normalised innovations.
+    """
+    t0 = time.perf_counter()
+    if pre is None:
+        pre = model.preintegrate(x_lin)
+    lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+    t1 = time.perf_counter()
+    K = model.n_keyframes
+    s, Ut = lin.s0.copy(), lin.Ut0.copy()
+    delta_f, sigma_f = np.empty((K + 1, 3)), np.empty((K + 1, 3))
+    nu, nu_var = np.empty(lin.z.size), np.empty(lin.z.size)
+    sqrt_kf.run(Ut, s, lin.B, lin.A, lin.G, lin.c, lin.H, lin.z, lin.sigma, lin.lo, delta_f, sigma_f, nu, nu_var)
+    CAL = sqrt_kf.cal_slice(x_lin.size)
+    dx = s[CAL].copy()
+    delta_s, sigma_s = _smooth_attitudes(lin, dx)
+    t2 = time.perf_counter()
+    cov = sqrt_kf.covariance(Ut)[CAL, CAL]
+    return _Pass(dx=dx, cov_x=0.5 * (cov + cov.T), delta_filtered=delta_f, sigma_filtered=sigma_f,
+                 delta_smoothed=delta_s, sigma_smoothed=sigma_s, t=lin.t, kind=lin.kind, axis=lin.axis,
+                 innovation=nu / np.sqrt(nu_var), seconds_model=t1 - t0, seconds_filter=t2 - t1)
+
+
+def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2):
+    """Keyframe attitudes that fit the measurements at the prior calibration: the first linearisation point.
+
+    Dead reckoning from ``q_nb0`` with the prior calibration (zero) drifts with the
+    uncalibrated gyro errors: by degrees per minute for a consumer MEMS unit, far
+    beyond where the factors may be linearised.  This Gauss-Newton iteration over
+    the attitudes alone (the smoother of :func:`kf_reference.sqrt_kf.smooth_attitude`,
+    calibration held at its prior mean) pulls that trajectory onto the gravity and
+    encoder measurements first.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+    q_nb0 : array_like, shape (4,)
+        Prior attitude ``q_nb`` (scalar first) at the start of the record.
+    pre : graph_calib.model.Preintegrated, optional
+        The preintegration at the prior calibration; computed here when not given.
+    max_iterations : int
+    tol_rad : float
+        Stop when no keyframe attitude moves by more than this, rad.
+
+    Returns
+    -------
+    C_nb : ndarray, shape (K+1, 3, 3)
+    iterations : int
+    """
+    R_prior = quat_to_dcm(np.asarray(q_nb0, dtype=float))
+    x_prior, x_sigma = model.prior()
+    if pre is None:
+        pre = model.preintegrate(x_prior)
+    R = model.propagate(R_prior, pre, x_prior)
+    for it in range(1, max_iterations + 1):
+        lin = _linearise(model, pre, R, x_prior, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+        delta, _ = _smooth_attitudes(lin, np.zeros_like(x_prior))
+        R = R @ exp_so3(delta)
+        if np.max(np.linalg.norm(delta, axis=1)) < tol_rad:
+            break
+    return R, it
+
+
+# ---------------------------------------------------------------------------
+# the iteration
+# ---------------------------------------------------------------------------
+
+
+def calibrate(model, *, q_nb0, max_passes=20, x_tol=1e-3, attitude_tol=1e-2, progress=None):
+    """Calibrate with the iterated square-root filter.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+    q_nb0 : array_like, shape (4,)
+        Prior attitude ``q_nb`` (scalar first) at the start of the record, ``t[0] - 1/rate``.
+    max_passes : int
+        Largest number of passes over the record.
+    x_tol : float
+        Converged when a pass moves every calibration element by less than ``x_tol`` of its sigma ...
+    attitude_tol : float
+        ... and every smoothed attitude correction is below ``attitude_tol`` of its sigma.
+    progress : callable, optional
+        Called as ``progress(pass_number, PassInfo)`` after each pass.
+
+    Returns
+    -------
+    FilterResult
+    """
+    if max_passes < 1:
+        raise ValueError(f"max_passes must be at least 1, not {max_passes}")
+    R_prior = quat_to_dcm(np.asarray(q_nb0, dtype=float))
+    x_prior, x_sigma = model.prior()
+    x_lin = x_prior.copy()
+    pre = model.preintegrate(x_lin)
+    R_lin, n_initial = initial_attitudes(model, q_nb0=q_nb0, pre=pre)
+    passes = []
+    converged = False
+    for i in range(1, max_passes + 1):
+        p = filter_pass(model, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma, pre=pre)
+        if not (np.all(np.isfinite(p.dx)) and np.all(np.isfinite(p.delta_smoothed))):
+            raise FloatingPointError(f"square-root filter pass {i} produced non-finite estimates")
+        sig_x = np.sqrt(np.diag(p.cov_x))
+        info = PassInfo(
+            index=i,
+            max_dx_sigma=float(np.max(np.abs(p.dx) / sig_x)) if sig_x.size else 0.0,
+            max_attitude_correction=float(np.max(np.linalg.norm(p.delta_smoothed, axis=1))),
+            max_attitude_correction_sigma=float(np.max(np.abs(p.delta_smoothed) / p.sigma_smoothed)),
+            chi2_per_dof=float(np.mean(p.innovation**2)) if p.innovation.size else 0.0,
+            seconds_model=p.seconds_model,
+            seconds_filter=p.seconds_filter,
+        )
+        passes.append(info)
+        if progress is not None:
+            progress(i, info)
+        C_filtered = R_lin @ exp_so3(p.delta_filtered)
+        x_lin = x_lin + p.dx
+        R_lin = R_lin @ exp_so3(p.delta_smoothed)
+        if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol:
+            converged = True
+            break
+        pre = None
+    return FilterResult(
+        layout=model.layout, x=x_lin, covariance=p.cov_x, t_key=model.t_key.copy(), C_nb=R_lin,
+        C_nb_filtered=C_filtered, attitude_sigma_filtered=p.sigma_filtered, innovation_t=p.t,
+        innovation_kind=p.kind, innovation_axis=p.axis, innovation=p.innovation, passes=tuple(passes),
+        converged=converged, initial_iterations=n_initial,
+    )
+
+
+def to_result(fr, model):
+    """The :class:`graph_calib.experiment.Result` (solver ``"sqrt-kf"``) of a :class:`FilterResult`."""
+    from graph_calib.calibrate import to_result as _to_result
+
+    stats = fr.innovation_stats()
+    residuals = {
+        "normalised_innovations": stats,
+        "rms_normalised_innovation": {k: v["rms"] for k, v in stats.items()},
+        "counts": {k: v["count"] for k, v in stats.items()},
+        "chi2_per_dof": float(np.mean(fr.innovation**2)) if fr.innovation.size else 0.0,
+        "passes": fr.n_passes,
+        "converged": bool(fr.converged),
+        "seconds_filter_per_pass": float(np.mean([p.seconds_filter for p in fr.passes])),
+    }
+    return _to_result(model=model, x=fr.x, covariance=fr.covariance, solver="sqrt-kf", residuals=residuals)
