@@ -318,7 +318,7 @@ def _scenario_fit(se, model_options):
     problem = build_problem(se.experiment, options=opts)
     fr = kf_reference.calibrate(problem.model, q_nb0=problem.q_nb0, max_passes=20)
     z = (fr.x - fr.layout.from_dict(se.truth.values)) / fr.sigma
-    return fr, z
+    return fr, z, problem
 
 
 @pytest.mark.slow
@@ -327,7 +327,7 @@ def _scenario_fit(se, model_options):
     "on noise-free data; the factor graph lands on the same estimate (lever_arm.z 1.6 sigma off)"))
 def test_nav_subrange_short_noise_free_within_a_tenth_of_sigma():
     se = _scenario("nav-subrange-short", noise=False, curvature=False)
-    fr, z = _scenario_fit(se, ModelOptions())
+    fr, z, _ = _scenario_fit(se, ModelOptions())
     assert fr.converged
     assert np.abs(z).max() < 0.1, _worst(fr, z)
 
@@ -338,10 +338,7 @@ def test_nav_subrange_short_agrees_with_factor_graph():
     from graph_calib import factor_graph
 
     se = _scenario("nav-subrange-short")
-    fr, _ = _scenario_fit(se, ModelOptions())
-    from graph_calib.calibrate import CalibrationOptions, build_problem
-
-    problem = build_problem(se.experiment, options=CalibrationOptions(t_ref_degC=se.truth.t_ref_degC))
+    fr, _, problem = _scenario_fit(se, ModelOptions())
     gr = factor_graph.solve(problem.model, q_nb0=problem.q_nb0)
     sig_g = np.sqrt(np.diag(gr.covariance))
     dz = (fr.x - gr.x) / sig_g
@@ -353,7 +350,7 @@ def test_nav_subrange_short_agrees_with_factor_graph():
 @pytest.mark.slow
 def test_consumer_handheld_converges_from_zero_calibration():
     se = _scenario("consumer-handheld")
-    fr, z = _scenario_fit(se, ModelOptions(grade="consumer"))
+    fr, z, _ = _scenario_fit(se, ModelOptions(grade="consumer"))
     assert fr.converged and fr.n_passes >= 3
     # within a few sigma; 4.3 sigma on gyro.bias.z is shared with the factor graph (same estimate)
     assert np.abs(z).max() < 5.0, _worst(fr, z)
