@@ -39,7 +39,7 @@ class CalibrationOptions:
 
     model: ModelOptions = field(default_factory=ModelOptions)
     graph: GraphOptions = field(default_factory=GraphOptions)
-    kf_max_passes: int = 8
+    kf_max_passes: int = 20
     t_ref_degC: float | None = None
 
 
