@@ -1,0 +1,743 @@
+r"""A calibration campaign: every experiment with both solvers, in parallel, cached, stitched, validated.
+
+This is the public Python API behind ``graph-calib campaign``::
+
+    from graph_calib.campaign import CampaignOptions, run_campaign
+    run = run_campaign("campaign.toml", "out", options=CampaignOptions(workers=2))
+    run.stitched["factor-graph"].curves["gyro.bias.x"].evaluate([25.0])
+
+Work and files
+--------------
+One *task* is one experiment calibrated by one solver.  Tasks run on Dask
+workers (a local cluster of processes with one thread each, sized for the
+machine, or an existing cluster given by its scheduler address; workers must
+see the output folder) or, with ``workers=0``, one after the other in this
+process.  A task writes, into ``OUT/<experiment name>/``, each file atomically:
+
+- ``summary.json``: the experiment's length, reference temperature, sensor
+  temperature ranges and a thinned temperature series;
+- ``<solver>.residuals.npz``: the solver's whitened residuals (factor graph) or
+  normalised innovations (filter) per measurement kind, for the residual plots;
+- ``<solver>.json``: the result (``data-format.md``), written last; its
+  top-level ``campaign`` object holds the task's cache key.
+
+The main process then writes ``comparison.json`` per experiment, stitches every
+solver's results over temperature (:mod:`graph_calib.stitching`), validates the
+stitched calibration on independent records (:mod:`graph_calib.validation`), and
+writes ``campaign.json`` and ``report.html``.
+
+Caching and resuming
+--------------------
+The cache key of a task is a SHA-256 over the experiment file's content, the
+calibration options (repr of :class:`graph_calib.calibrate.CalibrationOptions`,
+reference temperature included), the solver and :data:`CACHE_VERSION`.  A task
+whose result file carries the same key (and whose residual and summary files
+exist) is not run again.  So an interrupted campaign resumes where it stopped
+(finished tasks are on disk, a task cut short left nothing, thanks to the
+atomic writes) and a rerun does only what changed.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from graph_calib import io
+from graph_calib.errors import InputError
+
+#: Format name of ``campaign.json``.
+CAMPAIGN_FORMAT = "imu-calibration-campaign"
+CAMPAIGN_VERSION = 1
+#: Bumped when a change of the code invalidates cached results.
+CACHE_VERSION = 1
+
+SOLVER_CHOICES = {"both": ("sqrt-kf", "factor-graph"), "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",)}
+
+
+@dataclass(frozen=True)
+class CampaignOptions:
+    """How a campaign runs (what it computes comes from the manifest).
+
+    Attributes
+    ----------
+    workers : int or None
+        Dask worker processes of the local cluster (one thread each); None: as many
+        as CPU cores, at most the number of tasks; 0: no Dask, tasks run one after
+        the other in this process.
+    scheduler : str or None
+        Address of an existing Dask scheduler (``tcp://host:8786``); its workers must
+        see the output folder.  Overrides ``workers``.
+    solvers : str or None
+        ``"both"``, ``"sqrt-kf"`` or ``"factor-graph"``; None: the manifest's
+        ``[solver] solvers``, else both.
+    stitch_model : str
+        ``"cubic"`` or ``"linear"``: the stitched model that validation uses.
+    validate : tuple of str
+        Independent experiment files for validation.  A ``<stem>.truth.json`` next
+        to one is its reference; otherwise it is calibrated (factor graph) as an
+        extra task and its own estimate is the reference.
+    force : bool
+        Ignore cached results.
+    report : bool
+        Write ``report.html``.
+    progress : bool
+        Show a progress bar (stderr).
+    """
+
+    workers: int | None = None
+    scheduler: str | None = None
+    solvers: str | None = None
+    stitch_model: str = "cubic"
+    validate: tuple = ()
+    force: bool = False
+    report: bool = True
+    progress: bool = True
+
+
+@dataclass(frozen=True)
+class Task:
+    """One experiment, one solver (picklable; run by :func:`run_task` on a worker)."""
+
+    name: str
+    file: str
+    solver: str
+    options: object
+    out_dir: str
+    key: str
+    input_sha256: str
+    options_sha256: str
+    numba_threads: int = 0
+
+    @property
+    def result_path(self):
+        return Path(self.out_dir) / f"{self.solver}.json"
+
+    @property
+    def residuals_path(self):
+        return Path(self.out_dir) / f"{self.solver}.residuals.npz"
+
+    @property
+    def summary_path(self):
+        return Path(self.out_dir) / "summary.json"
+
+
+@dataclass
+class CampaignRun:
+    """What :func:`run_campaign` produced (files on disk, the main objects in memory).
+
+    Attributes
+    ----------
+    out : Path
+    document : dict
+        The content of ``campaign.json``.
+    results : dict
+        ``{experiment name: {solver: Result}}``.
+    summaries : dict
+        ``{experiment name: summary dict}``.
+    truths : dict
+        ``{experiment name: truth Result}`` where a truth file exists.
+    stitched : dict
+        ``{solver: graph_calib.stitching.Stitched}``.
+    validations : list
+        :class:`graph_calib.validation.Validation` objects (default model, primary solver first).
+    failed : list of dict
+        Tasks that raised: ``{"name", "solver", "error"}``.
+    """
+
+    out: Path
+    document: dict
+    results: dict = field(default_factory=dict)
+    summaries: dict = field(default_factory=dict)
+    truths: dict = field(default_factory=dict)
+    stitched: dict = field(default_factory=dict)
+    validations: list = field(default_factory=list)
+    failed: list = field(default_factory=list)
+    report_path: Path | None = None
+
+
+# ---------------------------------------------------------------------------
+# options and keys
+# ---------------------------------------------------------------------------
+
+
+def calibration_options(campaign, *, t_ref_degC=None):
+    """The :class:`graph_calib.calibrate.CalibrationOptions` a manifest asks for.
+
+    ``[imu] grade``, ``[priors]``, ``[model] effects / exclude``,
+    ``[solver] keyframe_s / max_iterations`` (the latter for both solvers: LM
+    iterations and filter passes), and the experiment's ``t_ref_degC``.
+    """
+    from graph_calib.calibrate import CalibrationOptions
+    from graph_calib.factor_graph import GraphOptions
+    from graph_calib.model import ModelOptions
+
+    s = campaign.solver
+    mopt = ModelOptions(
+        keyframe_s=float(s.get("keyframe_s", ModelOptions.keyframe_s)), grade=campaign.grade,
+        extra_effects=tuple(campaign.effects), exclude=tuple(campaign.exclude),
+        prior_sigma=dict(sorted(campaign.priors.items())) or None,
+    )
+    gopt = GraphOptions(max_iterations=int(s["max_iterations"])) if "max_iterations" in s else GraphOptions()
+    kw = {"kf_max_passes": int(s["max_iterations"])} if "max_iterations" in s else {}
+    return CalibrationOptions(model=mopt, graph=gopt, t_ref_degC=t_ref_degC, **kw)
+
+
+def file_sha256(path, *, chunk=1 << 22):
+    """SHA-256 (hex) of a file's content."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(chunk), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def options_sha256(options):
+    """SHA-256 (hex) of calibration options (their repr: frozen dataclasses of plain values)."""
+    return hashlib.sha256(repr(options).encode("utf-8")).hexdigest()
+
+
+def task_key(*, input_sha256, options_sha256, solver):
+    """The cache key of one task."""
+    from graph_calib import __version__
+
+    text = f"graph-calib {__version__} cache {CACHE_VERSION}|{solver}|{input_sha256}|{options_sha256}"
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def cached(task):
+    """Whether ``task``'s files are on disk with its key."""
+    if not (task.result_path.is_file() and task.residuals_path.is_file() and task.summary_path.is_file()):
+        return False
+    try:
+        doc = json.loads(task.result_path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and isinstance(doc.get("campaign"), dict) and doc["campaign"].get("key") == task.key
+
+
+# ---------------------------------------------------------------------------
+# one task (runs on a worker)
+# ---------------------------------------------------------------------------
+
+
+def experiment_summary(experiment, *, t_ref_degC, points=1500):
+    """``summary.json`` of an experiment: length, temperatures (ranges per sensor and a thinned series)."""
+    from graph_calib.stitching import SENSORS
+
+    T = experiment.sensor_temperatures()
+    step = max(1, experiment.n_samples // points)
+    tbl = experiment.table
+    return {
+        "file": Path(experiment.source).name if experiment.source else "",
+        "imu_id": experiment.imu_id, "n_samples": experiment.n_samples, "rate_hz": experiment.rate_hz,
+        "duration_s": float(experiment.t[-1] - experiment.t[0] + 1.0 / experiment.rate_hz),
+        "t_ref_degC": float(t_ref_degC),
+        "sensors": list(SENSORS),
+        "sensor_temperature_range_degC": np.stack([T.min(axis=0), T.max(axis=0)], axis=1).tolist(),
+        "temperature_range_degC": [float(T.min()), float(T.max())],
+        "table_readings": 0 if tbl is None else int(tbl.t.size),
+        "valid_table_readings": 0 if tbl is None else int(np.count_nonzero(tbl.valid)),
+        "series": {"t_s": experiment.t[::step], "sensor_temperature_degC": T[::step]},
+    }
+
+
+def _residual_arrays(solver, native):
+    """Residual series of a solver's native output as flat arrays ``{kind}_t / _axis / _value`` (float32)."""
+    out = {}
+    if solver == "factor-graph":
+        for kind, (t, w) in native.residuals.items():
+            w = np.asarray(w, dtype=float)
+            if w.size == 0:
+                continue
+            w = w.reshape(w.shape[0], -1)
+            out[f"{kind}_t"] = np.repeat(np.asarray(t, dtype=float), w.shape[1])
+            out[f"{kind}_axis"] = np.tile(np.arange(w.shape[1], dtype=np.int8), w.shape[0])
+            out[f"{kind}_value"] = w.ravel().astype(np.float32)
+    else:
+        names = getattr(sys.modules.get("kf_reference"), "KIND_NAMES", ("gravity", "encoder"))
+        for code, kind in enumerate(names):
+            m = native.innovation_kind == code
+            if not np.any(m):
+                continue
+            out[f"{kind}_t"] = np.asarray(native.innovation_t[m], dtype=float)
+            out[f"{kind}_axis"] = np.asarray(native.innovation_axis[m], dtype=np.int8)
+            out[f"{kind}_value"] = np.asarray(native.innovation[m], dtype=np.float32)
+    return out
+
+
+def run_task(task):
+    """Calibrate one experiment with one solver and write its files (see the module docstring).
+
+    Returns
+    -------
+    dict
+        ``name``, ``solver``, ``status`` (``"computed"``), ``seconds``.
+    """
+    from graph_calib.calibrate import build_problem, run_factor_graph, run_sqrt_kf
+
+    if task.numba_threads:
+        try:
+            import numba
+
+            numba.set_num_threads(max(1, min(task.numba_threads, numba.config.NUMBA_NUM_THREADS)))
+        except Exception:  # pragma: no cover - numba threading is an optimisation only
+            pass
+    t0 = time.perf_counter()
+    out = Path(task.out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    exp = io.read_experiment(task.file)
+    problem = build_problem(exp, options=task.options)
+    io.atomic_write_json(task.summary_path, experiment_summary(exp, t_ref_degC=problem.model.t_ref_degC))
+    runner = run_factor_graph if task.solver == "factor-graph" else run_sqrt_kf
+    result, native = runner(problem, options=task.options)
+    seconds = time.perf_counter() - t0
+    arrays = _residual_arrays(task.solver, native)
+    with io.atomic_path(task.residuals_path) as tmp:
+        with open(tmp, "wb") as fh:
+            np.savez_compressed(fh, **arrays)
+    extra = dict(result.extra)
+    extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256, "options_sha256": task.options_sha256,
+                         "seconds": seconds, "experiment": task.name}
+    io.write_result(replace(result, extra=extra), task.result_path)
+    return {"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds}
+
+
+# ---------------------------------------------------------------------------
+# running the tasks
+# ---------------------------------------------------------------------------
+
+
+def _progress_bar(total, enabled):
+    if not enabled or total == 0:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
+
+
+def _say(bar, text, enabled):
+    if not enabled:
+        return
+    if bar is not None:
+        bar.write(text, file=sys.stderr)
+    else:
+        print(text, file=sys.stderr)
+
+
+def _one_line(exc):
+    text = f"{type(exc).__name__}: {exc}".strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def _failure(task, exc):
+    out = {"name": task.name, "solver": task.solver, "status": "failed", "error": _one_line(exc)}
+    if isinstance(exc, InputError):
+        out["input_error"] = str(exc)
+    return out
+
+
+def execute(tasks, *, options, on_done=None):
+    """Run ``tasks`` (Dask or in-process) and return ``{(name, solver): outcome dict}``.
+
+    ``on_done(outcome)`` is called in the main process as each task ends (its
+    exception, e.g. ``KeyboardInterrupt``, stops the run; finished tasks stay on disk).
+    """
+    outcomes = {}
+    if not tasks:
+        return outcomes
+    bar = _progress_bar(len(tasks), options.progress)
+
+    def finish(task, outcome):
+        outcomes[(task.name, task.solver)] = outcome
+        if bar is not None:
+            bar.update(1)
+        if outcome["status"] == "failed":
+            _say(bar, f"  {task.name} {task.solver}: FAILED: {outcome['error']}", options.progress)
+        else:
+            _say(bar, f"  {task.name} {task.solver}: done in {outcome['seconds']:.1f} s", options.progress)
+        if on_done is not None:
+            on_done(outcome)
+
+    try:
+        if options.scheduler is None and options.workers == 0:
+            for t in tasks:
+                try:
+                    outcome = run_task(t)
+                except (KeyboardInterrupt, SystemExit):
+                    raise
+                except Exception as exc:  # noqa: BLE001 - reported per task, the campaign goes on
+                    outcome = _failure(t, exc)
+                finish(t, outcome)
+        else:
+            _run_dask(tasks, options=options, finish=finish, bar=bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    return outcomes
+
+
+def _run_dask(tasks, *, options, finish, bar):
+    import logging
+
+    from distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if options.scheduler:
+        try:
+            client = Client(options.scheduler, timeout="20s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
+    else:
+        n = options.workers if options.workers else min(os.cpu_count() or 1, len(tasks))
+        n = max(1, min(n, len(tasks)))
+        _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+    try:
+        by_future = {}
+        for t in tasks:
+            fut = client.submit(run_task, t, key=f"calibrate-{t.name}-{t.solver}-{t.key[:12]}", pure=False)
+            by_future[fut] = t
+        for fut in as_completed(list(by_future)):
+            t = by_future[fut]
+            try:
+                outcome = fut.result()
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except Exception as exc:  # noqa: BLE001
+                outcome = _failure(t, exc)
+            finish(t, outcome)
+    finally:
+        try:
+            client.close()
+        finally:
+            if cluster is not None:
+                cluster.close()
+
+
+# ---------------------------------------------------------------------------
+# the campaign
+# ---------------------------------------------------------------------------
+
+
+def _solvers(campaign, options):
+    choice = options.solvers or campaign.solver.get("solvers", "both")
+    if choice not in SOLVER_CHOICES:
+        raise InputError(f"unknown solver choice {choice!r}; known: {', '.join(SOLVER_CHOICES)}", dataset="--solver")
+    return SOLVER_CHOICES[choice]
+
+
+def _remove_stale_temporaries(folder):
+    """Temporary files of writes cut short by a killed worker (``.<name>.*.tmp``)."""
+    if not folder.is_dir():
+        return
+    for p in folder.glob(".*.tmp"):
+        try:
+            p.unlink()
+        except OSError:
+            pass
+
+
+def plan(campaign, out, *, options):
+    """Every task of a campaign with its cache key: ``(tasks to run, cached tasks)``."""
+    solvers = _solvers(campaign, options)
+    threads = 1 if (options.scheduler or options.workers != 0) else 0
+    todo, done = [], []
+    for e in campaign.experiments:
+        check_experiment_header(e.file)
+        copts = calibration_options(campaign, t_ref_degC=e.t_ref_degC)
+        osha = options_sha256(copts)
+        fsha = file_sha256(e.file)
+        folder = Path(out) / e.name
+        _remove_stale_temporaries(folder)
+        for s in solvers:
+            t = Task(name=e.name, file=str(e.file), solver=s, options=copts, out_dir=str(folder),
+                     key=task_key(input_sha256=fsha, options_sha256=osha, solver=s), input_sha256=fsha,
+                     options_sha256=osha, numba_threads=threads)
+            (done if (not options.force and cached(t)) else todo).append(t)
+    return todo, done
+
+
+def _validation_tasks(campaign, out, records, *, options):
+    """Tasks calibrating validation records that have no truth file (factor graph only)."""
+    todo, done, refs = [], [], {}
+    threads = 1 if (options.scheduler or options.workers != 0) else 0
+    for rec in records:
+        truth = truth_path(rec)
+        if truth.is_file():
+            refs[rec] = ("truth", truth)
+            continue
+        copts = calibration_options(campaign)
+        osha = options_sha256(copts)
+        fsha = file_sha256(rec)
+        folder = Path(out) / "validation" / rec.stem
+        _remove_stale_temporaries(folder)
+        t = Task(name=f"validation/{rec.stem}", file=str(rec), solver="factor-graph", options=copts,
+                 out_dir=str(folder), key=task_key(input_sha256=fsha, options_sha256=osha, solver="factor-graph"),
+                 input_sha256=fsha, options_sha256=osha, numba_threads=threads)
+        refs[rec] = ("estimate", t.result_path)
+        (done if (not options.force and cached(t)) else todo).append(t)
+    return todo, done, refs
+
+
+def truth_path(experiment_file):
+    """``<stem>.truth.json`` next to an experiment file (the simulator's convention)."""
+    p = Path(experiment_file)
+    return p.with_name(p.stem + ".truth.json")
+
+
+def _check_out(out):
+    out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a folder", path=out, dataset="--out")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the output folder: {exc}", path=out, dataset="--out") from None
+    return out
+
+
+def check_experiment_header(path, *, dataset=None):
+    """Cheap check that ``path`` is an experiment file (HDF5 with the right ``format``); InputError if not.
+
+    The full validation (every rule of data-format.md) runs where the file is
+    read, on the worker; this catches a wrong file before any work starts.
+    """
+    import h5py
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError("file not found" if not path.exists() else "not a file", path=path, dataset=dataset)
+    try:
+        with h5py.File(path, "r") as f:
+            fmt = f.attrs.get("format")
+    except OSError:
+        raise InputError("not an HDF5 file (an experiment file is HDF5, data-format.md)", path=path,
+                         dataset=dataset) from None
+    if isinstance(fmt, bytes):
+        fmt = fmt.decode("utf-8", "replace")
+    if isinstance(fmt, np.ndarray) and fmt.size == 1:
+        fmt = fmt.item()
+    if fmt != io.EXPERIMENT_FORMAT:
+        raise InputError(f"not an experiment file: format attribute is {fmt!r}, expected {io.EXPERIMENT_FORMAT!r}",
+                         path=path, dataset=dataset)
+
+
+def _check_records(records):
+    paths = []
+    for r in records:
+        p = Path(r).resolve()
+        if not p.is_file():
+            raise InputError("validation record not found" if not p.exists() else "not a file", path=p,
+                             dataset="--validate")
+        check_experiment_header(p, dataset="--validate")
+        paths.append(p)
+    return paths
+
+
+def truth_check(stitched, truth, *, model=None, n=61):
+    """How the stitched curves sit against the truth, inside each element's covered range.
+
+    Returns
+    -------
+    dict
+        Per element ``{"max_abs_z", "max_abs_error"}`` (z: error over the stitched
+        one-sigma band, on ``n`` temperatures across the covered range) and overall
+        ``max_abs_z``, ``fraction_within_1sigma`` (about 0.68 for honest bands),
+        ``fraction_within_2sigma`` and ``consistent``: the largest ``|z|`` below the
+        1 % family-wise limit for four independent checks per element
+        (:func:`graph_calib.stitching.family_z_limit`).
+    """
+    from graph_calib.stitching import family_z_limit
+    from graph_calib.validation import ResultCalibration
+
+    ref = truth if hasattr(truth, "evaluate") else ResultCalibration(truth)
+    per, zs = {}, []
+    for name, cv in stitched.curves.items():
+        lo, hi = cv.t_span
+        T = np.linspace(lo, hi, n)
+        tv = ref.evaluate(np.tile(T[:, None], (1, 6))).get(name)
+        if tv is None:
+            continue
+        v, s = cv.evaluate(T, model)
+        z = np.where(s > 0, (v - tv) / np.where(s > 0, s, 1.0), 0.0)
+        per[name] = {"max_abs_z": float(np.max(np.abs(z))), "max_abs_error": float(np.max(np.abs(v - tv)))}
+        zs.append(z)
+    allz = np.abs(np.concatenate(zs)) if zs else np.zeros(0)
+    # the points of one curve are strongly correlated: count about four independent checks per element
+    limit = family_z_limit(4 * len(per))
+    return {
+        "model": model or "default", "elements": per, "max_abs_z": float(allz.max()) if allz.size else 0.0,
+        "fraction_within_1sigma": float(np.mean(allz <= 1.0)) if allz.size else 1.0,
+        "fraction_within_2sigma": float(np.mean(allz <= 2.0)) if allz.size else 1.0,
+        "family_limit": limit,
+        "consistent": bool(allz.size == 0 or allz.max() <= limit),
+    }
+
+
+def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
+    """Run (or resume) a campaign: calibrate, compare, stitch, validate, write every file.
+
+    Parameters
+    ----------
+    manifest : str, Path or graph_calib.io.Campaign
+    out : str or Path
+        Output folder (created).
+    options : CampaignOptions
+    on_done : callable, optional
+        Called with each finished task's outcome dict (in the main process).
+
+    Returns
+    -------
+    CampaignRun
+
+    Raises
+    ------
+    InputError
+        A bad manifest, a missing experiment or validation file, a bad option.
+    """
+    from graph_calib.calibrate import compare
+    from graph_calib.stitching import stitch
+
+    t_start = time.perf_counter()
+    campaign = manifest if isinstance(manifest, io.Campaign) else io.read_manifest(manifest)
+    if options.stitch_model not in ("cubic", "linear"):
+        raise InputError(f"must be 'cubic' or 'linear', got {options.stitch_model!r}", dataset="--stitch")
+    out = _check_out(out)
+    records = _check_records(options.validate)
+    todo, done = plan(campaign, out, options=options)
+    vtodo, vdone, refs = _validation_tasks(campaign, out, records, options=options)
+    solvers = _solvers(campaign, options)
+    if options.progress:
+        print(f"campaign {campaign.imu_id}: {len(campaign.experiments)} experiment(s) x {len(solvers)} solver(s); "
+              f"{len(done) + len(vdone)} cached, {len(todo) + len(vtodo)} to compute", file=sys.stderr)
+    t_tasks = time.perf_counter()
+    outcomes = execute(todo + vtodo, options=options, on_done=on_done)
+    tasks_seconds = time.perf_counter() - t_tasks
+    for t in done + vdone:
+        outcomes[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}
+    bad = [o for o in outcomes.values() if o.get("input_error")]
+    if bad:  # bad input found by a worker: one clear message, exit code 2 (finished tasks stay cached)
+        raise InputError(bad[0]["input_error"])
+
+    run = CampaignRun(out=out, document={})
+    experiments_doc = []
+    for e in campaign.experiments:
+        folder = out / e.name
+        entry = {"name": e.name, "file": str(e.file), "folder": e.name, "t_ref_degC": e.t_ref_degC, "results": {}}
+        summary_file = folder / "summary.json"
+        if summary_file.is_file():
+            summ = json.loads(summary_file.read_text(encoding="utf-8"))
+            run.summaries[e.name] = summ
+            entry.update({k: summ[k] for k in ("t_ref_degC", "duration_s", "n_samples", "rate_hz",
+                                               "temperature_range_degC", "sensor_temperature_range_degC")})
+        res = {}
+        for s in solvers:
+            oc = outcomes.get((e.name, s), {"status": "missing"})
+            info = {"status": oc["status"], "file": f"{e.name}/{s}.json"}
+            if oc["status"] == "failed":
+                info["error"] = oc["error"]
+                run.failed.append({"name": e.name, "solver": s, "error": oc["error"]})
+            p = folder / f"{s}.json"
+            if oc["status"] in ("computed", "cached") and p.is_file():
+                r = io.read_result(p)
+                res[s] = r
+                info["seconds"] = (r.extra.get("campaign") or {}).get("seconds")
+            entry["results"][s] = info
+        run.results[e.name] = res
+        if "sqrt-kf" in res and "factor-graph" in res:
+            cmp_ = compare(res["sqrt-kf"], res["factor-graph"])
+            io.atomic_write_json(folder / "comparison.json", cmp_)
+            entry["comparison"] = cmp_["summary"]
+        tp = truth_path(e.file)
+        if tp.is_file():
+            try:
+                run.truths[e.name] = io.read_result(tp)
+                entry["truth"] = str(tp)
+            except InputError as exc:
+                entry["truth_error"] = str(exc)
+        experiments_doc.append(entry)
+
+    # stitching, per solver
+    stitch_doc = {}
+    for s in solvers:
+        names = [e.name for e in campaign.experiments if s in run.results[e.name]]
+        if not names:
+            continue
+        ranges = [run.summaries.get(n, {}).get("sensor_temperature_range_degC") for n in names]
+        st = stitch([run.results[n][s] for n in names], names=names, sensor_ranges=ranges, solver=s)
+        run.stitched[s] = st
+        stitch_doc[s] = st.to_dict()
+    truth_any = next(iter(run.truths.values()), None)
+    truth_doc = {}
+    if truth_any is not None:
+        for s, st in run.stitched.items():
+            truth_doc[s] = {m: truth_check(st, truth_any, model=m) for m in ("cubic", "linear")}
+
+    # validation
+    validation_doc = []
+    primary = "factor-graph" if "factor-graph" in run.stitched else next(iter(run.stitched), None)
+    if records and primary is not None:
+        from graph_calib.validation import ResultCalibration, validate, window_means
+
+        order = [primary] + [s for s in run.stitched if s != primary]
+        for rec in records:
+            kind, ref_path = refs[rec]
+            entry = {"record": str(rec), "reference_kind": kind, "reference": str(ref_path)}
+            if not Path(ref_path).is_file():
+                oc = outcomes.get((f"validation/{rec.stem}", "factor-graph"), {})
+                entry["error"] = oc.get("error", "the record's own calibration is missing")
+                validation_doc.append(entry)
+                continue
+            reference = ResultCalibration(io.read_result(ref_path))
+            exp = io.read_experiment(rec)
+            w = window_means(exp)
+            entry["results"] = {}
+            for s in order:
+                entry["results"][s] = {}
+                for m in (options.stitch_model, "cubic" if options.stitch_model == "linear" else "linear"):
+                    v = validate(exp, run.stitched[s], reference, model=m, windows=w, record_name=rec.name)
+                    entry["results"][s][m] = v.summary()
+                    if m == options.stitch_model:
+                        run.validations.append(v)
+            validation_doc.append(entry)
+            del exp
+
+    n_computed = sum(1 for o in outcomes.values() if o["status"] == "computed")
+    doc = {
+        "format": CAMPAIGN_FORMAT, "version": CAMPAIGN_VERSION,
+        "manifest": str(campaign.path), "imu_id": campaign.imu_id, "grade": campaign.grade,
+        "solvers": list(solvers), "primary_solver": primary, "stitch_model": options.stitch_model,
+        "model": {"effects": list(campaign.effects), "exclude": list(campaign.exclude), "priors": campaign.priors,
+                  "solver_options": campaign.solver},
+        "experiments": experiments_doc,
+        "stitching": stitch_doc,
+        "truth_check": truth_doc,
+        "validation": validation_doc,
+        "failed": run.failed,
+        "timing": {"tasks_computed": n_computed, "tasks_cached": len(outcomes) - n_computed
+                   - len(run.failed), "tasks_failed": len(run.failed), "tasks_seconds": tasks_seconds},
+    }
+    run.document = doc
+    if options.report:
+        from graph_calib.reports.campaign_report import write_report
+
+        t_rep = time.perf_counter()
+        run.report_path = write_report(run, out / "report.html")
+        doc["timing"]["report_seconds"] = time.perf_counter() - t_rep
+    doc["timing"]["total_seconds"] = time.perf_counter() - t_start
+    io.atomic_write_json(out / "campaign.json", doc)
+    return run
+
+
+__all__ = ["CAMPAIGN_FORMAT", "CACHE_VERSION", "CampaignOptions", "CampaignRun", "Task", "calibration_options",
+           "file_sha256", "options_sha256", "task_key", "cached", "plan", "run_task", "execute", "run_campaign",
+           "truth_check", "truth_path", "experiment_summary", "check_experiment_header"]

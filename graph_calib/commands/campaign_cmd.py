@@ -1,0 +1,91 @@
+"""``graph-calib campaign MANIFEST.toml --out DIR``: every experiment, both solvers, stitched, validated, reported."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from graph_calib.errors import InputError
+
+
+def add_arguments(p):
+    p.add_argument("manifest", help="campaign manifest (TOML, data-format.md)")
+    p.add_argument("--out", required=True, help="output folder (one sub-folder per experiment)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="Dask worker processes of the local cluster, one thread each (default: one per CPU core, "
+                        "at most one per task); 0: no Dask, one task after the other in this process")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="use an existing Dask cluster (e.g. tcp://host:8786); its workers must see --out")
+    p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default=None,
+                   help="override the manifest's [solver] solvers (default: both)")
+    p.add_argument("--validate", action="append", default=[], metavar="RECORD.h5",
+                   help="independent record to validate the stitched calibration on (repeatable); a "
+                        "RECORD.truth.json next to it is the reference, else its own calibration")
+    p.add_argument("--stitch", choices=("cubic", "linear"), default="cubic",
+                   help="stitched model used for validation and the calibration table (default cubic)")
+    p.add_argument("--force", action="store_true", help="recompute every experiment, ignoring cached results")
+    p.add_argument("--no-report", action="store_true", help="do not write report.html")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def options_from_args(args):
+    from graph_calib.campaign import CampaignOptions
+
+    if args.workers is not None and args.workers < 0:
+        raise InputError(f"must be 0 or more, got {args.workers}", dataset="--workers")
+    return CampaignOptions(workers=args.workers, scheduler=args.scheduler, solvers=args.solver,
+                           stitch_model=args.stitch, validate=tuple(args.validate), force=args.force,
+                           report=not args.no_report, progress=not args.quiet)
+
+
+def print_summary(run, out=None):
+    """The short human summary of a finished campaign (stdout by default)."""
+    from graph_calib import constants as c
+
+    out = out if out is not None else sys.stdout
+    doc = run.document
+    tim = doc["timing"]
+    print(f"campaign {doc['imu_id']}: {len(doc['experiments'])} experiment(s), {tim['tasks_computed']} task(s) "
+          f"computed, {tim['tasks_cached']} cached, {tim['tasks_failed']} failed, {tim['total_seconds']:.0f} s",
+          file=out)
+    for e in doc["experiments"]:
+        cmp_ = e.get("comparison")
+        line = f"  {e['name']}: T_ref {e.get('t_ref_degC') or float('nan'):.2f} degC"
+        if cmp_:
+            line += (f", filter vs graph max {cmp_['max_abs_difference_in_sigma']:.2g} sigma "
+                     f"({'agree' if cmp_['agree'] else 'DIFFER'})")
+        print(line, file=out)
+    primary = doc.get("primary_solver")
+    st = run.stitched.get(primary)
+    if st is not None:
+        b = st.boundary_summary()
+        print(f"  boundaries: max |z| {b['max_abs_z']:.2f} over {b['checks']} checks, "
+              f"{b['beyond_limit']} beyond {b['limit']:g} sigma", file=out)
+    tc = (doc.get("truth_check") or {}).get(primary, {}).get(doc["stitch_model"])
+    if tc:
+        print(f"  stitched vs truth: max |error| / sigma {tc['max_abs_z']:.2f}, "
+              f"{100 * tc['fraction_within_1sigma']:.0f} % within 1 sigma", file=out)
+    for v in doc.get("validation", []):
+        r = (v.get("results") or {}).get(primary, {}).get(doc["stitch_model"])
+        if not r:
+            print(f"  validation {Path(v['record']).name}: {v.get('error', 'not done')}", file=out)
+            continue
+        g = r["gyro_radps"].get("static") or r["gyro_radps"]["all"]
+        print(f"  validation {Path(v['record']).name}: gyro max {max(g['max']) * c.RS_TO_DH:.4f} deg/h "
+              f"(static), accel max {max(r['accel_mps2']['all']['max']):.2e} m/s^2 -> "
+              f"{'pass' if r['pass']['all'] else 'FAIL'}", file=out)
+    outdir = Path(run.out)
+    print(f"  -> {outdir / 'campaign.json'}" + (f", {run.report_path}" if run.report_path else ""), file=out)
+
+
+def run(args):
+    from graph_calib.campaign import run_campaign
+
+    options = options_from_args(args)
+    result = run_campaign(args.manifest, args.out, options=options)
+    print_summary(result)
+    if result.failed:
+        for f in result.failed:
+            print(f"graph-calib campaign: {f['name']} {f['solver']} failed: {f['error']}", file=sys.stderr)
+        return 1
+    return 0

@@ -1,0 +1,373 @@
+r"""Validation: a stitched calibration applied to an independent record, the sensor errors that remain.
+
+Definition (``docs/campaign.md`` explains it with the numbers)
+-------------------------------------------------------------
+The record is an experiment file that took no part in the calibration and
+whose sensor temperatures cover the campaign's range.  It is cut into windows of
+``window_s`` (1 s); in each window ``w`` the mean angular rate
+``omega_w = sum(dtheta) / sum(dt)``, the mean specific force ``f_w = sum(dv) / sum(dt)``
+and the mean temperature of each of the six sensors are formed.  A calibration
+``c`` evaluated at those temperatures gives the declared sensor error
+
+.. math::
+
+    e^c_{g,w} = b_g(T_w) + \mathrm{diag}(s_g(T_w))\,\omega_w + M_g\,\omega_w, \qquad
+    e^c_{a,w} = b_a(T_w) + \mathrm{diag}(s_a(T_w))\,f_w + M_a\,f_w,
+
+(model.md's sensor equations; each element at its own sensor's temperature).
+The *remaining error* is the difference between the reference calibration's
+error and the stitched one's, ``de_w = e^ref_w - e^stitched_w``: what a navigation
+system would still see after correcting its sensors with the stitched
+calibration.  The reference is the truth for simulated data (the truth file's
+values at its reference temperature, temperature coefficients and curvature
+remainder make the exact truth curve), or, for a real record, the record's own
+calibration (then ``de`` is a consistency check limited by that calibration's
+own uncertainty).  Measured rates and forces stand in for the true ones (the
+difference changes ``de`` by a product of two small errors).
+
+Per axis, RMS and largest ``|de|`` are reported
+
+- for the gyros over the **static windows** (the IMU at rest, turning with the
+  Earth only: the condition under which the method's accuracy of 0.01 deg/h is
+  stated), over all windows, and over the moving windows also as a fraction of
+  the rate (``ppm``: a residual scale-factor error);
+- for the accelerometers over all windows (specific force stays near ``g``
+  while the table turns) and over the static ones.
+
+The record passes when the largest static gyro error is below
+:data:`GYRO_ACCURACY_RADPS` and the largest accelerometer error below
+:data:`ACCEL_ACCURACY_MPS2` on every axis.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+
+from graph_calib import constants as c
+from graph_calib import params
+from graph_calib.stitching import family, is_stitched, sensor_of
+
+#: The method's published accuracy: gyro drift, rad/s (0.01 deg/h).
+GYRO_ACCURACY_RADPS = 0.01 * c.DH_TO_RS
+#: The method's published accuracy: accelerometer bias, m/s^2.
+ACCEL_ACCURACY_MPS2 = 2e-4
+
+_GYRO_MIS = {"xy": (0, 1), "xz": (0, 2), "yx": (1, 0), "yz": (1, 2), "zx": (2, 0), "zy": (2, 1)}
+_ACCEL_MIS = {"yx": (1, 0), "zx": (2, 0), "zy": (2, 1)}
+
+
+class ResultCalibration:
+    """A single result (truth or estimate) as a calibration over temperature.
+
+    Every gyro/accel element follows ``p + p_tc dT + p_tc2 dT^2`` with
+    ``dT = T_sensor - T_ref`` (absent coefficients are zero).  For a truth file of
+    the simulator the curvature remainder ``extra.simulation.unmodelled`` supplies
+    ``p_tc2``, which makes the truth exact over any range.
+
+    Parameters
+    ----------
+    result : graph_calib.experiment.Result
+    """
+
+    def __init__(self, result):
+        self.result = result
+        values = dict(result.values)
+        sim = (result.extra or {}).get("simulation", {}) if isinstance(result.extra, dict) else {}
+        for k, v in (sim.get("unmodelled") or {}).items():
+            values.setdefault(k, float(v))
+        self.values = values
+        self.label = "truth" if result.solver == "truth" else f"{result.solver} estimate of {result.source}"
+
+    def evaluate(self, T_sensors, model=None):
+        """``{flat element: values (N,)}`` at the sensor temperatures ``T_sensors`` (N, 6), SI."""
+        T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
+        out = {}
+        for flat, v in self.values.items():
+            try:
+                parameter, el = params.split_element_name(flat)
+            except KeyError:
+                continue
+            if not is_stitched(parameter):
+                continue
+            s = sensor_of(flat)
+            dT = (T[:, s] if s is not None else T.mean(axis=1)) - self.result.t_ref_degC
+            val = np.full(T.shape[0], float(v))
+            for k, cname in family(parameter)[1].items():
+                key = cname if el is None else f"{cname}.{el}"
+                if key in self.values:
+                    val = val + float(self.values[key]) * dT**k
+            out[flat] = val
+        return out
+
+
+def sensor_errors(values, omega_b, f_b):
+    """The declared sensor errors of a calibration, per window.
+
+    Parameters
+    ----------
+    values : dict
+        ``{flat element: value or values (N,)}``, SI; missing elements count as zero.
+    omega_b, f_b : ndarray, shape (N, 3)
+        Angular rate (rad/s) and specific force (m/s^2).
+
+    Returns
+    -------
+    e_gyro, e_accel : ndarray, shape (N, 3)
+        ``b + diag(s) u + M u`` for each triad, rad/s and m/s^2.
+    """
+    omega_b = np.atleast_2d(omega_b)
+    f_b = np.atleast_2d(f_b)
+    n = omega_b.shape[0]
+
+    def get(name):
+        return np.broadcast_to(np.asarray(values.get(name, 0.0), dtype=float), (n,))
+
+    out = []
+    for triad, u, mis in (("gyro", omega_b, _GYRO_MIS), ("accel", f_b, _ACCEL_MIS)):
+        e = np.zeros((n, 3))
+        for i, ax in enumerate("xyz"):
+            e[:, i] += get(f"{triad}.bias.{ax}") + get(f"{triad}.scale.{ax}") * u[:, i]
+        for el, (i, j) in mis.items():
+            e[:, i] += get(f"{triad}.misalignment.{el}") * u[:, j]
+        out.append(e)
+    return out[0], out[1]
+
+
+#: A window is static when its mean rate stays within this of the Earth rate, rad/s (about 10 deg/h).
+STATIC_RATE_TOLERANCE_RADPS = 5e-5
+
+
+def window_means(experiment, *, window_s=1.0, static_intervals=None):
+    """Mean rate, force and sensor temperatures over consecutive windows of an experiment.
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    window_s : float
+    static_intervals : sequence of (start, stop), optional
+        Sample index ranges known to be static; when given, a window must also lie
+        wholly inside one of them to count as static.
+
+    Returns
+    -------
+    dict
+        ``t`` (W,) window centre, s; ``omega`` (W, 3) rad/s; ``f`` (W, 3) m/s^2;
+        ``T`` (W, 6) degC; ``static`` (W,) bool: the window and both neighbours turn
+        at the Earth rate only (``| |omega| - OMEGA_E | <`` :data:`STATIC_RATE_TOLERANCE_RADPS`).
+        The rate, not the accelerometers, decides: a turn about the vertical leaves
+        the specific force unchanged.
+    """
+    n = experiment.n_samples
+    m = max(1, int(round(window_s * experiment.rate_hz)))
+    W = n // m
+    if W == 0:
+        raise ValueError(f"record shorter than one {window_s} s window")
+    sl = slice(0, W * m)
+    dt = experiment.dt[sl].reshape(W, m)
+    dur = dt.sum(axis=1)
+    omega = experiment.dtheta[sl].reshape(W, m, 3).sum(axis=1) / dur[:, None]
+    f = experiment.dv[sl].reshape(W, m, 3).sum(axis=1) / dur[:, None]
+    T = experiment.sensor_temperatures()[sl].reshape(W, m, 6).mean(axis=1)
+    t = experiment.t[sl].reshape(W, m).mean(axis=1)
+    quiet = np.abs(np.linalg.norm(omega, axis=1) - c.OMEGA_E) < STATIC_RATE_TOLERANCE_RADPS
+    static = quiet.copy()
+    static[1:] &= quiet[:-1]
+    static[:-1] &= quiet[1:]
+    if static_intervals is not None:
+        mask = np.zeros(n, dtype=bool)
+        for a, b in static_intervals:
+            mask[a:b] = True
+        static &= mask[sl].reshape(W, m).all(axis=1)
+    return {"t": t, "omega": omega, "f": f, "T": T, "static": static}
+
+
+def _stats(e, sel):
+    """Per-axis RMS and largest |e| over the windows selected per axis (``sel`` (W,) or (W, 3))."""
+    sel = np.broadcast_to(np.asarray(sel, dtype=bool).reshape(e.shape[0], -1), e.shape)
+    if not np.any(sel):
+        return None
+    rms, mx, cnt = [], [], []
+    for i in range(e.shape[1]):
+        x = e[sel[:, i], i]
+        cnt.append(int(x.size))
+        rms.append(float(np.sqrt(np.mean(x**2))) if x.size else 0.0)
+        mx.append(float(np.max(np.abs(x))) if x.size else 0.0)
+    return {"windows": int(max(cnt)), "windows_per_axis": cnt, "rms": rms, "max": mx}
+
+
+@dataclass(frozen=True)
+class Validation:
+    """Remaining sensor errors of a calibration on a record (see the module docstring).
+
+    Attributes
+    ----------
+    record : str
+    reference : str
+        What the errors are measured against (``"truth"`` or an estimate).
+    model : str
+        Stitched model evaluated.
+    windows : dict
+        :func:`window_means` of the record.
+    de_gyro, de_accel : ndarray, shape (W, 3)
+        Remaining errors, rad/s and m/s^2.
+    inside : ndarray of bool, shape (W, 6)
+        Whether each sensor's temperature lies in the range its bias was calibrated
+        over (the verdict counts only these windows; outside is extrapolation,
+        reported apart).
+    sigma_gyro_bias, sigma_accel_bias : ndarray, shape (W, 3) or None
+        One sigma of the stitched bias at each window's temperature (the stitched
+        uncertainty that dominates at rest).
+    coverage_degC : ndarray (6, 2) or None
+        Calibrated temperature range of each sensor's bias.
+    """
+
+    record: str
+    reference: str
+    model: str
+    windows: dict
+    de_gyro: np.ndarray
+    de_accel: np.ndarray
+    inside: np.ndarray
+    sigma_gyro_bias: np.ndarray | None = None
+    sigma_accel_bias: np.ndarray | None = None
+    coverage_degC: np.ndarray | None = None
+    thresholds: dict = field(default_factory=lambda: {"gyro_radps": GYRO_ACCURACY_RADPS,
+                                                      "accel_mps2": ACCEL_ACCURACY_MPS2})
+
+    def summary(self):
+        """JSON-ready statistics per axis (SI) and the verdict against the published accuracy."""
+        st = self.windows["static"][:, None]
+        ig, ia = self.inside[:, :3], self.inside[:, 3:]
+        moving = ~st
+        g = {"static": _stats(self.de_gyro, st & ig), "all": _stats(self.de_gyro, ig),
+             "moving": _stats(self.de_gyro, moving & ig),
+             "outside_calibrated_range": _stats(self.de_gyro, ~ig)}
+        if g["moving"] is not None:
+            rate = np.abs(self.windows["omega"])
+            ppm = []
+            for i in range(3):
+                s = moving[:, 0] & ig[:, i] & (rate[:, i] > 1e-3)  # turning about this axis, not Earth rate
+                ppm.append(float(np.sqrt(np.mean(self.de_gyro[s, i] ** 2) / np.mean(rate[s, i] ** 2)) * 1e6)
+                           if np.any(s) else 0.0)
+            g["moving"]["rms_relative_ppm"] = ppm
+        a = {"all": _stats(self.de_accel, ia), "static": _stats(self.de_accel, st & ia),
+             "outside_calibrated_range": _stats(self.de_accel, ~ia)}
+        gyro_basis = g["static"] or g["all"]
+        gyro_ok = gyro_basis is not None and bool(np.max(gyro_basis["max"]) < self.thresholds["gyro_radps"])
+        accel_ok = a["all"] is not None and bool(np.max(a["all"]["max"]) < self.thresholds["accel_mps2"])
+        T = self.windows["T"]
+        cov = self.coverage_degC
+        return {
+            "record": self.record, "reference": self.reference, "model": self.model,
+            "window_s": float(np.median(np.diff(self.windows["t"]))) if self.windows["t"].size > 1 else None,
+            "temperature_range_degC": [float(T.min()), float(T.max())],
+            "calibrated_range_degC": None if cov is None else [float(cov[:, 0].min()), float(cov[:, 1].max())],
+            "sensor_calibrated_range_degC": None if cov is None else np.asarray(cov).tolist(),
+            "fraction_inside": [float(v) for v in self.inside.mean(axis=0)],
+            "gyro_radps": g, "accel_mps2": a,
+            "thresholds": dict(self.thresholds),
+            "gyro_criterion": "static windows" if g["static"] is not None else "all windows",
+            "pass": {"gyro": gyro_ok, "accel": accel_ok, "all": gyro_ok and accel_ok},
+        }
+
+
+def validate(record, calibration, reference, *, model=None, window_s=1.0, windows=None, record_name=None):
+    """Remaining sensor errors of ``calibration`` on ``record`` against ``reference``.
+
+    Parameters
+    ----------
+    record : graph_calib.experiment.Experiment
+        An independent record (not used in the calibration).
+    calibration : graph_calib.stitching.Stitched or ResultCalibration
+        Anything with ``evaluate(T_sensors, model) -> {element: values}``.
+    reference : ResultCalibration or graph_calib.experiment.Result
+        The truth (simulated data) or the record's own calibration.
+    model : str, optional
+        Stitched model to evaluate (its default when None).
+    window_s : float
+    windows : dict, optional
+        Precomputed :func:`window_means` of the record.
+    record_name : str, optional
+
+    Returns
+    -------
+    Validation
+    """
+    if not hasattr(reference, "evaluate"):
+        reference = ResultCalibration(reference)
+    w = windows if windows is not None else window_means(record, window_s=window_s)
+    T = w["T"]
+    vals_c = calibration.evaluate(T, model)
+    vals_r = reference.evaluate(T)
+    eg_c, ea_c = sensor_errors(vals_c, w["omega"], w["f"])
+    eg_r, ea_r = sensor_errors(vals_r, w["omega"], w["f"])
+    sig_g = sig_a = coverage = None
+    inside = np.ones(T.shape, dtype=bool)
+    curves = getattr(calibration, "curves", None)
+    if curves:
+        sig_g = np.zeros((T.shape[0], 3))
+        sig_a = np.zeros_like(sig_g)
+        coverage = np.tile([-np.inf, np.inf], (6, 1))
+        for i, ax in enumerate("xyz"):
+            for triad, arr, s in (("gyro", sig_g, i), ("accel", sig_a, 3 + i)):
+                cv = curves.get(f"{triad}.bias.{ax}")
+                if cv is not None:
+                    arr[:, i] = cv.evaluate(T[:, s], model)[1]
+                    coverage[s] = cv.t_span
+                    inside[:, s] = (T[:, s] >= cv.t_span[0]) & (T[:, s] <= cv.t_span[1])
+    return Validation(
+        record=record_name or (record.source.rsplit("/", 1)[-1] if record.source else "record"),
+        reference=getattr(reference, "label", "reference"), model=model or "default",
+        windows=w, de_gyro=eg_r - eg_c, de_accel=ea_r - ea_c, inside=inside, sigma_gyro_bias=sig_g,
+        sigma_accel_bias=sig_a, coverage_degC=coverage,
+    )
+
+
+def simulate_validation_record(simulation, *, hours=2.0, start_degC=None, span_degC=None, rate_hz=None, seed=12345,
+                               file_name="validation.h5"):
+    """A further simulated experiment of the same IMU, sweeping the whole temperature range.
+
+    Built from a turntable scenario of :mod:`graph_calib.simulation` (``nav-campaign``,
+    ``nav-subrange``...): same IMU (``simulation.imu``), same bench and rotation
+    design, its own programme and noise (``seed``), the chamber ramping so that the
+    sensors drift from ``start_degC`` by ``span_degC`` (default: across every
+    subrange of the scenario).
+
+    Parameters
+    ----------
+    simulation : graph_calib.simulation.Simulation
+    hours : float
+    start_degC, span_degC : float, optional
+    rate_hz : float, optional
+        Sample rate (default: the scenario's).
+    seed : int
+    file_name : str
+
+    Returns
+    -------
+    graph_calib.simulation.SimulatedExperiment
+    """
+    plan = simulation.plans[0]
+    make = plan.make
+    if not isinstance(make, partial) or "start_degC" not in make.keywords:
+        raise ValueError(f"scenario {simulation.scenario!r} has no turntable experiment to extend")
+    subs = simulation.info.get("subranges") or [[make.keywords["start_degC"],
+                                                 make.keywords["start_degC"] + make.keywords["span_degC"]]]
+    lo = min(s[0] for s in subs)
+    hi = max(s[1] for s in subs)
+    kw = dict(make.keywords)
+    kw.update(file_name=file_name, seed=int(seed), duration_s=float(hours) * 3600.0,
+              start_degC=float(lo if start_degC is None else start_degC),
+              span_degC=float((hi - lo) if span_degC is None else span_degC),
+              description=f"graph-calib validation record: the {simulation.scenario} IMU sweeping "
+                          f"{lo:g}..{hi:g} degC, {hours:g} h", tag="validation")
+    if rate_hz is not None:
+        kw["rate_hz"] = float(rate_hz)
+    return make.func(*make.args, **kw)
+
+
+__all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "window_means",
+           "Validation", "validate", "simulate_validation_record", "STATIC_RATE_TOLERANCE_RADPS"]
