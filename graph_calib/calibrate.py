@@ -16,6 +16,7 @@ import numpy as np
 from graph_calib.experiment import Result
 from graph_calib.factor_graph import GraphOptions
 from graph_calib.model import CalibrationModel, ModelOptions
+from graph_calib.params import grade
 from graph_calib.strapdown import alignment, detect_static
 
 SOLVERS = ("sqrt-kf", "factor-graph")
@@ -69,8 +70,10 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             mopt = replace(mopt, moving_sigma=1.0)
         exclude = set(mopt.exclude) | {"lever_arm"}
         mopt = replace(mopt, exclude=tuple(sorted(exclude)))
-    model = CalibrationModel(experiment, options=mopt, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
     interval = tuple(static[0]) if len(static) else None
+    if interval is not None:
+        mopt = _noise_from_static(experiment, interval, mopt)
+    model = CalibrationModel(experiment, options=mopt, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
     method = "table" if (experiment.table is not None and np.any(experiment.table.valid)) else "gyrocompass"
     try:
         al = alignment(experiment, interval=interval, method=method)
@@ -81,12 +84,38 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     return Problem(model=model, q_nb0=al.q_nb0, alignment=al)
 
 
+def _noise_from_static(experiment, interval, mopt):
+    """White-noise densities: the grade's, raised to what the first static interval shows.
+
+    The density is the per-sample standard deviation of the rate (force) times
+    ``sqrt(dt)``, averaged over the axes.  Options set explicitly are kept.  The
+    grade's value is a floor, so noise-free data keep a sensible weighting.
+    """
+    a, b = int(interval[0]), int(interval[1])
+    if b - a < 50:
+        return mopt
+    g = grade(mopt.grade)
+    dt = experiment.dt[a:b, None]
+    w = experiment.dtheta[a:b] / dt
+    f = experiment.dv[a:b] / dt
+    h = float(np.median(dt))
+    est_g = float(np.sqrt(np.mean(np.var(w, axis=0)) * h))
+    est_a = float(np.sqrt(np.mean(np.var(f, axis=0)) * h))
+    return replace(
+        mopt,
+        gyro_noise=mopt.gyro_noise if mopt.gyro_noise is not None else max(g.gyro_noise, est_g),
+        accel_noise=mopt.accel_noise if mopt.accel_noise is not None else max(g.accel_noise, est_a),
+    )
+
+
 def to_result(*, model, x, covariance, solver, residuals, extra=None):
     """A :class:`graph_calib.experiment.Result` from an estimate and its covariance."""
     names = model.layout.element_names()
     sig = np.sqrt(np.clip(np.diag(covariance), 0.0, None))
     T = model.temperatures
-    ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade}
+    ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
+          "noise": {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
+                    "encoder_rad": model.encoder_noise}}
     ex.update(extra or {})
     return Result(
         source=model.experiment.source.rsplit("/", 1)[-1] if model.experiment.source else "",

@@ -263,16 +263,27 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     history = [cost]
     lam = options.lambda_initial
     it = 0
+    pre_current = cache.pre          # preintegrated at the current calibration: its cost is exact
     for it in range(1, options.max_iterations + 1):
+        cache.pre = pre_current
+        cache.R = None
         gfg = graph.linearize(values)
         while True:
-            delta = _damped(gfg, keys, lam, dims).optimize(ordering)
+            try:
+                delta = _damped(gfg, keys, lam, dims).optimize(ordering)
+            except RuntimeError:            # numerically indeterminate: damp harder
+                if lam > 1e8:
+                    raise
+                lam = max(lam * 10.0, 1e-6)
+                continue
             trial = values.retract(delta)
             x_trial = np.asarray(trial.atVector(C(0)))
-            if model.needs_repreintegration(cache.pre, x_trial, tol=options.repreintegrate_tol):
+            # a trial far from the preintegration point is judged by an exact preintegration
+            if model.needs_repreintegration(pre_current, x_trial, tol=options.repreintegrate_tol):
                 cache.pre = model.preintegrate(x_trial)
-                cache.R = None
-                cost = graph.error(values)   # the same values under the refreshed preintegration
+            else:
+                cache.pre = pre_current
+            cache.R = None
             new_cost = graph.error(trial)
             if new_cost <= cost or lam > 1e8:
                 break
@@ -281,7 +292,8 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         accepted = new_cost <= cost
         if accepted:
             values = trial
-            lam = max(lam / 10.0, 1e-12)
+            pre_current = cache.pre
+            lam = max(lam / 10.0, 1e-9)
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
         history.append(cost)
