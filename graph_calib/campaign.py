@@ -8,7 +8,9 @@ This is the public Python API behind ``graph-calib campaign``::
 
 Work and files
 --------------
-One *task* is one experiment calibrated by one solver.  Tasks run on Dask
+One *task* is one experiment calibrated by one solver; the tasks of one
+experiment run together as one job (the problem is set up once for both
+solvers).  Jobs run on Dask
 workers (a local cluster of processes with one thread each, sized for the
 machine, or an existing cluster given by its scheduler address; workers must
 see the output folder) or, with ``workers=0``, one after the other in this
@@ -272,41 +274,73 @@ def _residual_arrays(solver, native):
     return out
 
 
-def run_task(task):
-    """Calibrate one experiment with one solver and write its files (see the module docstring).
+def run_tasks(tasks):
+    """Calibrate one experiment with each task's solver (one problem built for all) and write their files.
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        Tasks of the same experiment (same file and options).
 
     Returns
     -------
-    dict
-        ``name``, ``solver``, ``status`` (``"computed"``), ``seconds``.
+    list of dict
+        Per task ``name``, ``solver``, ``status`` (``"computed"`` or ``"failed"`` with ``error``; an
+        ``input_error`` when the experiment file breaks a rule), ``seconds`` (its share of the set-up
+        plus its solve).
     """
     from graph_calib.calibrate import build_problem, run_factor_graph, run_sqrt_kf
 
-    if task.numba_threads:
+    tasks = list(tasks)
+    if not tasks:
+        return []
+    first = tasks[0]
+    if first.numba_threads:
         try:
             import numba
 
-            numba.set_num_threads(max(1, min(task.numba_threads, numba.config.NUMBA_NUM_THREADS)))
+            numba.set_num_threads(max(1, min(first.numba_threads, numba.config.NUMBA_NUM_THREADS)))
         except Exception:  # pragma: no cover - numba threading is an optimisation only
             pass
     t0 = time.perf_counter()
-    out = Path(task.out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    exp = io.read_experiment(task.file)
-    problem = build_problem(exp, options=task.options)
-    io.atomic_write_json(task.summary_path, experiment_summary(exp, t_ref_degC=problem.model.t_ref_degC))
-    runner = run_factor_graph if task.solver == "factor-graph" else run_sqrt_kf
-    result, native = runner(problem, options=task.options)
-    seconds = time.perf_counter() - t0
-    arrays = _residual_arrays(task.solver, native)
-    with io.atomic_path(task.residuals_path) as tmp:
-        with open(tmp, "wb") as fh:
-            np.savez_compressed(fh, **arrays)
-    extra = dict(result.extra)
-    extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256, "options_sha256": task.options_sha256,
-                         "seconds": seconds, "experiment": task.name}
-    io.write_result(replace(result, extra=extra), task.result_path)
-    return {"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds}
+    try:
+        Path(first.out_dir).mkdir(parents=True, exist_ok=True)
+        exp = io.read_experiment(first.file)
+        problem = build_problem(exp, options=first.options)
+        io.atomic_write_json(first.summary_path, experiment_summary(exp, t_ref_degC=problem.model.t_ref_degC))
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - reported per task
+        return [_failure(t, exc) for t in tasks]
+    build_seconds = time.perf_counter() - t0
+    outcomes = []
+    for task in tasks:
+        t1 = time.perf_counter()
+        try:
+            runner = run_factor_graph if task.solver == "factor-graph" else run_sqrt_kf
+            result, native = runner(problem, options=task.options)
+            solve_seconds = time.perf_counter() - t1
+            arrays = _residual_arrays(task.solver, native)
+            with io.atomic_path(task.residuals_path) as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez_compressed(fh, **arrays)
+            seconds = build_seconds / len(tasks) + solve_seconds
+            extra = dict(result.extra)
+            extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
+                                 "options_sha256": task.options_sha256, "experiment": task.name,
+                                 "seconds": seconds, "setup_seconds": build_seconds, "solve_seconds": solve_seconds}
+            io.write_result(replace(result, extra=extra), task.result_path)
+            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds})
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            outcomes.append(_failure(task, exc))
+    return outcomes
+
+
+def run_task(task):
+    """Calibrate one experiment with one solver (:func:`run_tasks` of one task); its outcome dict."""
+    return run_tasks([task])[0]
 
 
 # ---------------------------------------------------------------------------
@@ -343,11 +377,20 @@ def _failure(task, exc):
     return out
 
 
-def execute(tasks, *, options, on_done=None):
-    """Run ``tasks`` (Dask or in-process) and return ``{(name, solver): outcome dict}``.
+def _groups(tasks):
+    """Tasks grouped by experiment (one problem set-up serves every solver of an experiment), in order."""
+    groups = {}
+    for t in tasks:
+        groups.setdefault((t.name, t.file, t.out_dir), []).append(t)
+    return list(groups.values())
 
-    ``on_done(outcome)`` is called in the main process as each task ends (its
-    exception, e.g. ``KeyboardInterrupt``, stops the run; finished tasks stay on disk).
+
+def execute(tasks, *, options, on_done=None):
+    """Run ``tasks`` (Dask or in-process), one job per experiment; ``{(name, solver): outcome dict}``.
+
+    ``on_done(outcome)`` is called in the main process as each task's outcome
+    arrives (its exception, e.g. ``KeyboardInterrupt``, stops the run; finished
+    tasks stay on disk).
     """
     outcomes = {}
     if not tasks:
@@ -367,14 +410,9 @@ def execute(tasks, *, options, on_done=None):
 
     try:
         if options.scheduler is None and options.workers == 0:
-            for t in tasks:
-                try:
-                    outcome = run_task(t)
-                except (KeyboardInterrupt, SystemExit):
-                    raise
-                except Exception as exc:  # noqa: BLE001 - reported per task, the campaign goes on
-                    outcome = _failure(t, exc)
-                finish(t, outcome)
+            for group in _groups(tasks):
+                for t, outcome in zip(group, run_tasks(group)):
+                    finish(t, outcome)
         else:
             _run_dask(tasks, options=options, finish=finish, bar=bar)
     finally:
@@ -388,6 +426,7 @@ def _run_dask(tasks, *, options, finish, bar):
 
     from distributed import Client, LocalCluster, as_completed
 
+    groups = _groups(tasks)
     cluster = None
     if options.scheduler:
         try:
@@ -395,26 +434,27 @@ def _run_dask(tasks, *, options, finish, bar):
         except (OSError, TimeoutError) as exc:
             raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
     else:
-        n = options.workers if options.workers else min(os.cpu_count() or 1, len(tasks))
-        n = max(1, min(n, len(tasks)))
+        n = options.workers if options.workers else min(os.cpu_count() or 1, len(groups))
+        n = max(1, min(n, len(groups)))
         _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
         cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
                                silence_logs=logging.ERROR)
         client = Client(cluster)
     try:
         by_future = {}
-        for t in tasks:
-            fut = client.submit(run_task, t, key=f"calibrate-{t.name}-{t.solver}-{t.key[:12]}", pure=False)
-            by_future[fut] = t
+        for g in groups:
+            key = f"calibrate-{g[0].name}-{'+'.join(t.solver for t in g)}-{g[0].key[:12]}"
+            by_future[client.submit(run_tasks, g, key=key, pure=False)] = g
         for fut in as_completed(list(by_future)):
-            t = by_future[fut]
+            g = by_future[fut]
             try:
-                outcome = fut.result()
+                outs = fut.result()
             except (KeyboardInterrupt, SystemExit):
                 raise
-            except Exception as exc:  # noqa: BLE001
-                outcome = _failure(t, exc)
-            finish(t, outcome)
+            except Exception as exc:  # noqa: BLE001 - e.g. a worker that died
+                outs = [_failure(t, exc) for t in g]
+            for t, outcome in zip(g, outs):
+                finish(t, outcome)
     finally:
         try:
             client.close()
@@ -739,5 +779,5 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
 
 
 __all__ = ["CAMPAIGN_FORMAT", "CACHE_VERSION", "CampaignOptions", "CampaignRun", "Task", "calibration_options",
-           "file_sha256", "options_sha256", "task_key", "cached", "plan", "run_task", "execute", "run_campaign",
+           "file_sha256", "options_sha256", "task_key", "cached", "plan", "run_task", "run_tasks", "execute", "run_campaign",
            "truth_check", "truth_path", "experiment_summary", "check_experiment_header"]

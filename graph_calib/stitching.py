@@ -493,37 +493,56 @@ def boundary_temperature(lower, upper):
     return float(tb)
 
 
+def _merged_knots(temps):
+    knots = np.array(sorted({round(float(t), 9) for t in temps}))
+    merged = []
+    for t in knots:  # knots closer than the spacing merge
+        if not merged or t - merged[-1] >= MIN_KNOT_SPACING_DEGC:
+            merged.append(t)
+    return np.array(merged)
+
+
 def fit_element(element, points):
-    """Fit every model of one element and check its boundaries; an :class:`ElementCurve`."""
+    """Fit every model of one element and check its boundaries; an :class:`ElementCurve`.
+
+    An element is temperature dependent when its parameter has temperature
+    coefficients in the catalogue (``gyro.bias`` has ``gyro.bias_tc``), even if
+    the results hold only its values (a calibration at constant temperature):
+    then the ``linear`` model interpolates the values (knots at the reference
+    temperatures, continued linearly outside) and the ``cubic`` fits the values
+    alone; the boundary check needs the subranges' slopes and is skipped.
+    """
     parameter = params.split_element_name(element)[0]
     points = tuple(sorted(points, key=lambda p: p.t_ref_degC))
-    tdep = any(p.coef.size > 1 for p in points)
+    tdep = bool(family(parameter)[1]) or any(p.coef.size > 1 for p in points)
+    slopes = all(p.coef.size > 1 for p in points)
     fits = {}
     lo = min(min(p.t_range[0] for p in points), points[0].t_ref_degC)
     hi = max(max(p.t_range[1] for p in points), points[-1].t_ref_degC)
     if tdep:
-        inner = []
-        for a, b in zip(points[:-1], points[1:]):
-            if b.t_ref_degC - a.t_ref_degC >= MIN_KNOT_SPACING_DEGC:
-                inner.append(boundary_temperature(a, b))
-        knots = np.array([lo] + inner + [hi])
-        if hi - lo < 1e-6:
-            knots = np.array([lo, lo + 1.0])
+        if slopes:
+            inner = []
+            for a, b in zip(points[:-1], points[1:]):
+                if b.t_ref_degC - a.t_ref_degC >= MIN_KNOT_SPACING_DEGC:
+                    inner.append(boundary_temperature(a, b))
+            knots = np.array([lo] + inner + [hi])
+            if hi - lo < 1e-6:
+                knots = np.array([lo, lo + 1.0])
+        else:
+            knots = _merged_knots([p.t_ref_degC for p in points])
         fits["linear"] = _gls("linear", points, knots=knots, orders=2)
-        n_meas = sum(p.coef.size for p in points)
+        n_meas = sum(min(p.coef.size, 4) for p in points)
         center = 0.5 * (lo + hi)
         scale = max(0.5 * (hi - lo), 1.0)
         fits["cubic"] = _gls("cubic", points, center=center, scale=scale, degree=min(3, n_meas - 1))
     else:
-        knots = np.array(sorted({round(p.t_ref_degC, 9) for p in points}))
-        merged = []
-        for t in knots:  # knots closer than the spacing merge
-            if not merged or t - merged[-1] >= MIN_KNOT_SPACING_DEGC:
-                merged.append(t)
-        fits["linear"] = _gls("linear", points, knots=np.array(merged), clamp=True, orders=1)
+        knots = _merged_knots([p.t_ref_degC for p in points])
+        fits["linear"] = _gls("linear", points, knots=knots, clamp=True, orders=1)
         fits["constant"] = _gls("constant", points, center=0.0, scale=1.0, degree=0, orders=1)
     boundaries = []
     for a, b in zip(points[:-1], points[1:]):
+        if tdep and not (a.coef.size > 1 and b.coef.size > 1):
+            continue
         tb = boundary_temperature(a, b)
         va, sa = a.predict([tb])
         vb, sb = b.predict([tb])

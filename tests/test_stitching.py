@@ -275,3 +275,19 @@ def test_validation_of_a_calibration_against_itself_is_zero_and_against_a_shifte
     assert s["accel_mps2"]["all"]["max"][1] == pytest.approx(1e-5, rel=1e-9)
     assert not s["pass"]["gyro"] and s["pass"]["accel"]
     assert GYRO_ACCURACY_RADPS == pytest.approx(0.01 * c.DH_TO_RS) and ACCEL_ACCURACY_MPS2 == 2e-4
+
+
+def test_values_only_at_constant_temperatures_still_give_a_temperature_model():
+    """A traditional calibration (steps at constant temperature, no coefficients): interpolate, fit a cubic."""
+    def f(t):
+        return 1e-4 + 2e-6 * t - 3e-8 * t**2
+
+    res = []
+    for t in (-10.0, 0.0, 10.0, 20.0, 30.0, 40.0, 50.0):
+        r = _result(t, {"accel.bias.x": np.array([f(t)])}, {"accel.bias.x": [[1e-14]]}, name=f"s{t:g}")
+        res.append(Result(**{**r.__dict__, "temperature_range_degC": (t - 0.1, t + 0.1)}))
+    cv = stitch(res, names=[r.source for r in res]).curves["accel.bias.x"]
+    assert cv.temperature_dependent and not cv.boundaries
+    T = np.array([-10.0, 5.0, 33.0, 50.0])
+    np.testing.assert_allclose(cv.evaluate(T, "cubic")[0], f(T), atol=1e-12)
+    np.testing.assert_allclose(cv.evaluate([0.0, 10.0], "linear")[0], f(np.array([0.0, 10.0])), atol=1e-15)

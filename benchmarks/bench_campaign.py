@@ -1,0 +1,143 @@
+"""End-to-end campaign benchmark: six subranges of 3 h at 100 Hz, both solvers, stitching, validation, report.
+
+Run by hand::
+
+    .venv/bin/python benchmarks/bench_campaign.py [--hours 3] [--workers 2] [--out /tmp/bench-campaign]
+
+Simulates the ``nav-campaign`` scenario (once; reused from ``--out`` when present), then times
+``graph_calib.campaign.run_campaign`` from a cold cache (``force``) with a local Dask cluster, and
+samples the resident memory of the whole process tree (this process and the Dask workers) every
+0.2 s.  Prints the wall time per stage, the per-task times and the peak memory; docs/performance.md
+records what it measured.  Targets: 2 minutes, under 4 GB.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import platform
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+
+class MemoryMonitor:
+    """Peak summed RSS of this process and all its children, sampled in a thread."""
+
+    def __init__(self, interval=0.2):
+        import psutil
+
+        self.proc = psutil.Process()
+        self.interval = interval
+        self.peak_total = 0
+        self.peak_main = 0
+        self.peak_child = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _sample(self):
+        import psutil
+
+        total = main = self.proc.memory_info().rss
+        child = 0
+        for ch in self.proc.children(recursive=True):
+            try:
+                r = ch.memory_info().rss
+            except psutil.Error:
+                continue
+            total += r
+            child = max(child, r)
+        self.peak_total = max(self.peak_total, total)
+        self.peak_main = max(self.peak_main, main)
+        self.peak_child = max(self.peak_child, child)
+
+    def _run(self):
+        while not self._stop.is_set():
+            self._sample()
+            self._stop.wait(self.interval)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+        self._sample()
+
+
+def simulate(out, *, hours, seed):
+    from graph_calib import io
+    from graph_calib.simulation import simulate as sim_build
+    from graph_calib.simulation import write_simulation
+    from graph_calib.validation import simulate_validation_record
+
+    stamp = out / "bench.json"
+    want = {"hours": hours, "seed": seed}
+    if stamp.is_file() and json.loads(stamp.read_text()) == want and (out / "campaign.toml").is_file():
+        print(f"reusing the simulated campaign in {out}")
+        return 0.0
+    t0 = time.perf_counter()
+    sim = sim_build("nav-campaign", rng=np.random.default_rng(seed), hours=hours)
+    write_simulation(sim, out, progress=lambda m: print("  " + m, flush=True))
+    se = simulate_validation_record(sim, hours=3.0, rate_hz=50.0, seed=seed + 1)
+    io.write_experiment(se.experiment, out / "validation.h5")
+    io.write_result(se.truth, out / "validation.truth.json")
+    stamp.write_text(json.dumps(want))
+    return time.perf_counter() - t0
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--hours", type=float, default=3.0)
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--out", default="/tmp/bench-campaign")
+    args = ap.parse_args(argv)
+
+    from graph_calib.campaign import CampaignOptions, run_campaign
+
+    out = Path(args.out)
+    data = out / "data"
+    data.mkdir(parents=True, exist_ok=True)
+    t_sim = simulate(data, hours=args.hours, seed=args.seed)
+    if t_sim:
+        print(f"simulated 6 x {args.hours:g} h in {t_sim:.0f} s")
+
+    opts = CampaignOptions(workers=args.workers, validate=(str(data / "validation.h5"),), force=True,
+                           progress=True)
+    t0 = time.perf_counter()
+    with MemoryMonitor() as mem:
+        run = run_campaign(data / "campaign.toml", out / "campaign", options=opts)
+    wall = time.perf_counter() - t0
+    doc = run.document
+    tim = doc["timing"]
+    print()
+    print(f"machine: {platform.processor() or platform.machine()}, Python {platform.python_version()}, "
+          f"{__import__('os').cpu_count()} cores")
+    print(f"campaign, 6 x {args.hours:g} h at 100 Hz, both solvers, {args.workers} workers:")
+    print(f"  end to end      {wall:7.1f} s  (target 120 s)")
+    print(f"  tasks (Dask)    {tim['tasks_seconds']:7.1f} s  ({tim['tasks_computed']} computed)")
+    print(f"  report          {tim.get('report_seconds', 0.0):7.1f} s")
+    print(f"  rest            {wall - tim['tasks_seconds'] - tim.get('report_seconds', 0.0):7.1f} s "
+          "(hashing, comparison, stitching, validation)")
+    print(f"  peak memory     {mem.peak_total / 2**30:7.2f} GB total (main {mem.peak_main / 2**30:.2f} GB, "
+          f"largest worker {mem.peak_child / 2**30:.2f} GB)  (target < 4 GB)")
+    per = []
+    for e in doc["experiments"]:
+        for s, info in e["results"].items():
+            per.append((e["name"], s, info.get("seconds")))
+    print("  per task (build + solve, on its worker):")
+    for name, s, sec in per:
+        print(f"    {name:12s} {s:13s} {sec:7.1f} s" if sec is not None else f"    {name:12s} {s:13s}       -")
+    if run.failed:
+        print("FAILED:", run.failed)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
