@@ -430,7 +430,7 @@ def _run_dask(tasks, *, options, finish, bar):
     cluster = None
     if options.scheduler:
         try:
-            client = Client(options.scheduler, timeout="20s")
+            client = Client(options.scheduler, timeout="10s")
         except (OSError, TimeoutError) as exc:
             raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
     else:

@@ -297,3 +297,24 @@ def test_demo_command_help():
 
     args = build_parser().parse_args(["demo", "--out", "x", "--hours", "0.2"])
     assert args.hours == 0.2 and args.out == "x"
+
+
+def test_existing_dask_cluster_by_address(simulated, tmp_path):
+    import logging
+
+    from distributed import LocalCluster
+
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+                      silence_logs=logging.ERROR) as cluster:
+        run = run_campaign(manifest, tmp_path / "out",
+                           options=CampaignOptions(scheduler=cluster.scheduler_address, report=False, progress=False))
+    assert run.document["timing"]["tasks_computed"] == 3 and not run.failed
+
+
+def test_unreachable_scheduler_is_an_input_error(simulated, tmp_path, capsys):
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    rc = main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--scheduler", "tcp://127.0.0.1:9",
+               "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--scheduler: cannot connect to the Dask scheduler" in err
