@@ -473,10 +473,11 @@ def score_test(A, b, base, test, *, scale=None, min_eig=1e-3, scale_factor=1.0):
     Sinv = (V[:, keep] / lam[keep]) @ V[:, keep].T
     est = -D * (Sinv @ du)
     # sigma from every direction: a direction the data do not determine makes it (nearly) infinite
-    with np.errstate(divide="ignore", over="ignore"):
+    with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
         inv_lam = np.where(lam > 0, 1.0 / np.where(lam > 0, lam, 1.0), np.inf)
         contrib = np.where(V**2 > 0, V**2 * inv_lam[None, :], 0.0)
         var = D**2 * np.sum(contrib, axis=1) * scale_factor
+        var = np.where(np.isnan(var), np.inf, var)
     sig = np.where(np.isfinite(var) & (var > 0), np.sqrt(np.where(np.isfinite(var), var, 0.0)), np.inf)
     sig_id = np.sqrt(D**2 * np.diag(Sinv) * scale_factor)
     return Score(statistic=T, dof=int(np.count_nonzero(keep)), dim=int(test.size), estimate=est, sigma=sig,
@@ -581,7 +582,7 @@ class DriverTest:
     estimate: tuple
     sigma: tuple
     amplitude: float = 0.0
-    profile: tuple = ()
+    profile: tuple = ()      # fitted bias per keyframe, mean removed (NaN where such a bias is not seen)
 
     @property
     def unit(self):
@@ -1096,14 +1097,17 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
     md = max(1, len(draw))
     dtests = []
     dthr = {}
+    # where an accelerometer bias is seen: every keyframe, or only the static ones without a table
+    acc_keys = ext.static_key if ext.options.moving_sigma is not None else np.ones(ext.n_keyframes, bool)
     for (g, ax), (idx, ii, sc) in draw.items():
         thr = float(stats.chi2.isf(dopt.alpha / md, sc.dof))
         dthr[(g, ax)] = thr
         prof = rs.driver_means[:, [dlist[i].series for i in ii]] @ sc.estimate     # fitted bias per keyframe
-        prof = prof - prof.mean()                                                  # the mean is the bias
+        seen = acc_keys if ax.startswith("accel") and np.any(acc_keys) else np.ones(prof.size, bool)
+        prof = np.where(seen, prof - prof[seen].mean(), np.nan)                   # the mean is the bias
         dtests.append(DriverTest(g, ax, tuple(dlist[i].label for i in ii), sc.statistic, sc.dof, thr,
                                  sc.log10_p(), sc.statistic > thr, tuple(sc.estimate.tolist()),
-                                 tuple(sc.sigma_identifiable.tolist()), float(np.sqrt(np.mean(prof**2))),
+                                 tuple(sc.sigma_identifiable.tolist()), float(np.sqrt(np.nanmean(prof**2))),
                                  tuple(prof.tolist())))
     rnd = Round(index=index, layout=tuple(model.layout.names), candidates=tests, drivers=dtests,
                 variance_factor=vf, chi2_per_dof=rs.chi2 / max(rs.dof, 1))

@@ -64,16 +64,18 @@ def residual_view(stage, triad):
     """``(name, whitened (F, 3), keyframe (F,), component labels)`` of the series where ``triad`` errors show.
 
     Gyro errors show in the encoder residuals when the experiment has valid table
-    readings, else in the gravity residuals (level axes, through the attitude);
-    accelerometer errors in the gravity residuals in body axes (static keyframes).
+    readings, else in the rotation residuals (body axes: in static poses gravity
+    holds the attitude, so the gyro's error is left in them); accelerometer errors
+    in the gravity residuals in body axes (static keyframes).
     """
     res = stage.residuals
     if triad == "gyro" and "encoder" in res and res["encoder"]["w"].shape[0] > 0:
         d = res["encoder"]
         return "encoder", d["w"], d["key"], ("x", "y", "z")
-    d = res["gravity"]
     if triad == "gyro":
-        return "gravity (level axes)", d["w"], d["key"], ("E", "N", "U")
+        d = res["rotation"]
+        return "rotation", d["w"], d["key"], ("x", "y", "z")
+    d = res["gravity"]
     m = d["static"]
     return "gravity (body axes, static keyframes)", d["w_body"][m], d["key"][m], ("x", "y", "z")
 
@@ -132,7 +134,7 @@ def signature_figure(before, after, driver, triad, *, title="", component_driver
     for stage, style in ((before, _BEFORE), (after, _AFTER)):
         ctx = keyframe_context(stage.problem.model)
         name, w, key, comps = residual_view(stage, triad)
-        level = name.startswith("gravity (level")
+        level = False
         for i, ax in enumerate(axes):
             comp = i if (component_driver and not level) else None
             x = _driver_values(ctx, driver, key, comp, triad)
@@ -275,7 +277,8 @@ def profile_figure(stage, drivers, *, limit=4):
     fig, ax = plt.subplots(figsize=(9, 3.0))
     for d in sorted(drivers, key=lambda d: d.log10_p)[:limit]:
         unit, k = d.report
-        ax.plot(t, np.asarray(d.profile) * k, lw=1, label=f"{d.group} on {d.axis} [{unit}]")
+        ax.plot(t, np.asarray(d.profile, dtype=float) * k, ".-", ms=2, lw=0.8,
+                label=f"{d.group} on {d.axis} [{unit}]")
     ax.axhline(0.0, color="0.6", lw=0.8)
     ax.set_xlabel("time since start [s]", fontsize=8)
     ax.set_ylabel("fitted bias (mean removed)", fontsize=8)
