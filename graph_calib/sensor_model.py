@@ -163,7 +163,7 @@ def _dfeature(code, axis, aux, s, dT, k):
     return 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def _error(rows, x, s, dT, dTdt, other, domega, dsig, out):
     out[0] = 0.0
     out[1] = 0.0
@@ -203,26 +203,30 @@ def _slope(rows, x, s, dT, A):
         col, axis, code, aux = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
         if code < SCALE or code == GSENS or code > NONLIN:
             continue
-        for k in range(3):
-            A[axis, k] += x[col] * _dfeature(code, axis, aux, s, dT, k)
+        # every slope term has one nonzero derivative: in s[aux] (CROSS), else in s[axis]
+        k = aux if code == CROSS else axis
+        A[axis, k] += x[col] * _dfeature(code, axis, aux, s, dT, k)
 
 
-@numba.njit(cache=True)
-def correct_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, s, J, want_jacobian, work):
-    """Invert one sample: ``s`` with ``s + Phi(s) x = m``; ``J = ds/dx`` (3, n) when asked.
-
-    Newton's method from ``s = m`` (exact in one step when the model is linear in
-    ``s``).  ``J`` is overwritten only in the columns that ``rows`` name (others
-    must be zero).  ``work`` is a scratch array of shape (8, 3).
-    """
-    err = work[0]
-    A = work[2:5]
-    Ai = work[5:8]
-    nonlinear = False
+@numba.njit(cache=True, inline="always")
+def is_nonlinear(rows):
+    """Whether any term of ``rows`` is nonlinear in the signal (then Newton needs several steps)."""
     for r in range(rows.shape[0]):
         if rows[r, 2] == SCALE_ASYM or rows[r, 2] == NONLIN:
-            nonlinear = True
-    # a model linear in s is inverted exactly by one Newton step
+            return True
+    return False
+
+
+@numba.njit(cache=True, inline="always")
+def invert_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, nonlinear, s, A, Ai, err):
+    """Newton inversion of one sample: ``s`` with ``s + Phi(s) x = m`` and ``Ai = (I + dPhi x/ds)^-1`` at ``s``.
+
+    ``nonlinear`` is :func:`is_nonlinear` of ``rows`` (a model linear in ``s`` is
+    inverted exactly by one step, and its ``Ai`` does not depend on ``s``).
+    ``A`` (3, 3) and ``err`` (3,) are scratch, passed separately so that a
+    per-sample loop need not slice a work array (every view costs an atomic
+    reference-count pair).
+    """
     steps = n_iter if nonlinear else 1
     s[0] = m[0]
     s[1] = m[1]
@@ -236,11 +240,33 @@ def correct_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, s, J, want
         r2 = s[2] + err[2] - m[2]
         for i in range(3):
             s[i] -= Ai[i, 0] * r0 + Ai[i, 1] * r1 + Ai[i, 2] * r2
-    if not want_jacobian:
-        return
     if nonlinear:
         _slope(rows, x, s, dT, A)
         _inv3(A, Ai)
+
+
+@numba.njit(cache=True, inline="always")
+def sample_features(rows, s, dT, dTdt, other, domega, dsig, feat):
+    """``feat[r]``: the feature of term row ``r`` at ``s``; ``Phi[axis_r, col_r] = feat[r]``.
+
+    With :func:`invert_sample`, ``ds/dx[:, col_r] = -Ai[:, axis_r] * feat[r]`` (summed over rows).
+    """
+    for r in range(rows.shape[0]):
+        feat[r] = _feature(rows[r, 2], rows[r, 1], rows[r, 3], s, dT, dTdt, other, domega, dsig)
+
+
+@numba.njit(cache=True)
+def correct_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, s, J, want_jacobian, work):
+    """Invert one sample: ``s`` with ``s + Phi(s) x = m``; ``J = ds/dx`` (3, n) when asked.
+
+    Newton's method from ``s = m`` (exact in one step when the model is linear in
+    ``s``).  ``J`` is overwritten only in the columns that ``rows`` name (others
+    must be zero).  ``work`` is a scratch array of shape (8, 3).
+    """
+    Ai = work[5:8]
+    invert_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, is_nonlinear(rows), s, work[2:5], Ai, work[0])
+    if not want_jacobian:
+        return
     for r in range(rows.shape[0]):
         for i in range(3):
             J[i, rows[r, 0]] = 0.0
@@ -337,4 +363,5 @@ def correct(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domeg
     return (out, J) if jacobian else out
 
 
-__all__ = ["term_rows", "measure", "correct", "correct_sample", "XYZ"]
+__all__ = ["term_rows", "measure", "correct", "correct_sample", "invert_sample", "sample_features",
+           "is_nonlinear", "XYZ"]

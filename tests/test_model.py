@@ -1,12 +1,15 @@
 """Every Jacobian of the shared model against central finite differences."""
 
+from dataclasses import replace
+
+import numba
 import numpy as np
 import pytest
 
 from graph_calib import sensor_model as sm
 from graph_calib.model import CalibrationModel, ModelOptions
 from graph_calib.params import FURTHER_EFFECTS, Layout
-from graph_calib.rotations import exp_so3
+from graph_calib.rotations import dcm_to_quat, exp_so3, exp_so3_nb, right_jacobian_nb
 
 from _synthetic import wobbly_experiment
 
@@ -95,3 +98,168 @@ def test_first_order_update_tracks_repreintegration(problem):
     b = model.gravity_factors(R, model.preintegrate(x + dx), x + dx).r
     c0 = model.gravity_factors(R, pre, x).r
     assert np.abs(a - b).max() < 1e-3 * np.abs(b - c0).max()
+
+
+# ---------------------------------------------------------------------------
+# the preintegration kernel against the direct recursion
+# ---------------------------------------------------------------------------
+
+
+@numba.njit
+def _skew_mul(a, J, out):
+    for c in range(J.shape[1]):
+        out[0, c] = a[1] * J[2, c] - a[2] * J[1, c]
+        out[1, c] = a[2] * J[0, c] - a[0] * J[2, c]
+        out[2, c] = a[0] * J[1, c] - a[1] * J[0, c]
+
+
+@numba.njit
+def _reference_preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta, w_raw, f_raw, dw_raw, df_raw,
+                            tap_idx, tap_lo, n_newton, nc,
+                            dR, JR, S, JS, S1, JS1, w_first, Jw_first, w_last, Jw_last, tapR, tapJ):
+    """The recursion of ``model._preintegrate`` as written, full (3, nc) Jacobians through every sample."""
+    for k in range(k0.shape[0] - 1):
+        R = np.eye(3)
+        J = np.zeros((3, nc))
+        s = np.zeros(3)
+        js = np.zeros((3, nc))
+        s1 = np.zeros(3)
+        js1 = np.zeros((3, nc))
+        w = np.empty(3)
+        Jw = np.zeros((3, nc))
+        fc = np.empty(3)
+        Jf = np.zeros((3, nc))
+        pth = np.zeros(3)
+        pJth = np.zeros((3, nc))
+        th = np.empty(3)
+        Jth = np.zeros((3, nc))
+        vv = np.empty(3)
+        Jvv = np.zeros((3, nc))
+        phi = np.empty(3)
+        Jphi = np.zeros((3, nc))
+        u = np.empty(3)
+        Ju = np.zeros((3, nc))
+        c1 = np.empty(3)
+        c2 = np.empty(3)
+        tmp = np.zeros((3, nc))
+        tmp2 = np.zeros((3, nc))
+        E = np.empty((3, 3))
+        Jr = np.empty((3, 3))
+        work = np.empty((8, 3))
+        j0 = k0[k]
+        if j0 > 0:
+            sm.correct_sample(grows, x, w_raw[j0 - 1], dTg[j0 - 1], dTdtg[j0 - 1], f_raw[j0 - 1],
+                              dw_raw[j0 - 1], dw_raw[j0 - 1], n_newton, w, Jw, True, work)
+            pth[:] = w * dt[j0 - 1]
+            pJth[:] = Jw * dt[j0 - 1]
+        tau = 0.0
+        tp = tap_lo[k]
+        for j in range(j0, k0[k + 1]):
+            h = dt[j]
+            sm.correct_sample(grows, x, w_raw[j], dTg[j], dTdtg[j], f_raw[j], dw_raw[j], dw_raw[j],
+                              n_newton, w, Jw, True, work)
+            sm.correct_sample(arows, x, f_raw[j], dTa[j], dTdta[j], w_raw[j], dw_raw[j], df_raw[j],
+                              n_newton, fc, Jf, True, work)
+            th[:] = w * h
+            vv[:] = fc * h
+            Jth[:] = Jw * h
+            Jvv[:] = Jf * h
+            if j == j0:
+                w_first[k] = w
+                Jw_first[k] = Jw
+            # coning: phi = th + pth x th / 12
+            c1[:] = np.cross(pth, th)
+            _skew_mul(pth, Jth, tmp)
+            _skew_mul(th, pJth, tmp2)
+            phi[:] = th + c1 / 12.0
+            Jphi[:] = Jth + (tmp - tmp2) / 12.0
+            # u = v + th x v / 2 + th x (th x v) / 12
+            c1[:] = np.cross(th, vv)
+            c2[:] = np.cross(th, c1)
+            _skew_mul(th, Jvv, tmp)
+            _skew_mul(vv, Jth, tmp2)
+            tmp -= tmp2                                   # d(th x v)
+            _skew_mul(th, tmp, tmp2)
+            u[:] = vv + 0.5 * c1 + c2 / 12.0
+            Ju[:] = Jvv + 0.5 * tmp + tmp2 / 12.0
+            _skew_mul(c1, Jth, tmp2)
+            Ju -= tmp2 / 12.0
+            # S += R u, dS += R (du - [u x] J)
+            _skew_mul(u, J, tmp)
+            tmp2[:] = Ju - tmp
+            tm = tau + 0.5 * h
+            ru = R @ u
+            d = R @ tmp2
+            s += ru
+            s1 += tm * ru
+            js += d
+            js1 += tm * d
+            # R <- R Exp(phi), J <- Exp(phi)^T J + Jr(phi) dphi
+            exp_so3_nb(phi[0], phi[1], phi[2], E)
+            right_jacobian_nb(phi[0], phi[1], phi[2], Jr)
+            J[:] = E.T @ J + Jr @ Jphi
+            R[:] = R @ E
+            tau += h
+            while tp < tap_idx.shape[0] and tap_idx[tp] == j:
+                tapR[tp] = R
+                tapJ[tp] = J
+                tp += 1
+            pth[:] = th
+            pJth[:] = Jth
+        dR[k] = R
+        JR[k] = J
+        S[k] = s
+        JS[k] = js
+        S1[k] = s1
+        JS1[k] = js1
+        w_last[k] = w
+        Jw_last[k] = Jw
+
+
+def _reference_preintegration(model, x):
+    """Preintegrated quantities of ``model`` at ``x`` by the direct recursion, as a dict."""
+    nc = model.kernel_cols.size
+    K = model.n_keyframes
+    M = model.tap_idx.size
+    out = dict(dR=np.empty((K, 3, 3)), J_dR=np.zeros((K, 3, nc)), S=np.empty((K, 3)), J_S=np.zeros((K, 3, nc)),
+               S1=np.empty((K, 3)), J_S1=np.zeros((K, 3, nc)), wf=np.empty((K, 3)), Jwf=np.zeros((K, 3, nc)),
+               wl=np.empty((K, 3)), Jwl=np.zeros((K, 3, nc)), tap_dR=np.empty((M, 3, 3)), tap_J=np.zeros((M, 3, nc)))
+    _reference_preintegrate(model.dt, model.k0, x[model.kernel_cols], model.grows, model.arows, model.dTg,
+                            model.dTdtg, model.dTa, model.dTdta, model.w_raw, model.f_raw, model.dw_raw,
+                            model.df_raw, model.tap_idx, model.tap_lo, model.options.n_newton, nc, *out.values())
+    wf, Jwf, wl, Jwl = out.pop("wf"), out.pop("Jwf"), out.pop("wl"), out.pop("Jwl")
+    out["w_b"] = np.concatenate([wf[:1], 0.5 * (wl[:-1] + wf[1:]), wl[-1:]])
+    out["J_w_b"] = np.concatenate([Jwf[:1], 0.5 * (Jwl[:-1] + Jwf[1:]), Jwl[-1:]])
+    return out
+
+
+@pytest.mark.parametrize("extra, keyframe_s", [((), 0.37), (FURTHER_EFFECTS, 0.37), (FURTHER_EFFECTS, 1.0)])
+def test_preintegration_kernel_matches_direct_recursion(extra, keyframe_s):
+    rng = np.random.default_rng(11)
+    exp = wobbly_experiment(rng=rng, n=700, rate_scale=1.5)
+    # table readings faster than the samples: several fall in one sample interval, some at keyframe ends
+    tt = np.unique(np.concatenate([rng.uniform(0.0, exp.t[-1], size=300), exp.t[::37] - 1e-4, exp.t[36::37]]))
+    tt = tt[tt < exp.t[-1]]
+    table = replace(exp.table, t=tt, q_nf=dcm_to_quat(exp_so3(rng.normal(size=(tt.size, 3)))),
+                    valid=np.ones(tt.size, bool))
+    model = CalibrationModel(replace(exp, table=table),
+                             options=ModelOptions(keyframe_s=keyframe_s, extra_effects=extra))
+    assert np.any(np.diff(model.tap_idx) == 0)
+    x = rng.normal(size=model.layout.size) * 1e-2       # percent level: the nonlinear terms matter
+    pre = model.preintegrate(x)
+    ref = _reference_preintegration(model, x)
+    cols = model.kernel_cols
+    others = np.setdiff1d(np.arange(model.layout.size), cols)
+    for name, b in ref.items():
+        a = getattr(pre, name)
+        assert a.shape[:-1] == b.shape[:-1], name
+        if name.startswith(("J_", "tap_J")):
+            assert not np.any(a[..., others]), name
+            a = a[..., cols]
+            # each column against its own scale
+            scale = np.abs(b).max(axis=tuple(range(b.ndim - 1)))
+            assert np.all(a[..., scale == 0] == 0), name          # e.g. accelerometer columns of J_dR
+            err = np.abs(a - b).max(axis=tuple(range(b.ndim - 1))) / np.where(scale > 0, scale, 1.0)
+            assert err.max() < 1e-10, (name, model.layout.element_names()[cols[np.argmax(err)]], err.max())
+        else:
+            np.testing.assert_allclose(a, b, rtol=1e-12, atol=1e-12 * np.abs(b).max(), err_msg=name)
