@@ -28,6 +28,9 @@ def add_arguments(p):
     p.add_argument("--alpha", type=float, default=0.01,
                    help="false-alarm probability of each decision (default 0.01, Bonferroni over the tests)")
     p.add_argument("--max-added", type=int, default=4, help="most effects added (default 4)")
+    p.add_argument("--max-iterations", type=int, default=None,
+                   help="Levenberg-Marquardt iterations of the factor graph (default: GraphOptions'; hand-held "
+                        "sessions may need 100 or more)")
     p.add_argument("--solver", choices=("both", "factor-graph"), default="both",
                    help="solvers run before and after (the tests always use the factor graph)")
     p.add_argument("--truth", default=None,
@@ -38,6 +41,7 @@ def add_arguments(p):
 def _options(args):
     from graph_calib.calibrate import CalibrationOptions
     from graph_calib.diagnosis import DiagnosisOptions
+    from graph_calib.factor_graph import GraphOptions
     from graph_calib.model import ModelOptions
     from graph_calib.params import FURTHER_EFFECTS
 
@@ -50,8 +54,13 @@ def _options(args):
         raise InputError("must be between 0 and 1", dataset="--alpha")
     if args.max_added < 0:
         raise InputError("must not be negative", dataset="--max-added")
+    graph = GraphOptions()
+    if args.max_iterations is not None:
+        if args.max_iterations < 1:
+            raise InputError("must be at least 1", dataset="--max-iterations")
+        graph = GraphOptions(max_iterations=args.max_iterations)
     copt = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade,
-                                                 extra_effects=tuple(args.effect)), t_ref_degC=args.t_ref)
+                                                 extra_effects=tuple(args.effect)), graph=graph, t_ref_degC=args.t_ref)
     solvers = ("factor-graph", "sqrt-kf") if args.solver == "both" else ("factor-graph",)
     dopt = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers)
     return copt, dopt

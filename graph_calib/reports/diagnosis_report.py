@@ -120,6 +120,7 @@ def signature_figure(before, after, driver, triad, *, title="", component_driver
     Parameters
     ----------
     before, after : graph_calib.diagnosis.Stage
+        The same object draws one series ("final model").
     driver : str
         A key of :func:`graph_calib.diagnosis.keyframe_context`.
     triad : {"gyro", "accel"}
@@ -131,7 +132,9 @@ def signature_figure(before, after, driver, triad, *, title="", component_driver
 
     plt = _plt()
     fig, axes = plt.subplots(1, 3, figsize=(11, 3.2), sharey=True)
-    for stage, style in ((before, _BEFORE), (after, _AFTER)):
+    stages = ((after, dict(color=_AFTER["color"], label="final model")),) if before is after else \
+        ((before, _BEFORE), (after, _AFTER))
+    for stage, style in stages:
         ctx = keyframe_context(stage.problem.model)
         name, w, key, comps = residual_view(stage, triad)
         level = False
