@@ -14,10 +14,16 @@ Rotation (process) model
 Gravity measurement
     The specific force integrated in the level frame over the interval, each
     sample rotated with its own attitude,
-    ``dv_n = sum_j C_nb(t_{j-1}) (dv_j + 1/2 dth_j x dv_j + 1/12 dth_j x (dth_j x dv_j))``,
+    ``dv_n = sum_j C_nb(t_{j-1}) u_j``,
+    ``u = dv + 1/2 dth x dv + 1/6 dth x (dth x dv) + h^2/12 (dth x fdot - alpha x dv)``
+    (exact to third order in the sample interval ``h`` when the rate and the
+    specific force vary linearly over the sample; the angular acceleration
+    ``alpha`` and ``fdot = df_b/dt`` are taken from the raw data),
     equals ``g_up * T_k`` plus the change of the velocity of the accelerometer
-    point, ``v_n = C_nb (omega_nb_b x l) `` (the rotation centre is fixed), so
-    ``r = (dv_n - [v_n(t_{k+1}) - v_n(t_k)]) / T_k - [0, 0, g]``.  With
+    point, ``C_nb (omega_nb_b x l)`` (the rotation centre is fixed), and the
+    Coriolis integral ``2 omega_ie_n x`` the change of its position ``C_nb l``:
+    with ``v = C_nb (omega_ib_b x l) + omega_ie_n x (C_nb l)`` (which is both),
+    ``r = (dv_n - [v(t_{k+1}) - v(t_k)]) / T_k - [0, 0, g]``.  With
     ``C_nb(t) = E(t - t_k) R_k dR(t)``, ``dv_n = R_k S - [omega_ie_n x] R_k S1``
     where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} + h_j/2 - t_k) dR_{j-1} u_j``
     are preintegrated once per calibration.  Covariance
@@ -112,7 +118,8 @@ class ModelOptions:
 # ---------------------------------------------------------------------------
 
 
-_C12 = 1.0 / 12.0   # Jacobian matrices only; the values divide by 12 as the recursion is written
+_C12 = 1.0 / 12.0   # coning Jacobians
+_C6 = 1.0 / 6.0     # velocity-rotation Jacobians; the values divide by 6 as the recursion is written
 
 
 @numba.njit(cache=True, inline="always")
@@ -154,7 +161,8 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
     corrected increments, ``pth`` the previous sample's)::
 
         phi = th + pth x th / 12                         (coning)
-        u   = v + th x v / 2 + th x (th x v) / 12        (velocity rotated to the sample start)
+        u   = v + th x v / 2 + th x (th x v) / 6 + h^2/12 (th x fdot - alpha x v)
+                                                         (velocity rotated to the sample start)
         S  += R u,  S1 += tm R u,  tm = mid-sample time since the keyframe start
         R  <- R Exp(phi)
 
@@ -171,8 +179,8 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
       ``dth_k`` enters ``G`` with ``P_k + Q_{k+1}`` (``P_j = R_j Jr_j B_j``,
       ``Q_j = R_j Jr_j C_j``), so a sample's term rows are added one sample late,
       when ``Q_{k+1}`` is known (taps and the keyframe end add the pending one).
-    - ``du = M_a dv + M_g dth`` with ``M_a = I + [th x]/2 + [th x]^2/12`` and
-      ``M_g = -[v x]/2 - ([th x][v x] + [(th x v) x])/12``.
+    - ``du = M_a dv + M_g dth`` with ``M_a = I + [th x]/2 + [th x]^2/6 - h^2/12 [alpha x]`` and
+      ``M_g = -[v x]/2 - ([th x][v x] + [(th x v) x])/6 - h^2/12 [fdot x]``.
     - ``sum_j R_{j-1} [u_j x] J_{j-1} = sum_j [a_j x] G_{j-1}`` (``a_j = R_{j-1} u_j``)
       ``= [S_end x] G_end - sum_i [S_i x] g_i`` with ``S_i`` the running sum of ``a``
       and ``g_i`` the increment of ``G``; likewise with ``tm``-weights for ``S1``.
@@ -289,36 +297,44 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
             phi0 = th0 + (pth[1] * th2 - pth[2] * th1) / 12.0
             phi1 = th1 + (pth[2] * th0 - pth[0] * th2) / 12.0
             phi2 = th2 + (pth[0] * th1 - pth[1] * th0) / 12.0
-            # velocity increment rotated to the sample start: u = v + c1 / 2 + th x c1 / 12, c1 = th x v
+            # velocity increment rotated to the sample start, exact to third order in h for a
+            # linearly varying rate and specific force (data derivatives alpha = dw/dt, fdot = df/dt):
+            # u = v + c1 / 2 + th x c1 / 6 + h^2/12 (th x fdot - alpha x v), c1 = th x v
             c1[0] = th1 * v2 - th2 * v1
             c1[1] = th2 * v0 - th0 * v2
             c1[2] = th0 * v1 - th1 * v0
-            u0 = v0 + 0.5 * c1[0] + (th1 * c1[2] - th2 * c1[1]) / 12.0
-            u1 = v1 + 0.5 * c1[1] + (th2 * c1[0] - th0 * c1[2]) / 12.0
-            u2 = v2 + 0.5 * c1[2] + (th0 * c1[1] - th1 * c1[0]) / 12.0
+            ka = h * h / 12.0
+            al0, al1, al2 = ka * dw_j[0], ka * dw_j[1], ka * dw_j[2]
+            fd0, fd1, fd2 = ka * df_j[0], ka * df_j[1], ka * df_j[2]
+            u0 = (v0 + 0.5 * c1[0] + (th1 * c1[2] - th2 * c1[1]) / 6.0 - (al1 * v2 - al2 * v1)
+                  + (th1 * fd2 - th2 * fd1))
+            u1 = (v1 + 0.5 * c1[1] + (th2 * c1[0] - th0 * c1[2]) / 6.0 - (al2 * v0 - al0 * v2)
+                  + (th2 * fd0 - th0 * fd2))
+            u2 = (v2 + 0.5 * c1[2] + (th0 * c1[1] - th1 * c1[0]) / 6.0 - (al0 * v1 - al1 * v0)
+                  + (th0 * fd1 - th1 * fd0))
             # du = Ma dv + Mg dth
             tv = th0 * v0 + th1 * v1 + th2 * v2
             tt = th0 * th0 + th1 * th1 + th2 * th2
             for i in range(3):
                 for m in range(3):
-                    Mg[i, m] = -vv[i] * th[m] * _C12
-                    Ma[i, m] = th[i] * th[m] * _C12
-                Mg[i, i] += tv * _C12
-                Ma[i, i] += 1.0 - tt * _C12
-            # -[v x] / 2 - [c1 x] / 12
-            Mg[0, 1] += 0.5 * v2 + c1[2] * _C12
-            Mg[0, 2] -= 0.5 * v1 + c1[1] * _C12
-            Mg[1, 0] -= 0.5 * v2 + c1[2] * _C12
-            Mg[1, 2] += 0.5 * v0 + c1[0] * _C12
-            Mg[2, 0] += 0.5 * v1 + c1[1] * _C12
-            Mg[2, 1] -= 0.5 * v0 + c1[0] * _C12
-            # [th x] / 2
-            Ma[0, 1] -= 0.5 * th2
-            Ma[0, 2] += 0.5 * th1
-            Ma[1, 0] += 0.5 * th2
-            Ma[1, 2] -= 0.5 * th0
-            Ma[2, 0] -= 0.5 * th1
-            Ma[2, 1] += 0.5 * th0
+                    Mg[i, m] = -vv[i] * th[m] * _C6
+                    Ma[i, m] = th[i] * th[m] * _C6
+                Mg[i, i] += tv * _C6
+                Ma[i, i] += 1.0 - tt * _C6
+            # -[v x] / 2 - [c1 x] / 6 - h^2/12 [fdot x]
+            Mg[0, 1] += 0.5 * v2 + c1[2] * _C6 + fd2
+            Mg[0, 2] -= 0.5 * v1 + c1[1] * _C6 + fd1
+            Mg[1, 0] -= 0.5 * v2 + c1[2] * _C6 + fd2
+            Mg[1, 2] += 0.5 * v0 + c1[0] * _C6 + fd0
+            Mg[2, 0] += 0.5 * v1 + c1[1] * _C6 + fd1
+            Mg[2, 1] -= 0.5 * v0 + c1[0] * _C6 + fd0
+            # [th x] / 2 - h^2/12 [alpha x]
+            Ma[0, 1] -= 0.5 * th2 - al2
+            Ma[0, 2] += 0.5 * th1 - al1
+            Ma[1, 0] += 0.5 * th2 - al2
+            Ma[1, 2] -= 0.5 * th0 - al0
+            Ma[2, 0] -= 0.5 * th1 - al1
+            Ma[2, 1] += 0.5 * th0 - al0
             # S += R u, S1 += tm R u (the level frame turns during the sample: mid-sample time)
             tm = tau + 0.5 * h
             for i in range(3):
@@ -762,26 +778,28 @@ class CalibrationModel:
         dv_n = np.einsum("kij,kj->ki", Rk, S) - np.einsum("ij,kjl,kl->ki", W, Rk, S1)
         a0 = np.cross(w_b[:-1], l)                               # omega x l at the start
         a1 = np.cross(w_b[1:], l)
-        v0 = np.einsum("kij,kj->ki", Rk, a0) - np.cross(self.omega_ie_n, np.einsum("kij,j->ki", Rk, l))
-        v1 = np.einsum("kij,kj->ki", C1, a1) - np.cross(self.omega_ie_n, np.einsum("kij,j->ki", C1, l))
+        # v = C (omega_ib x l) + omega_ie x (C l): the point's velocity in the Earth-fixed level frame,
+        # C (omega_nb x l), plus 2 omega_ie x (C l) whose change is the Coriolis integral
+        v0 = np.einsum("kij,kj->ki", Rk, a0) + np.cross(self.omega_ie_n, np.einsum("kij,j->ki", Rk, l))
+        v1 = np.einsum("kij,kj->ki", C1, a1) + np.cross(self.omega_ie_n, np.einsum("kij,j->ki", C1, l))
         g_up = np.array([0.0, 0.0, self.gravity])
         r = (dv_n - (v1 - v0)) / T[:, None] - g_up
         # Jacobian in the right perturbation of R_k
         H_R = -Rk @ skew(S) + W @ Rk @ skew(S1)
-        H_R += -Rk @ skew(a0) + W @ Rk @ skew(l)                 # -(-dv0)
+        H_R += -Rk @ skew(a0) - W @ Rk @ skew(l)                 # -(-dv0)
         dRT = np.swapaxes(dR, 1, 2)
-        H_R -= (-C1 @ skew(a1) + W @ C1 @ skew(l)) @ dRT
+        H_R -= (-C1 @ skew(a1) - W @ C1 @ skew(l)) @ dRT
         # Jacobian in x
         H_x = Rk @ pre.J_S - W @ Rk @ pre.J_S1
-        # v0 = Rk (w0 x l) - ...: d/dw0 = -Rk [l x]; d/dl = Rk [w0 x] - W Rk
+        # v0 = Rk (w0 x l) + ...: d/dw0 = -Rk [l x]; d/dl = Rk [w0 x] + W Rk
         H_x -= Rk @ skew(l) @ pre.J_w_b[:-1]
         H_x -= -C1 @ skew(l) @ pre.J_w_b[1:]
         # C1 depends on x through dR: d(C1 a) = -C1 [a x] J
-        H_x -= (-C1 @ skew(a1) + W @ C1 @ skew(l)) @ pre.J_dR
+        H_x -= (-C1 @ skew(a1) - W @ C1 @ skew(l)) @ pre.J_dR
         if "lever_arm" in self.layout:
             s = self.layout.slice("lever_arm")
-            H_x[:, :, s] += Rk @ skew(w_b[:-1]) - W @ Rk
-            H_x[:, :, s] -= C1 @ skew(w_b[1:]) - W @ C1
+            H_x[:, :, s] += Rk @ skew(w_b[:-1]) + W @ Rk
+            H_x[:, :, s] -= C1 @ skew(w_b[1:]) + W @ C1
         r_scale = 1.0 / T[:, None, None]
         H_R = H_R * r_scale
         H_x = H_x * r_scale

@@ -173,17 +173,22 @@ def _reference_preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta, w_r
             _skew_mul(th, pJth, tmp2)
             phi[:] = th + c1 / 12.0
             Jphi[:] = Jth + (tmp - tmp2) / 12.0
-            # u = v + th x v / 2 + th x (th x v) / 12
+            # u = v + th x v / 2 + th x (th x v) / 6 + h^2/12 (th x fdot - alpha x v)
+            ka = h * h / 12.0
             c1[:] = np.cross(th, vv)
             c2[:] = np.cross(th, c1)
             _skew_mul(th, Jvv, tmp)
             _skew_mul(vv, Jth, tmp2)
             tmp -= tmp2                                   # d(th x v)
             _skew_mul(th, tmp, tmp2)
-            u[:] = vv + 0.5 * c1 + c2 / 12.0
-            Ju[:] = Jvv + 0.5 * tmp + tmp2 / 12.0
+            u[:] = vv + 0.5 * c1 + c2 / 6.0 + ka * (np.cross(th, df_raw[j]) - np.cross(dw_raw[j], vv))
+            Ju[:] = Jvv + 0.5 * tmp + tmp2 / 6.0
             _skew_mul(c1, Jth, tmp2)
-            Ju -= tmp2 / 12.0
+            Ju -= tmp2 / 6.0
+            _skew_mul(df_raw[j], Jth, tmp2)
+            Ju -= ka * tmp2
+            _skew_mul(dw_raw[j], Jvv, tmp2)
+            Ju -= ka * tmp2
             # S += R u, dS += R (du - [u x] J)
             _skew_mul(u, J, tmp)
             tmp2[:] = Ju - tmp
