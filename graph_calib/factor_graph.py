@@ -285,7 +285,8 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
                 cache.pre = pre_current
             cache.R = None
             new_cost = graph.error(trial)
-            if new_cost <= cost or lam > 1e8:
+            # at convergence a step may change the cost only by rounding: stop damping then
+            if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
                 break
             lam *= 10.0
         step = np.asarray(delta.at(C(0)))
@@ -301,7 +302,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
             progress(it, cost)
         if accepted and (abs(rel) < options.rel_tol or np.all(np.abs(step) < options.step_tol_sigma * x_sigma)):
             break
-        if not accepted and lam > 1e8:
+        if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
             break
     # covariance: re-preintegrate at the solution so the Jacobians are exact there
     x = np.asarray(values.atVector(C(0)), dtype=float)
