@@ -36,7 +36,10 @@ Per axis, RMS and largest ``|de|`` are reported
 
 The record passes when the largest static gyro error is below
 :data:`GYRO_ACCURACY_RADPS` and the largest accelerometer error below
-:data:`ACCEL_ACCURACY_MPS2` on every axis.
+:data:`ACCEL_ACCURACY_MPS2` on every axis.  ``largest_z`` divides the
+errors by the combined one-sigma of the stitched and the reference calibrations'
+sensor errors (the check that matters when the reference is an estimate: about
+3 or less when they agree).
 """
 
 from __future__ import annotations
@@ -101,6 +104,58 @@ class ResultCalibration:
                     val = val + float(self.values[key]) * dT**k
             out[flat] = val
         return out
+
+
+    def element_sigmas(self, T_sensors, model=None):
+        """One sigma of every element at the sensor temperatures, ``{flat: (N,)}`` (empty for a truth).
+
+        From the result's covariance of each element and its temperature coefficients.
+        """
+        T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
+        r = self.result
+        if r.sigmas is None:
+            return {}
+        idx = {n: i for i, n in enumerate(r.covariance_names or ())}
+        out = {}
+        for flat in r.values:
+            try:
+                parameter, el = params.split_element_name(flat)
+            except KeyError:
+                continue
+            if not is_stitched(parameter):
+                continue
+            names = [flat] + [cn if el is None else f"{cn}.{el}" for _, cn in sorted(family(parameter)[1].items())]
+            names = [n for n in names if n in r.values]
+            s = sensor_of(flat)
+            dT = (T[:, s] if s is not None else T.mean(axis=1)) - r.t_ref_degC
+            J = np.stack([dT**k for k in range(len(names))], axis=1)
+            if r.covariance is not None and all(n in idx for n in names):
+                ii = [idx[n] for n in names]
+                C = np.asarray(r.covariance)[np.ix_(ii, ii)]
+            else:
+                C = np.diag([r.sigmas[n] ** 2 for n in names])
+            out[flat] = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", J, C, J), 0.0, None))
+        return out
+
+
+def stitched_sigmas(stitched, T_sensors, model=None):
+    """One sigma of every stitched element at the sensor temperatures, ``{flat: (N,)}``."""
+    T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
+    out = {}
+    for name, cv in stitched.curves.items():
+        t = T[:, cv.sensor] if cv.sensor is not None else T.mean(axis=1)
+        out[name] = cv.evaluate(t, model)[1]
+    return out
+
+
+def sensor_error_sigmas(sigmas, omega_b, f_b):
+    """One sigma of the declared sensor errors from independent element sigmas, shape (N, 3) per triad.
+
+    ``sqrt(s_b^2 + (s_s u_i)^2 + sum_j (s_M,ij u_j)^2)``: correlations between elements are ignored.
+    """
+    sq = {k: np.square(v) for k, v in sigmas.items()}
+    eg, ea = sensor_errors(sq, np.square(omega_b), np.square(f_b))
+    return np.sqrt(np.clip(eg, 0.0, None)), np.sqrt(np.clip(ea, 0.0, None))
 
 
 def sensor_errors(values, omega_b, f_b):
@@ -217,11 +272,14 @@ class Validation:
         Whether each sensor's temperature lies in the range its bias was calibrated
         over (the verdict counts only these windows; outside is extrapolation,
         reported apart).
-    sigma_gyro_bias, sigma_accel_bias : ndarray, shape (W, 3) or None
-        One sigma of the stitched bias at each window's temperature (the stitched
-        uncertainty that dominates at rest).
+    sigma_gyro, sigma_accel : ndarray, shape (W, 3) or None
+        One sigma of the stitched calibration's sensor error in each window (its
+        elements' bands, correlations between elements ignored).
     coverage_degC : ndarray (6, 2) or None
         Calibrated temperature range of each sensor's bias.
+    sigma_ref_gyro, sigma_ref_accel : ndarray, shape (W, 3) or None
+        The same for the reference (zero for a truth; the record's own calibration
+        otherwise).
     """
 
     record: str
@@ -231,9 +289,11 @@ class Validation:
     de_gyro: np.ndarray
     de_accel: np.ndarray
     inside: np.ndarray
-    sigma_gyro_bias: np.ndarray | None = None
-    sigma_accel_bias: np.ndarray | None = None
+    sigma_gyro: np.ndarray | None = None
+    sigma_accel: np.ndarray | None = None
     coverage_degC: np.ndarray | None = None
+    sigma_ref_gyro: np.ndarray | None = None
+    sigma_ref_accel: np.ndarray | None = None
     thresholds: dict = field(default_factory=lambda: {"gyro_radps": GYRO_ACCURACY_RADPS,
                                                       "accel_mps2": ACCEL_ACCURACY_MPS2})
 
@@ -260,8 +320,21 @@ class Validation:
         accel_ok = a["all"] is not None and bool(np.max(a["all"]["max"]) < self.thresholds["accel_mps2"])
         T = self.windows["T"]
         cov = self.coverage_degC
+        z = None
+        if self.sigma_gyro is not None:
+            zero = np.zeros_like(self.de_gyro)
+            sg = np.hypot(self.sigma_gyro, self.sigma_ref_gyro if self.sigma_ref_gyro is not None else zero)
+            sa = np.hypot(self.sigma_accel, self.sigma_ref_accel if self.sigma_ref_accel is not None else zero)
+            zg = np.where(sg > 0, np.abs(self.de_gyro) / np.where(sg > 0, sg, 1.0), 0.0)
+            za = np.where(sa > 0, np.abs(self.de_accel) / np.where(sa > 0, sa, 1.0), 0.0)
+            selg = np.broadcast_to(st, ig.shape) & ig
+            selg = selg if np.any(selg) else ig
+            z = {"gyro": float(np.max(zg[selg])) if np.any(selg) else None,
+                 "accel": float(np.max(za[ia])) if np.any(ia) else None}
         return {
             "record": self.record, "reference": self.reference, "model": self.model,
+            "largest": {"gyro_radps": None if gyro_basis is None else float(np.max(gyro_basis["max"])),
+                        "accel_mps2": None if a["all"] is None else float(np.max(a["all"]["max"]))},
             "window_s": float(np.median(np.diff(self.windows["t"]))) if self.windows["t"].size > 1 else None,
             "temperature_range_degC": [float(T.min()), float(T.max())],
             "calibrated_range_degC": None if cov is None else [float(cov[:, 0].min()), float(cov[:, 1].max())],
@@ -271,6 +344,7 @@ class Validation:
             "thresholds": dict(self.thresholds),
             "gyro_criterion": "static windows" if g["static"] is not None else "all windows",
             "pass": {"gyro": gyro_ok, "accel": accel_ok, "all": gyro_ok and accel_ok},
+            "largest_z": z,
         }
 
 
@@ -308,22 +382,33 @@ def validate(record, calibration, reference, *, model=None, window_s=1.0, window
     inside = np.ones(T.shape, dtype=bool)
     curves = getattr(calibration, "curves", None)
     if curves:
-        sig_g = np.zeros((T.shape[0], 3))
-        sig_a = np.zeros_like(sig_g)
+        sig_g, sig_a = sensor_error_sigmas(stitched_sigmas(calibration, T, model), w["omega"], w["f"])
         coverage = np.tile([-np.inf, np.inf], (6, 1))
         for i, ax in enumerate("xyz"):
-            for triad, arr, s in (("gyro", sig_g, i), ("accel", sig_a, 3 + i)):
+            for triad, s in (("gyro", i), ("accel", 3 + i)):
                 cv = curves.get(f"{triad}.bias.{ax}")
                 if cv is not None:
-                    arr[:, i] = cv.evaluate(T[:, s], model)[1]
                     coverage[s] = cv.t_span
                     inside[:, s] = (T[:, s] >= cv.t_span[0]) & (T[:, s] <= cv.t_span[1])
+    ref_g = ref_a = None
+    if hasattr(reference, "element_sigmas"):
+        ref_sig = reference.element_sigmas(T)
+        if ref_sig:
+            ref_g, ref_a = sensor_error_sigmas(ref_sig, w["omega"], w["f"])
     return Validation(
         record=record_name or (record.source.rsplit("/", 1)[-1] if record.source else "record"),
         reference=getattr(reference, "label", "reference"), model=model or "default",
-        windows=w, de_gyro=eg_r - eg_c, de_accel=ea_r - ea_c, inside=inside, sigma_gyro_bias=sig_g,
-        sigma_accel_bias=sig_a, coverage_degC=coverage,
+        windows=w, de_gyro=eg_r - eg_c, de_accel=ea_r - ea_c, inside=inside, sigma_gyro=sig_g,
+        sigma_accel=sig_a, coverage_degC=coverage, sigma_ref_gyro=ref_g, sigma_ref_accel=ref_a,
     )
+
+
+def validation_text(summary):
+    """``gyro max X deg/h (static), accel max Y m/s^2`` of a validation summary ("-" where nothing was inside)."""
+    g, a = summary["largest"]["gyro_radps"], summary["largest"]["accel_mps2"]
+    gt = "-" if g is None else f"{g * c.RS_TO_DH:.4f}"
+    at = "-" if a is None else f"{a:.2e}"
+    return f"gyro max {gt} deg/h ({summary['gyro_criterion'].replace(' windows', '')}), accel max {at} m/s^2"
 
 
 def simulate_validation_record(simulation, *, hours=2.0, start_degC=None, span_degC=None, rate_hz=None, seed=12345,
@@ -369,5 +454,6 @@ def simulate_validation_record(simulation, *, hours=2.0, start_degC=None, span_d
     return make.func(*make.args, **kw)
 
 
-__all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "window_means",
-           "Validation", "validate", "simulate_validation_record", "STATIC_RATE_TOLERANCE_RADPS"]
+__all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "sensor_error_sigmas",
+           "stitched_sigmas", "window_means",
+           "Validation", "validate", "validation_text", "simulate_validation_record", "STATIC_RATE_TOLERANCE_RADPS"]

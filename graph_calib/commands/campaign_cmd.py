@@ -40,7 +40,7 @@ def options_from_args(args):
 
 def print_summary(run, out=None):
     """The short human summary of a finished campaign (stdout by default)."""
-    from graph_calib import constants as c
+    from graph_calib.validation import validation_text
 
     out = out if out is not None else sys.stdout
     doc = run.document
@@ -70,9 +70,7 @@ def print_summary(run, out=None):
         if not r:
             print(f"  validation {Path(v['record']).name}: {v.get('error', 'not done')}", file=out)
             continue
-        g = r["gyro_radps"].get("static") or r["gyro_radps"]["all"]
-        print(f"  validation {Path(v['record']).name}: gyro max {max(g['max']) * c.RS_TO_DH:.4f} deg/h "
-              f"(static), accel max {max(r['accel_mps2']['all']['max']):.2e} m/s^2 -> "
+        print(f"  validation {Path(v['record']).name}: {validation_text(r)} -> "
               f"{'pass' if r['pass']['all'] else 'FAIL'}", file=out)
     outdir = Path(run.out)
     print(f"  -> {outdir / 'campaign.json'}" + (f", {run.report_path}" if run.report_path else ""), file=out)

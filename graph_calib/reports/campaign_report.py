@@ -221,8 +221,8 @@ def fig_validation(v):
     thr_a = v.thresholds["accel_mps2"] * c.MPS2_TO_UG
     for i, ax_name in enumerate("xyz"):
         for triad, ax, de, sig, k, sel in (
-            ("gyro", axes[0], v.de_gyro, v.sigma_gyro_bias, c.RS_TO_DH, st if np.any(st) else np.ones_like(st)),
-            ("accel", axes[1], v.de_accel, v.sigma_accel_bias, c.MPS2_TO_UG, np.ones_like(st)),
+            ("gyro", axes[0], v.de_gyro, v.sigma_gyro, c.RS_TO_DH, st if np.any(st) else np.ones_like(st)),
+            ("accel", axes[1], v.de_accel, v.sigma_accel, c.MPS2_TO_UG, np.ones_like(st)),
         ):
             s = i if triad == "gyro" else 3 + i
             T = w["T"][:, s]
@@ -240,7 +240,7 @@ def fig_validation(v):
         ax.axhline(-thr, color="r", ls="--", lw=1)
         ax.set_xlabel("sensor temperature, degC")
         ax.set_ylabel(f"remaining error, {unit}")
-        ax.set_title(f"{what} (dashed: published accuracy; thin: stitched bias 1-sigma)", fontsize=8)
+        ax.set_title(f"{what} (dashed: published accuracy; thin: stitched 1-sigma)", fontsize=8)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=7, markerscale=5)
     fig.suptitle(f"Validation on {v.record} against {v.reference}", fontsize=9)
@@ -423,7 +423,7 @@ def build_report(run, *, figures_dir=None):
     figures_dir : Path, optional
         Also write every figure there as PNG.
     """
-    from graph_calib.validation import ResultCalibration
+    from graph_calib.validation import ResultCalibration, validation_text
 
     doc = run.document
     model = doc.get("stitch_model", "cubic")
@@ -470,11 +470,9 @@ def build_report(run, *, figures_dir=None):
     for ventry in doc.get("validation", []):
         vs = (ventry.get("results") or {}).get(primary, {}).get(model)
         if vs:
-            g = vs["gyro_radps"].get("static") or vs["gyro_radps"]["all"]
             verdicts.append([f"validation on {Path(ventry['record']).name}",
                              H.verdict(vs["pass"]["all"], "pass", "FAIL"),
-                             f"gyro max {max(g['max']) * c.RS_TO_DH:.4f} deg/h (limit 0.01), accel max "
-                             f"{max(vs['accel_mps2']['all']['max']):.2e} m/s^2 (limit 2e-4)"])
+                             validation_text(vs) + " (limits 0.01 deg/h, 2e-4 m/s^2)"])
         elif ventry.get("error"):
             verdicts.append([f"validation on {Path(ventry['record']).name}", H.verdict(False, "", "not done"),
                              ventry["error"]])
@@ -562,8 +560,7 @@ def build_report(run, *, figures_dir=None):
     for ventry, v in zip([e for e in doc.get("validation", []) if e.get("results")], run.validations):
         vs = ventry["results"][primary][model]
         alt = {m: r for m, r in ventry["results"][primary].items() if m != model}
-        alt_txt = "; ".join(f"{m} model: gyro static max {max((r['gyro_radps'].get('static') or r['gyro_radps']['all'])['max']) * c.RS_TO_DH:.4f} deg/h, "
-                            f"accel max {max(r['accel_mps2']['all']['max']):.2e} m/s^2" for m, r in alt.items())
+        alt_txt = "; ".join(f"{m} model: {validation_text(r)}" for m, r in alt.items())
         vparts += [H.section(f"Record {Path(ventry['record']).name}", H.paragraph(
             f"Reference: {v.reference}. Record temperatures {vs['temperature_range_degC'][0]:.1f} .. "
             f"{vs['temperature_range_degC'][1]:.1f} degC; calibrated range "
