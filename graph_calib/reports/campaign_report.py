@@ -230,10 +230,11 @@ def fig_validation(v):
             ax.plot(T[sel & ins], de[sel & ins, i] * k, ".", ms=1.5, color=_AXIS_COLORS[i], label=f"{triad} {ax_name}")
             ax.plot(T[sel & ~ins], de[sel & ~ins, i] * k, ".", ms=1.5, color="#bbbbbb",
                     label="outside the calibrated range" if i == 2 else None)
-            if sig is not None:
-                o = np.argsort(T)
-                ax.plot(T[o], sig[o, i] * k, "-", color=_AXIS_COLORS[i], lw=0.7, alpha=0.6)
-                ax.plot(T[o], -sig[o, i] * k, "-", color=_AXIS_COLORS[i], lw=0.7, alpha=0.6)
+            if sig is not None and np.any(sel):
+                Ts, ss = T[sel], sig[sel, i]
+                o = np.argsort(Ts)
+                ax.plot(Ts[o], ss[o] * k, "-", color=_AXIS_COLORS[i], lw=0.7, alpha=0.6)
+                ax.plot(Ts[o], -ss[o] * k, "-", color=_AXIS_COLORS[i], lw=0.7, alpha=0.6)
     for ax, thr, unit, what in ((axes[0], thr_g, "deg/h", "gyro error, static windows"),
                                 (axes[1], thr_a, "micro-g", "accelerometer error, all windows")):
         ax.axhline(thr, color="r", ls="--", lw=1)
@@ -567,7 +568,10 @@ def build_report(run, *, figures_dir=None):
             + (f"{vs['calibrated_range_degC'][0]:.1f} .. {vs['calibrated_range_degC'][1]:.1f} degC."
                if vs.get("calibrated_range_degC") else "unknown.")),
             H.Raw(f"<p>Verdict ({H.esc(model)} model): gyros {H.verdict(vs['pass']['gyro'])}, accelerometers "
-                  f"{H.verdict(vs['pass']['accel'])}. Other model: {H.esc(alt_txt)}.</p>"),
+                  f"{H.verdict(vs['pass']['accel'])}. Other model: {H.esc(alt_txt)}."
+                  + (f" Largest error over its combined one-sigma (stitched and reference): gyros "
+                     f"{vs['largest_z']['gyro']:.2f}, accelerometers {vs['largest_z']['accel']:.2f}."
+                     if vs.get("largest_z") and None not in vs["largest_z"].values() else "") + "</p>"),
             _validation_table(vs), fig(fig_validation(v), "Remaining sensor error over the record against the "
                                        "sensor temperature."), level=3)]
     if vparts:
