@@ -525,6 +525,20 @@ class Residuals:
         return np.linalg.solve(L, self.r[..., None])[..., 0]
 
 
+def _limited_derivative(y, t):
+    """Time derivative of sample means ``y`` (N, 3) at each sample, slope-limited (minmod).
+
+    Where the signal varies linearly both one-sided differences agree; at a jump
+    (a rate step) one of them is zero and so is the estimate, instead of the
+    spurious spike a central difference puts on both neighbours of the jump.
+    """
+    d = np.diff(y, axis=0) / np.diff(t)[:, None]
+    back = np.vstack([d[:1], d])
+    fwd = np.vstack([d, d[-1:]])
+    same = np.sign(back) == np.sign(fwd)
+    return np.where(same, np.sign(back) * np.minimum(np.abs(back), np.abs(fwd)), 0.0)
+
+
 def _savgol_derivative(y, dt, window_s):
     n = y.shape[0]
     win = int(round(window_s / dt)) | 1
@@ -584,8 +598,8 @@ class CalibrationModel:
         self.w_raw = e.dtheta / dt[:, None]
         self.f_raw = e.dv / dt[:, None]
         h = 1.0 / e.rate_hz
-        self.dw_raw = np.gradient(self.w_raw, e.t, axis=0)
-        self.df_raw = np.gradient(self.f_raw, e.t, axis=0)
+        self.dw_raw = _limited_derivative(self.w_raw, e.t)
+        self.df_raw = _limited_derivative(self.f_raw, e.t)
         T = e.sensor_temperatures()
         self.temperatures = T
         dT = T - self.t_ref_degC
