@@ -52,7 +52,6 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
-from scipy.signal import savgol_filter
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
 from graph_calib.params import Layout, grade as _grade
@@ -539,14 +538,32 @@ def _limited_derivative(y, t):
     return np.where(same, np.sign(back) * np.minimum(np.abs(back), np.abs(fwd)), 0.0)
 
 
-def _savgol_derivative(y, dt, window_s):
+def _moving_slope(y, dt, window_s):
+    """Least-squares slope of ``y`` (N, K) over a centred window of about ``window_s``, per sample.
+
+    Temperature channels are slow and often quantised, so a long window is wanted.
+    The series is first averaged over blocks of about 1 s, the quadratic
+    Savitzky-Golay slope is taken on the block means, and it is interpolated back
+    to the samples: O(N) and accurate for any smooth temperature.
+    """
+    from scipy.signal import savgol_filter
+
+    y = np.asarray(y, dtype=float)
     n = y.shape[0]
-    win = int(round(window_s / dt)) | 1
-    win = max(5, min(win, (n - 1) // 2 * 2 - 1 if n > 6 else 5))
-    if n <= win:
-        slope = np.polyfit(np.arange(n) * dt, y, 1)[0] if n > 1 else np.zeros(y.shape[1:])
-        return np.broadcast_to(slope, y.shape).copy()
-    return savgol_filter(y, win, 2, deriv=1, delta=dt, axis=0, mode="interp")
+    per = max(1, int(round(1.0 / dt)))
+    nb = n // per
+    if nb < 7:
+        if n < 2:
+            return np.zeros_like(y)
+        t = np.arange(n) * dt
+        return np.broadcast_to(np.polyfit(t, y, 1)[0], y.shape).copy()
+    yb = y[: nb * per].reshape(nb, per, -1).mean(axis=1)
+    tb = (np.arange(nb) * per + 0.5 * (per - 1)) * dt
+    win = int(round(window_s / (per * dt))) | 1
+    win = max(5, min(win, nb if nb % 2 else nb - 1))
+    sb = savgol_filter(yb, win, 2, deriv=1, delta=per * dt, axis=0, mode="interp")
+    t = np.arange(n) * dt
+    return np.column_stack([np.interp(t, tb, sb[:, i]) for i in range(y.shape[1])])
 
 
 class CalibrationModel:
@@ -603,7 +620,7 @@ class CalibrationModel:
         T = e.sensor_temperatures()
         self.temperatures = T
         dT = T - self.t_ref_degC
-        dTdt = _savgol_derivative(T, h, 60.0)
+        dTdt = _moving_slope(T, h, 60.0)
         self.dTg = np.ascontiguousarray(dT[:, :3])
         self.dTa = np.ascontiguousarray(dT[:, 3:])
         self.dTdtg = np.ascontiguousarray(dTdt[:, :3])
