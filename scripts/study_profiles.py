@@ -265,7 +265,9 @@ def figures(rows, examples, truth, outdir):
         ax.set_title(f"{profile}: {L:g} h per experiment, campaign {duration_h(profile, L):g} h", fontsize=9)
         ax.set_xlabel("sensor temperature, degC")
         ax.grid(alpha=0.3)
-    axes[0].set_ylabel("stitched gyro bias minus truth, deg/h (dotted: outside the calibrated range)")
+    axes[0].set_ylabel("stitched gyro bias minus truth, deg/h")
+    fig.suptitle("One noise realisation; bands: stitched one sigma; dotted: outside the range the sensor was "
+                 "calibrated over", fontsize=9)
     axes[0].legend(fontsize=7)
     fig.tight_layout()
     fig.savefig(outdir / "study_curves.png", dpi=110)
