@@ -437,7 +437,7 @@ def _run_dask(tasks, *, options, finish, bar):
         n = options.workers if options.workers else min(os.cpu_count() or 1, len(groups))
         n = max(1, min(n, len(groups)))
         _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                silence_logs=logging.ERROR)
         client = Client(cluster)
     try:

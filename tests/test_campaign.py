@@ -305,7 +305,7 @@ def test_existing_dask_cluster_by_address(simulated, tmp_path):
     from distributed import LocalCluster
 
     manifest = _small_manifest(simulated, tmp_path / "m")
-    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=None,
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True, dashboard_address=":0",
                       silence_logs=logging.ERROR) as cluster:
         run = run_campaign(manifest, tmp_path / "out",
                            options=CampaignOptions(scheduler=cluster.scheduler_address, report=False, progress=False))
