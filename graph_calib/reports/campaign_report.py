@@ -331,7 +331,7 @@ def _comparison_table(run):
         cmp_ = e.get("comparison")
         if not cmp_:
             continue
-        rows.append([e["name"], str(cmp_["parameters"]), f"{cmp_['max_abs_difference_in_sigma']:.3f}",
+        rows.append([e["name"], str(cmp_["parameters"]), f"{cmp_['max_abs_difference_in_sigma']:.2g}",
                      f"{cmp_['sigma_ratio_range'][0]:.3f} .. {cmp_['sigma_ratio_range'][1]:.3f}",
                      H.verdict(cmp_["agree"], "agree", "DIFFER")])
         classes.append("" if cmp_["agree"] else "bad")
@@ -452,7 +452,7 @@ def build_report(run, *, figures_dir=None):
     if cmps:
         agree = all(x["agree"] for x in cmps)
         verdicts.append(["filter and graph agree in every subrange", H.verdict(agree, "yes", "NO"),
-                         f"largest difference {max(x['max_abs_difference_in_sigma'] for x in cmps):.3f} sigma"])
+                         f"largest difference {max(x['max_abs_difference_in_sigma'] for x in cmps):.2g} sigma"])
     st_primary = run.stitched.get(primary) if primary else None
     if st_primary is not None:
         bsm = st_primary.boundary_summary()
