@@ -4,7 +4,7 @@ Run by hand::
 
     .venv/bin/python benchmarks/bench_campaign.py [--hours 3] [--workers 2] [--out /tmp/bench-campaign]
 
-Simulates the ``nav-campaign`` scenario (once; reused from ``--out`` when present), then times
+Simulates the ``nav-campaign`` scenario with the demo's code (once; reused from ``--out`` when present), then times
 ``graph_calib.campaign.run_campaign`` from a cold cache (``force``) with a local Dask cluster, and
 samples the resident memory of the whole process tree (this process and the Dask workers) every
 0.2 s.  Prints the wall time per stage, the per-task times and the peak memory; docs/performance.md
@@ -14,14 +14,11 @@ records what it measured.  Targets: 2 minutes, under 4 GB.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import sys
 import threading
 import time
 from pathlib import Path
-
-import numpy as np
 
 
 class MemoryMonitor:
@@ -69,27 +66,6 @@ class MemoryMonitor:
         self._sample()
 
 
-def simulate(out, *, hours, seed):
-    from graph_calib import io
-    from graph_calib.simulation import simulate as sim_build
-    from graph_calib.simulation import write_simulation
-    from graph_calib.validation import simulate_validation_record
-
-    stamp = out / "bench.json"
-    want = {"hours": hours, "seed": seed}
-    if stamp.is_file() and json.loads(stamp.read_text()) == want and (out / "campaign.toml").is_file():
-        print(f"reusing the simulated campaign in {out}")
-        return 0.0
-    t0 = time.perf_counter()
-    sim = sim_build("nav-campaign", rng=np.random.default_rng(seed), hours=hours)
-    write_simulation(sim, out, progress=lambda m: print("  " + m, flush=True))
-    se = simulate_validation_record(sim, hours=3.0, rate_hz=50.0, seed=seed + 1)
-    io.write_experiment(se.experiment, out / "validation.h5")
-    io.write_result(se.truth, out / "validation.truth.json")
-    stamp.write_text(json.dumps(want))
-    return time.perf_counter() - t0
-
-
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--hours", type=float, default=3.0)
@@ -99,13 +75,13 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     from graph_calib.campaign import CampaignOptions, run_campaign
+    from graph_calib.commands.demo_cmd import simulate_demo
 
     out = Path(args.out)
     data = out / "data"
-    data.mkdir(parents=True, exist_ok=True)
-    t_sim = simulate(data, hours=args.hours, seed=args.seed)
-    if t_sim:
-        print(f"simulated 6 x {args.hours:g} h in {t_sim:.0f} s")
+    t0 = time.perf_counter()
+    simulate_demo(data, hours=args.hours, seed=args.seed, validation_hours=3.0)
+    print(f"simulation ready in {time.perf_counter() - t0:.0f} s")
 
     opts = CampaignOptions(workers=args.workers, validate=(str(data / "validation.h5"),), force=True,
                            progress=True)

@@ -381,12 +381,11 @@ class Stitched:
         dict
             ``{flat element name: values (N,)}``, SI.
         """
-        T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
-        out = {}
-        for name, c in self.curves.items():
-            t = T[:, c.sensor] if c.sensor is not None else T.mean(axis=1)
-            out[name] = c.evaluate(t, model)[0]
-        return out
+        return {name: c.evaluate(sensor_columns(T_sensors, c.sensor), model)[0] for name, c in self.curves.items()}
+
+    def element_sigmas(self, T_sensors, model=None):
+        """One sigma of every stitched element at the sensor temperatures, ``{flat element name: (N,)}``."""
+        return {name: c.evaluate(sensor_columns(T_sensors, c.sensor), model)[1] for name, c in self.curves.items()}
 
     def boundary_checks(self):
         return [b for c in self.curves.values() for b in c.boundaries]
@@ -562,6 +561,52 @@ def _cov_block(result, names):
     return np.diag([float(result.sigmas[n]) ** 2 for n in names])
 
 
+def result_points(result, *, name=None, sensor_ranges=None, values=None):
+    """Every stitched element of one result as a :class:`SubrangePoint`, ``{flat element: point}``.
+
+    Parameters
+    ----------
+    result : graph_calib.experiment.Result
+    name : str, optional
+        Label of the points (default: the result's source).
+    sensor_ranges : array_like (6, 2), optional
+        Temperature range of each sensor (default: the result's range for all).
+    values : dict, optional
+        Values to use instead of ``result.values`` (e.g. with a truth's curvature remainder added).
+        Coefficients are taken in order (value, ``_tc``, ``_tc2``) up to the first one absent; the
+        covariance comes from the result (zero without sigmas: a truth).
+    """
+    values = result.values if values is None else values
+    rg = (np.tile(np.asarray(result.temperature_range_degC, dtype=float), (6, 1)) if sensor_ranges is None
+          else np.asarray(sensor_ranges, dtype=float).reshape(6, 2))
+    out = {}
+    for flat in values:
+        try:
+            parameter, el = params.split_element_name(flat)
+        except KeyError:
+            continue
+        if not is_stitched(parameter):
+            continue
+        coef_names = [flat]
+        for _, cn in sorted(family(parameter)[1].items()):
+            cn = cn if el is None else f"{cn}.{el}"
+            if cn not in values:
+                break
+            coef_names.append(cn)
+        coef = np.array([float(values[n]) for n in coef_names])
+        cov = _cov_block(result, coef_names) if result.sigmas is not None else np.zeros((coef.size, coef.size))
+        s = sensor_of(flat)
+        t_range = tuple(float(v) for v in (rg[s] if s is not None else rg.mean(axis=0)))
+        out[flat] = SubrangePoint(name or result.source, float(result.t_ref_degC), coef, cov, t_range)
+    return out
+
+
+def sensor_columns(T_sensors, sensor):
+    """The temperature an element follows: its sensor's column of ``T_sensors`` (N, 6), else their mean."""
+    T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
+    return T[:, sensor] if sensor is not None else T.mean(axis=1)
+
+
 def stitch(results, *, names=None, sensor_ranges=None, solver=None):
     """Stitch per-subrange results of one IMU into a model of every IMU parameter over temperature.
 
@@ -597,22 +642,8 @@ def stitch(results, *, names=None, sensor_ranges=None, solver=None):
     for r, nm, rg in zip(results, names, ranges):
         if r.sigmas is None:
             raise ValueError(f"{nm}: a result without sigmas (truth?) cannot be stitched")
-        for flat in r.values:
-            parameter, el = params.split_element_name(flat)
-            if not is_stitched(parameter):
-                continue
-            _, orders = family(parameter)
-            coef_names = [flat]
-            for k in sorted(orders):
-                cn = orders[k] if el is None else f"{orders[k]}.{el}"
-                if cn not in r.values:
-                    break
-                coef_names.append(cn)
-            coef = np.array([float(r.values[n]) for n in coef_names])
-            cov = _cov_block(r, coef_names)
-            s = sensor_of(flat)
-            t_range = tuple(float(v) for v in (rg[s] if s is not None else rg.mean(axis=0)))
-            points.setdefault(flat, []).append(SubrangePoint(nm, float(r.t_ref_degC), coef, cov, t_range))
+        for flat, pt in result_points(r, name=nm, sensor_ranges=rg).items():
+            points.setdefault(flat, []).append(pt)
     curves = {}
     order = {n: i for i, n in enumerate(p.name for p in params.CATALOGUE)}
     for flat in sorted(points, key=lambda f: (order[params.split_element_name(f)[0]], f)):
@@ -622,4 +653,5 @@ def stitch(results, *, names=None, sensor_ranges=None, solver=None):
 
 
 __all__ = ["SENSORS", "MODELS", "BOUNDARY_Z_LIMIT", "sensor_of", "family", "is_stitched", "SubrangePoint", "Fit", "family_z_limit",
-           "BoundaryCheck", "ElementCurve", "Stitched", "boundary_temperature", "fit_element", "stitch"]
+           "BoundaryCheck", "ElementCurve", "Stitched", "boundary_temperature", "fit_element", "stitch",
+           "result_points", "sensor_columns"]

@@ -50,8 +50,7 @@ from functools import partial
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib import params
-from graph_calib.stitching import family, is_stitched, sensor_of
+from graph_calib.stitching import result_points, sensor_columns, sensor_of
 
 #: The method's published accuracy: gyro drift, rad/s (0.01 deg/h).
 GYRO_ACCURACY_RADPS = 0.01 * c.DH_TO_RS
@@ -66,7 +65,8 @@ class ResultCalibration:
     """A single result (truth or estimate) as a calibration over temperature.
 
     Every gyro/accel element follows ``p + p_tc dT + p_tc2 dT^2`` with
-    ``dT = T_sensor - T_ref`` (absent coefficients are zero).  For a truth file of
+    ``dT = T_sensor - T_ref`` (absent coefficients are zero), one
+    :class:`graph_calib.stitching.SubrangePoint` per element.  For a truth file of
     the simulator the curvature remainder ``extra.simulation.unmodelled`` supplies
     ``p_tc2``, which makes the truth exact over any range.
 
@@ -81,71 +81,21 @@ class ResultCalibration:
         sim = (result.extra or {}).get("simulation", {}) if isinstance(result.extra, dict) else {}
         for k, v in (sim.get("unmodelled") or {}).items():
             values.setdefault(k, float(v))
-        self.values = values
+        self.points = result_points(result, values=values)
         self.label = "truth" if result.solver == "truth" else f"{result.solver} estimate of {result.source}"
 
     def evaluate(self, T_sensors, model=None):
         """``{flat element: values (N,)}`` at the sensor temperatures ``T_sensors`` (N, 6), SI."""
-        T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
-        out = {}
-        for flat, v in self.values.items():
-            try:
-                parameter, el = params.split_element_name(flat)
-            except KeyError:
-                continue
-            if not is_stitched(parameter):
-                continue
-            s = sensor_of(flat)
-            dT = (T[:, s] if s is not None else T.mean(axis=1)) - self.result.t_ref_degC
-            val = np.full(T.shape[0], float(v))
-            for k, cname in family(parameter)[1].items():
-                key = cname if el is None else f"{cname}.{el}"
-                if key in self.values:
-                    val = val + float(self.values[key]) * dT**k
-            out[flat] = val
-        return out
-
+        return {k: p.predict(sensor_columns(T_sensors, sensor_of(k)))[0] for k, p in self.points.items()}
 
     def element_sigmas(self, T_sensors, model=None):
         """One sigma of every element at the sensor temperatures, ``{flat: (N,)}`` (empty for a truth).
 
         From the result's covariance of each element and its temperature coefficients.
         """
-        T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
-        r = self.result
-        if r.sigmas is None:
+        if self.result.sigmas is None:
             return {}
-        idx = {n: i for i, n in enumerate(r.covariance_names or ())}
-        out = {}
-        for flat in r.values:
-            try:
-                parameter, el = params.split_element_name(flat)
-            except KeyError:
-                continue
-            if not is_stitched(parameter):
-                continue
-            names = [flat] + [cn if el is None else f"{cn}.{el}" for _, cn in sorted(family(parameter)[1].items())]
-            names = [n for n in names if n in r.values]
-            s = sensor_of(flat)
-            dT = (T[:, s] if s is not None else T.mean(axis=1)) - r.t_ref_degC
-            J = np.stack([dT**k for k in range(len(names))], axis=1)
-            if r.covariance is not None and all(n in idx for n in names):
-                ii = [idx[n] for n in names]
-                C = np.asarray(r.covariance)[np.ix_(ii, ii)]
-            else:
-                C = np.diag([r.sigmas[n] ** 2 for n in names])
-            out[flat] = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", J, C, J), 0.0, None))
-        return out
-
-
-def stitched_sigmas(stitched, T_sensors, model=None):
-    """One sigma of every stitched element at the sensor temperatures, ``{flat: (N,)}``."""
-    T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
-    out = {}
-    for name, cv in stitched.curves.items():
-        t = T[:, cv.sensor] if cv.sensor is not None else T.mean(axis=1)
-        out[name] = cv.evaluate(t, model)[1]
-    return out
+        return {k: p.predict(sensor_columns(T_sensors, sensor_of(k)))[1] for k, p in self.points.items()}
 
 
 def sensor_error_sigmas(sigmas, omega_b, f_b):
@@ -382,7 +332,7 @@ def validate(record, calibration, reference, *, model=None, window_s=1.0, window
     inside = np.ones(T.shape, dtype=bool)
     curves = getattr(calibration, "curves", None)
     if curves:
-        sig_g, sig_a = sensor_error_sigmas(stitched_sigmas(calibration, T, model), w["omega"], w["f"])
+        sig_g, sig_a = sensor_error_sigmas(calibration.element_sigmas(T, model), w["omega"], w["f"])
         coverage = np.tile([-np.inf, np.inf], (6, 1))
         for i, ax in enumerate("xyz"):
             for triad, s in (("gyro", i), ("accel", 3 + i)):
@@ -454,6 +404,5 @@ def simulate_validation_record(simulation, *, hours=2.0, start_degC=None, span_d
     return make.func(*make.args, **kw)
 
 
-__all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "sensor_error_sigmas",
-           "stitched_sigmas", "window_means",
+__all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "sensor_error_sigmas", "window_means",
            "Validation", "validate", "validation_text", "simulate_validation_record", "STATIC_RATE_TOLERANCE_RADPS"]

@@ -48,8 +48,12 @@ def _say(msg):
     print(msg, file=sys.stderr, flush=True)
 
 
-def simulate_demo(out, *, hours, seed):
-    """Write the demo's campaign and validation record into ``out`` (reused when present); manifest path."""
+def simulate_demo(out, *, hours, seed, validation_hours=VALIDATION_HOURS):
+    """Write the demo's campaign and validation record into ``out`` (reused when present); manifest path.
+
+    ``nav-campaign`` with ``hours`` per subrange, and ``validation.h5`` (with its truth): the same IMU
+    sweeping -10..+50 degC for ``validation_hours`` at :data:`VALIDATION_RATE_HZ`.
+    """
     from graph_calib import io
     from graph_calib.simulation import simulate, write_simulation
     from graph_calib.validation import simulate_validation_record
@@ -57,7 +61,7 @@ def simulate_demo(out, *, hours, seed):
     out = Path(out)
     manifest = out / "campaign.toml"
     stamp = out / "demo.json"
-    want = {"scenario": "nav-campaign", "hours": hours, "seed": seed, "validation_hours": VALIDATION_HOURS,
+    want = {"scenario": "nav-campaign", "hours": hours, "seed": seed, "validation_hours": validation_hours,
             "validation_rate_hz": VALIDATION_RATE_HZ}
     sim = simulate("nav-campaign", rng=np.random.default_rng(seed), hours=hours, tag=f"demo, seed {seed}")
     if stamp.is_file() and manifest.is_file() and (out / "validation.h5").is_file():
@@ -71,8 +75,8 @@ def simulate_demo(out, *, hours, seed):
             pass
     t0 = time.monotonic()
     write_simulation(sim, out, progress=lambda m: _say("  " + m), tag=f"demo, seed {seed}")
-    _say(f"  simulating the validation record ({VALIDATION_HOURS:g} h sweeping -10..+50 degC)")
-    se = simulate_validation_record(sim, hours=VALIDATION_HOURS, rate_hz=VALIDATION_RATE_HZ, seed=seed + 1000)
+    _say(f"  simulating the validation record ({validation_hours:g} h sweeping -10..+50 degC)")
+    se = simulate_validation_record(sim, hours=validation_hours, rate_hz=VALIDATION_RATE_HZ, seed=seed + 1000)
     io.write_experiment(se.experiment, out / "validation.h5")
     io.write_result(se.truth, out / "validation.truth.json")
     io.atomic_write_json(stamp, want)
