@@ -17,8 +17,8 @@ from graph_calib import sensor_model as sm  # noqa: E402
 from graph_calib.calibrate import CalibrationOptions, build_problem, compare, run_factor_graph, run_sqrt_kf  # noqa: E402
 from graph_calib.importers import import_mpu6050, import_xsens  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
-from graph_calib.rotations import exp_so3  # noqa: E402
-from graph_calib.strapdown import detect_static, static_means  # noqa: E402
+from graph_calib.rotations import quat_to_dcm  # noqa: E402
+from graph_calib.strapdown import detect_static, integrate_attitude  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "data" / "real"
@@ -29,8 +29,8 @@ def pose_metrics(exp, layout, x, poses):
     """|f| spread over the poses and the gyro-vs-accelerometer attitude change between consecutive poses.
 
     For poses i and i+1 (static means f_i, f_i+1 in b), the rotation C from the gyro increments
-    between the pose centres must carry gravity: f_i+1 = C^T f_i (the Earth's turn is far below
-    these sensors' noise).  Returns (|f| per pose, mismatch angle per pose pair in rad).
+    between the pose centres (graph_calib.strapdown.integrate_attitude, Earth rate included) must
+    carry gravity: f_i+1 = C^T f_i.  Returns (|f| per pose, mismatch angle per pose pair in rad).
     """
     dt = exp.dt[:, None]
     w = sm.correct(layout, x, "gyro", exp.dtheta / dt, other=exp.dv / dt) if x is not None else exp.dtheta / dt
@@ -38,11 +38,12 @@ def pose_metrics(exp, layout, x, poses):
     means = np.array([f[a:b].mean(axis=0) for a, b in poses])
     centres = [(a + b) // 2 for a, b in poses]
     mism = []
+    q0 = np.array([1.0, 0.0, 0.0, 0.0])
     for (i0, i1), (fa, fb) in zip(zip(centres[:-1], centres[1:]), zip(means[:-1], means[1:])):
-        C = np.eye(3)
-        for phi in w[i0 + 1:i1 + 1] * dt[i0 + 1:i1 + 1]:   # short spans: a few hundred samples
-            C = C @ exp_so3(phi)
-        pred = C.T @ fa
+        span = slice(i0 + 1, i1 + 1)
+        q = integrate_attitude(w[span] * dt[span], t=exp.t[span], rate_hz=exp.rate_hz, q_nb0=q0,
+                               latitude_rad=exp.latitude_rad)[-1]
+        pred = quat_to_dcm(q).T @ fa
         mism.append(np.arccos(np.clip(pred @ fb / np.linalg.norm(pred) / np.linalg.norm(fb), -1, 1)))
     return np.linalg.norm(means, axis=1), np.array(mism)
 
