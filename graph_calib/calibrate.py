@@ -40,7 +40,7 @@ class CalibrationOptions:
 
     model: ModelOptions = field(default_factory=ModelOptions)
     graph: GraphOptions = field(default_factory=GraphOptions)
-    kf_max_passes: int = 20
+    kf_max_passes: int = 50
     t_ref_degC: float | None = None
 
 
@@ -68,8 +68,6 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             static_mask[a:b] = True
         if mopt.moving_sigma is None:
             mopt = replace(mopt, moving_sigma=1.0)
-        exclude = set(mopt.exclude) | {"lever_arm"}
-        mopt = replace(mopt, exclude=tuple(sorted(exclude)))
     interval = tuple(static[0]) if len(static) else None
     if interval is not None:
         mopt = _noise_from_static(experiment, interval, mopt)

@@ -90,8 +90,9 @@ class ModelOptions:
         Overrides of the grade's prior sigmas, ``{parameter name: sigma}`` (SI).
     gyro_noise, accel_noise, encoder_noise : float or None
         Overrides of the grade's noise (rad/sqrt(s), m/s/sqrt(s), rad).
-    initial_attitude_sigma : float
+    initial_attitude_sigma : float or None
         Prior sigma of the first keyframe attitude around the alignment, rad.
+        None: what the alignment can know (:attr:`CalibrationModel.initial_attitude_sigma`).
     moving_sigma : float or None
         Without a table the bench may translate: gravity measurements of keyframes
         that are not static get this sigma (m/s^2).  None: every keyframe counts.
@@ -107,7 +108,7 @@ class ModelOptions:
     gyro_noise: float | None = None
     accel_noise: float | None = None
     encoder_noise: float | None = None
-    initial_attitude_sigma: float = 0.05
+    initial_attitude_sigma: float | None = None
     moving_sigma: float | None = None
     n_newton: int = 2
 
@@ -566,6 +567,45 @@ def _moving_slope(y, dt, window_s):
     return np.column_stack([np.interp(t, tb, sb[:, i]) for i in range(y.shape[1])])
 
 
+def boundary_rate_correction(w_mean, k0):
+    """Correction from the two-sample mean to the angular rate at each keyframe boundary.
+
+    The lever-arm term needs the rate at a boundary instant, but the data are
+    interval means.  The mean of the two adjacent samples is off by ``h^2/6``
+    times the rate's second derivative (at a turn's cosine ramp 3e-5 rad/s, i.e.
+    0.3 sigma of a navigation-grade gravity factor with a 0.15 m lever arm); the
+    four-sample value ``(-m[-2] + 7 m[-1] + 7 m[0] - m[1]) / 12`` is exact for
+    cubics and also where a ramp starts exactly at the boundary.  At the ends of
+    the record the first (last) sample is extrapolated linearly.  The correction
+    is a property of the data: its dependence on the calibration is of the order
+    of a scale error times itself and is left out.
+
+    Parameters
+    ----------
+    w_mean : ndarray, shape (N, 3)
+        Interval-mean rates of equally spaced samples, rad/s.
+    k0 : ndarray of int, shape (K+1,)
+        First sample of each keyframe, and N.
+
+    Returns
+    -------
+    ndarray, shape (K+1, 3)
+        Add to ``[m[0] of keyframe 0, (m[-1] + m[0]) / 2 at inner boundaries, m[-1] of the last]``.
+    """
+    w = np.asarray(w_mean, dtype=float)
+    b = np.asarray(k0)
+    n = w.shape[0]
+    fix = np.zeros((b.size, 3))
+    inner = np.arange(1, b.size - 1)
+    ok = inner[(b[inner] >= 2) & (b[inner] + 1 < n)]
+    j = b[ok]
+    fix[ok] = (-w[j - 2] + w[j - 1] + w[j] - w[j + 1]) / 12.0
+    if n >= 2:
+        fix[0] = 0.5 * (w[0] - w[1])
+        fix[-1] = 0.5 * (w[n - 1] - w[n - 2])
+    return fix
+
+
 class CalibrationModel:
     """The calibration problem of one experiment: data, layout, priors, noise, factors.
 
@@ -588,15 +628,14 @@ class CalibrationModel:
     def __init__(self, experiment, *, options=ModelOptions(), t_ref_degC=None, static_mask=None):
         self.experiment = experiment
         self.options = options
-        exclude = tuple(options.exclude)
-        if experiment.table is None:
-            # without a table nothing ties the attitude to the faceplate or the rotation centre
-            exclude = tuple(sorted(set(exclude) | {"mount", "time_lag.table", "damping.stiffness"}))
-        self.layout = Layout.declared(extra=tuple(options.extra_effects), exclude=exclude)
         self.grade = _grade(options.grade)
+        self.omega_ie_n = _omega_ie_n(experiment.latitude_rad)
+        self.auto_excluded = self._unobservable(experiment)
+        exclude = tuple(sorted(set(options.exclude) | set(self.auto_excluded)))
+        self.layout = Layout.declared(extra=tuple(options.extra_effects), exclude=exclude)
         self.t_ref_degC = float(experiment.default_t_ref() if t_ref_degC is None else t_ref_degC)
         self.gravity = float(experiment.gravity_mps2)
-        self.omega_ie_n = _omega_ie_n(experiment.latitude_rad)
+        self.initial_attitude_sigma = self._initial_attitude_sigma(experiment)
         self.gyro_noise = float(options.gyro_noise if options.gyro_noise is not None else self.grade.gyro_noise)
         self.accel_noise = float(options.accel_noise if options.accel_noise is not None else self.grade.accel_noise)
         self.encoder_noise = float(options.encoder_noise if options.encoder_noise is not None
@@ -605,6 +644,61 @@ class CalibrationModel:
         self._prepare_keyframes()
         self._prepare_table()
         self._static_keyframes(static_mask)
+
+    #: A valid table reading counts as taken while the table turns above this rate
+    #: against the level frame, rad/s (about 0.06 deg/s, 14 times the Earth rate).
+    LAG_RATE_THRESHOLD = 1e-3
+
+    def _unobservable(self, experiment):
+        """Declared parameters the record cannot inform, left out of the layout (sorted tuple).
+
+        Without a table nothing ties the attitude to the faceplate or to a fixed
+        rotation centre: ``mount``, ``time_lag.table``, ``damping.stiffness`` and
+        ``lever_arm`` go.  With a table whose valid readings are all taken at rest
+        (the usual bench: encoders trusted only in static positions) a time lag
+        changes no measurement, so ``time_lag.table`` goes too; estimating it
+        would only return its prior mean as if it were a result.
+        """
+        tab = experiment.table
+        if tab is None:
+            return ("damping.stiffness", "lever_arm", "mount", "time_lag.table")
+        if not np.any(tab.valid):
+            return ("damping.stiffness", "mount", "time_lag.table")
+        tm = tab.t[tab.valid]
+        j = np.clip(np.searchsorted(experiment.t, tm, side="right"), 0, experiment.n_samples - 1)
+        w_ib_b = experiment.dtheta[j] / experiment.dt[j, None]
+        C_bn = np.swapaxes(quat_to_dcm(tab.q_nf[tab.valid]) @ quat_to_dcm(tab.q_fb_nominal), 1, 2)
+        w_nb_b = w_ib_b - C_bn @ self.omega_ie_n
+        if np.any(np.linalg.norm(w_nb_b, axis=1) > self.LAG_RATE_THRESHOLD):
+            return ()
+        return ("time_lag.table",)
+
+    #: Prior sigma of the first attitude when valid table readings give it (faceplate
+    #: attitude through the nominal mounting; the mounting error is estimated), rad.
+    TABLE_ALIGNMENT_SIGMA = 0.05
+
+    def _initial_attitude_sigma(self, experiment):
+        """Prior sigma of the first keyframe attitude (isotropic), rad.
+
+        With valid table readings the alignment takes the table's attitude:
+        :attr:`TABLE_ALIGNMENT_SIGMA`.  Otherwise the heading comes from
+        gyrocompassing, good to about the gyro bias over the horizontal Earth
+        rate (0.1 rad for a navigation-grade unit, nothing at all for consumer
+        MEMS, whose bias is a hundred times the Earth rate): the sigma is that,
+        capped at pi.  The whole record then fixes the heading through the Earth
+        rate; a tight prior around a wrong gyrocompass heading would instead turn
+        the Earth-rate compensation into a false gyro bias (4 sigma on the
+        consumer hand-held scenario).
+        """
+        if self.options.initial_attitude_sigma is not None:
+            return float(self.options.initial_attitude_sigma)
+        tab = experiment.table
+        if tab is not None and np.any(tab.valid):
+            return self.TABLE_ALIGNMENT_SIGMA
+        horizontal = np.hypot(self.omega_ie_n[0], self.omega_ie_n[1])
+        bias = (self.options.prior_sigma or {}).get("gyro.bias", self.grade.prior_sigma["gyro.bias"])
+        bias = float(np.max(bias))
+        return float(min(np.pi, max(self.TABLE_ALIGNMENT_SIGMA, bias / max(horizontal, 1e-12))))
 
     # -- data preparation ---------------------------------------------------
 
@@ -648,6 +742,8 @@ class CalibrationModel:
         t_start = e.t - self.dt
         self.t_key = np.append(t_start[self.k0[:-1]], e.t[-1])  # time of each boundary, (K+1,)
         self.T_key = np.diff(self.t_key)
+        self.w_b_fix = boundary_rate_correction(self.w_raw, self.k0)
+
 
     def _prepare_table(self):
         e = self.experiment
@@ -740,6 +836,7 @@ class CalibrationModel:
         w_b[K], Jw_b[K] = wl[K - 1], Jwl[K - 1]
         w_b[1:K] = 0.5 * (wl[:-1] + wf[1:])
         Jw_b[1:K] = 0.5 * (Jwl[:-1] + Jwf[1:])
+        w_b += self.w_b_fix
         return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=JR, S=S, J_S=JS, S1=S1,
                              J_S1=JS1, w_b=w_b, J_w_b=Jw_b, tap_dR=tapR, tap_J=tapJ)
 

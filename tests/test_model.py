@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from graph_calib import sensor_model as sm
-from graph_calib.model import CalibrationModel, ModelOptions
+from graph_calib.model import CalibrationModel, ModelOptions, boundary_rate_correction
 from graph_calib.params import FURTHER_EFFECTS, Layout
 from graph_calib.rotations import dcm_to_quat, exp_so3, exp_so3_nb, right_jacobian_nb
 
@@ -234,8 +234,33 @@ def _reference_preintegration(model, x):
                             model.df_raw, model.tap_idx, model.tap_lo, model.options.n_newton, nc, *out.values())
     wf, Jwf, wl, Jwl = out.pop("wf"), out.pop("Jwf"), out.pop("wl"), out.pop("Jwl")
     out["w_b"] = np.concatenate([wf[:1], 0.5 * (wl[:-1] + wf[1:]), wl[-1:]])
+    out["w_b"] += model.w_b_fix
     out["J_w_b"] = np.concatenate([Jwf[:1], 0.5 * (Jwl[:-1] + Jwf[1:]), Jwl[-1:]])
     return out
+
+
+def test_boundary_rate_exact_for_cubics_and_ramp_starts():
+    h, n = 0.01, 60
+    k0 = np.array([0, 20, 40, 60])
+    edges = np.arange(n + 1) * h
+    c = np.array([[0.3, -2.0, 5.0, 40.0], [0.0, 1.0, -7.0, 3.0], [0.1, 0.0, 0.0, 0.0]])   # per axis, t^0..t^3
+
+    def means(F):                          # interval means from an antiderivative F(t), (n, 3)
+        return np.diff(F(edges), axis=0) / h
+
+    w = means(lambda t: np.stack([sum(c[a, p] * t ** (p + 1) / (p + 1) for p in range(4)) for a in range(3)], 1))
+    w_b = np.concatenate([w[:1], 0.5 * (w[k0[1:-1] - 1] + w[k0[1:-1]]), w[-1:]]) + boundary_rate_correction(w, k0)
+    t_b = k0 * h
+    exact = np.stack([sum(c[a, p] * t_b**p for p in range(4)) for a in range(3)], 1)
+    np.testing.assert_allclose(w_b[1:-1], exact[1:-1], rtol=0, atol=1e-12)      # inner boundaries: cubic exact
+    # the two ends are linear extrapolations: exact for the linear axis 2, off by O(h^2 w'') elsewhere
+    np.testing.assert_allclose(w_b[[0, -1], 2], exact[[0, -1], 2], atol=1e-14)
+    # a cosine-like ramp starting at the boundary t = 0.2 s: rate a (t - 0.2)^2 after it, zero before
+    a = 2.0
+    ramp = means(lambda t: np.repeat((a / 3 * np.clip(t - 0.2, 0, None) ** 3)[:, None], 3, 1))
+    w_b = 0.5 * (ramp[19] + ramp[20]) + boundary_rate_correction(ramp, k0)[1]
+    assert np.abs(w_b).max() < 1e-15
+    assert abs(0.5 * (ramp[19, 0] + ramp[20, 0]) - a * h**2 / 6) < 1e-15      # what the plain mean is off by
 
 
 @pytest.mark.parametrize("extra, keyframe_s", [((), 0.37), (FURTHER_EFFECTS, 0.37), (FURTHER_EFFECTS, 1.0)])
