@@ -347,7 +347,7 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     null_idx = np.concatenate([np.arange(P)[layout.slice(n)] for n in null_names]).astype(np.int64)
     Hxx[null_idx, null_idx] += 1.0 / x_sigma[null_idx] ** 2
     gx[null_idx] += (x[null_idx] - x_prior[null_idx]) / x_sigma[null_idx] ** 2
-    att = model.options.initial_attitude_sigma
+    att = model.initial_attitude_sigma
     r0 = log_so3(quat_to_dcm(q_nb0).T @ R[0]) / att
     H0 = right_jacobian_inv(r0 * att) / att
     Hdiag[0] += H0.T @ H0

@@ -171,7 +171,7 @@ def build_graph(model, cache, *, R_prior, x_prior, x_sigma, robust=None, robust_
 
     graph = gtsam.NonlinearFactorGraph()
     K = model.n_keyframes
-    att_sigma = model.options.initial_attitude_sigma
+    att_sigma = model.initial_attitude_sigma
     graph.add(gtsam.PriorFactorRot3(X(0), gtsam.Rot3(R_prior), gtsam.noiseModel.Isotropic.Sigma(3, att_sigma)))
     graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
     rot_sigma = cache.rot.sigma

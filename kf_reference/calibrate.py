@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.params import Layout
-from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
+from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm, right_jacobian
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
 
@@ -218,6 +218,20 @@ class _Linearised:
     Ut0: np.ndarray
 
 
+def _attitude_prior_root(m0, sigma):
+    """Transposed upper-triangular square root of the first attitude's prior covariance, (3, 3).
+
+    The prior factor ``Log(R_prior^T R_lin Exp(delta)) / sigma`` is linear in
+    ``delta`` with slope ``Jr^-1(-m0)``, ``m0 = Log(R_lin^T R_prior)``: ``delta``
+    has mean ``m0`` and covariance ``sigma^2 Jr(-m0) Jr(-m0)^T`` (exactly the
+    batch factor's information, whatever the size of ``m0``).
+    """
+    Jr = right_jacobian(-np.asarray(m0, dtype=float))
+    P = sigma**2 * (Jr @ Jr.T)
+    L = np.linalg.cholesky(P[::-1, ::-1])       # P = U U^T with U upper triangular: U = flip(chol(flip(P)))
+    return L[::-1, ::-1].T
+
+
 def _linearise(model, pre, R_lin, x_lin, *, R_prior, x_prior, x_sigma):
     """Every factor at ``(R_lin, x_lin)`` (``pre`` preintegrated at ``x_lin``), as a :class:`_Linearised`."""
     rot = model.rotation_factors(R_lin, pre, x_lin)
@@ -230,7 +244,8 @@ def _linearise(model, pre, R_lin, x_lin, *, R_prior, x_prior, x_sigma):
     s0 = np.zeros(sqrt_kf.N_ATT + x_lin.size)
     s0[ATT] = log_so3(R_lin[0].T @ R_prior)
     s0[CAL] = x_prior - x_lin
-    Ut0 = np.diag(np.concatenate([np.full(3, model.options.initial_attitude_sigma), x_sigma]))
+    Ut0 = np.diag(np.concatenate([np.zeros(3), x_sigma]))
+    Ut0[ATT, ATT] = _attitude_prior_root(s0[ATT], model.initial_attitude_sigma)
     return _Linearised(B=B, A=A, G=G, c=c, H=H, z=z, sigma=sig, lo=lo, t=t, kind=kind, axis=axis, s0=s0, Ut0=Ut0)
 
 
@@ -275,7 +290,7 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
     x_lin : ndarray, shape (P,)
         Linearisation calibration.
     R_prior : ndarray, shape (3, 3)
-        Prior attitude at the first boundary, sigma ``model.options.initial_attitude_sigma``.
+        Prior attitude at the first boundary, sigma ``model.initial_attitude_sigma``.
     x_prior, x_sigma : ndarray, shape (P,)
         Prior mean and sigma of the calibration.
     pre : graph_calib.model.Preintegrated, optional
@@ -354,7 +369,7 @@ def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2
 # ---------------------------------------------------------------------------
 
 
-def calibrate(model, *, q_nb0, max_passes=20, x_tol=1e-3, attitude_tol=1e-2, progress=None):
+def calibrate(model, *, q_nb0, max_passes=50, x_tol=1e-3, attitude_tol=1e-2, progress=None):
     """Calibrate with the iterated square-root filter.
 
     Parameters

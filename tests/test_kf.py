@@ -143,7 +143,7 @@ def _batch_gauss_newton(model, *, R, x, R_prior, iterations=6):
     P = model.layout.size
     n_att = 3 * (K + 1)
     x_prior, x_sigma = model.prior()
-    s0 = model.options.initial_attitude_sigma
+    s0 = model.initial_attitude_sigma
     for _ in range(iterations):
         pre = model.preintegrate(x)
         rows, cols, vals, res = [], [], [], []
@@ -183,6 +183,19 @@ def _batch_gauss_newton(model, *, R, x, R_prior, iterations=6):
         x = x + step[n_att:]
     cov = np.linalg.inv(info)[n_att:, n_att:]
     return x, cov, R
+
+
+def test_attitude_prior_root_is_the_batch_factor_information():
+    """The first attitude's prior: upper-triangular root whose information is the batch factor's."""
+    from kf_reference.calibrate import _attitude_prior_root
+
+    m0 = np.array([0.3, -0.2, 1.6])                       # far from the prior's centre (loose heading)
+    Ut = _attitude_prior_root(m0, 2.0)
+    U = Ut.T
+    assert np.all(np.tril(U, -1) == 0.0)
+    J = right_jacobian_inv(-m0) / 2.0                    # slope of Log(R_prior^T R_lin Exp(delta)) / sigma
+    np.testing.assert_allclose(np.linalg.inv(U @ U.T), J.T @ J, rtol=1e-12)
+    assert np.abs(U @ U.T - 4.0 * np.eye(3)).max() > 0.1   # not the isotropic approximation
 
 
 def test_iterated_filter_reproduces_batch_solution():
@@ -301,57 +314,5 @@ def test_to_result_and_progress():
         kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=0)
 
 
-# ---------------------------------------------------------------------------
-# the simulator's scenarios
-# ---------------------------------------------------------------------------
-
-
-def _scenario(name, **options):
-    simulate = pytest.importorskip("graph_calib.simulate")
-    return simulate.simulate(name, rng=np.random.default_rng(7), **options).run()[0]
-
-
-def _scenario_fit(se, model_options):
-    from graph_calib.calibrate import CalibrationOptions, build_problem
-
-    opts = CalibrationOptions(model=model_options, t_ref_degC=se.truth.t_ref_degC)
-    problem = build_problem(se.experiment, options=opts)
-    fr = kf_reference.calibrate(problem.model, q_nb0=problem.q_nb0, max_passes=20)
-    z = (fr.x - fr.layout.from_dict(se.truth.values)) / fr.sigma
-    return fr, z, problem
-
-
-@pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason=(
-    "shared model vs simulator: at the true trajectory the gravity factors of moving keyframes reach 2 sigma "
-    "on noise-free data; the factor graph lands on the same estimate (lever_arm.z 1.6 sigma off)"))
-def test_nav_subrange_short_noise_free_within_a_tenth_of_sigma():
-    se = _scenario("nav-subrange-short", noise=False, curvature=False)
-    fr, z, _ = _scenario_fit(se, ModelOptions())
-    assert fr.converged
-    assert np.abs(z).max() < 0.1, _worst(fr, z)
-
-
-@pytest.mark.slow
-def test_nav_subrange_short_agrees_with_factor_graph():
-    """The acceptance rule of the two solvers: every parameter within 0.1 sigma, sigma ratios in [0.9, 1.1]."""
-    from graph_calib import factor_graph
-
-    se = _scenario("nav-subrange-short")
-    fr, _, problem = _scenario_fit(se, ModelOptions())
-    gr = factor_graph.solve(problem.model, q_nb0=problem.q_nb0)
-    sig_g = np.sqrt(np.diag(gr.covariance))
-    dz = (fr.x - gr.x) / sig_g
-    assert np.abs(dz).max() < 0.1, _worst(fr, dz)
-    ratio = fr.sigma / sig_g
-    assert np.all((ratio > 0.9) & (ratio < 1.1)), ratio
-
-
-@pytest.mark.slow
-def test_consumer_handheld_converges_from_zero_calibration():
-    se = _scenario("consumer-handheld")
-    fr, z, _ = _scenario_fit(se, ModelOptions(grade="consumer"))
-    assert fr.converged and fr.n_passes >= 3
-    # within a few sigma; 4.3 sigma on gyro.bias.z is shared with the factor graph (same estimate)
-    assert np.abs(z).max() < 5.0, _worst(fr, z)
-    assert np.sqrt(np.mean(z**2)) < 2.0
+# The simulator's scenarios (noise-free recovery, Monte Carlo, agreement with the graph, remaining
+# sensor errors, the consumer hand-held session) are in tests/test_accuracy.py, for both solvers.
