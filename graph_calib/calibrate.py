@@ -40,7 +40,7 @@ class CalibrationOptions:
 
     model: ModelOptions = field(default_factory=ModelOptions)
     graph: GraphOptions = field(default_factory=GraphOptions)
-    kf_max_passes: int = 50
+    kf_max_passes: int = 500
     t_ref_degC: float | None = None
 
 

@@ -440,6 +440,41 @@ def import_mpu6050(csv_path, *, latitude_rad=MPU6050_LATITUDE_RAD, gravity_mps2=
                   skip_lines=5)
 
 
+def mpu6050_reference_calibration(params_path):
+    """The UNCuyo authors' accelerometer calibration in this project's terms.
+
+    Their ``reference_params_acc.csv`` holds ``m`` (3 misalignments), ``k`` (3
+    scales, g per count) and ``b`` (3 biases, counts) of ``a = T K (raw + b)``,
+    ``T = [[1, -m0, m1], [0, 1, -m2], [0, 0, 1]]``.  With the importer's nominal
+    scale ``s = g0 / 16384`` (m/s^2 per count) the measured specific force is
+    ``f_meas = s raw = A f - s b`` with ``A = s (T K)^-1``, so the model.md scale
+    errors are ``diag(A) - 1`` and the biases ``-s b``.  Their misalignment
+    convention differs from model.md's, so only scales and biases are returned.
+
+    Parameters
+    ----------
+    params_path : str or pathlib.Path
+        ``reference_params_acc.csv``.
+
+    Returns
+    -------
+    dict
+        ``{"accel.scale.x": ..., "accel.bias.x": ..., ...}``, SI.
+    """
+    p = read_numeric_table(params_path).ravel()
+    if p.size != 9:
+        raise InputError(f"{params_path}: expected 9 numbers (m, k, b), found {p.size}")
+    m, k, b = p[:3], p[3:6], p[6:]
+    s_nom = c.G0 / MPU6050_ACCEL_COUNTS_PER_G
+    T = np.array([[1.0, -m[0], m[1]], [0.0, 1.0, -m[2]], [0.0, 0.0, 1.0]])
+    A = s_nom * np.linalg.inv(T @ np.diag(k))
+    out = {}
+    for i, ax in enumerate("xyz"):
+        out[f"accel.scale.{ax}"] = float(A[i, i] - 1.0)
+        out[f"accel.bias.{ax}"] = float(-s_nom * b[i])
+    return out
+
+
 def _resolve_columns(columns, *, path, delimiter, header_lines):
     """Check a column mapping; return ({key: 0-based index}, [temperature keys], {key: channel name})."""
     if not isinstance(columns, dict) or not columns:

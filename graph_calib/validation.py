@@ -141,6 +141,58 @@ def sensor_errors(values, omega_b, f_b):
     return out[0], out[1]
 
 
+def static_pose_consistency(experiment, *, poses, layout=None, x=None):
+    """How well a calibration makes a hand-held session's static poses agree with each other.
+
+    Two checks that need no reference: the magnitude of the mean specific force in
+    each static pose (all equal to local gravity for a calibrated triad), and, for
+    consecutive poses ``i`` and ``i+1``, the rotation ``C`` integrated from the gyro
+    increments between the pose centres (:func:`graph_calib.strapdown.integrate_attitude`,
+    coning and Earth rate included) must carry the mean specific force of one pose
+    into the other, ``f_(i+1) = C^T f_i``; the angle between the two is the
+    gyro-against-accelerometer attitude mismatch.
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    poses : sequence of (start, stop)
+        Sample ranges of the static poses, in time order (e.g. from
+        :func:`graph_calib.strapdown.detect_static`).
+    layout : graph_calib.params.Layout, optional
+    x : ndarray, optional
+        Calibration to apply (with ``layout``); None: the raw (nominally scaled) data.
+
+    Returns
+    -------
+    f_norm : ndarray, shape (n_poses,)
+        ``|mean f_b|`` per pose, m/s^2.
+    mismatch : ndarray, shape (n_poses - 1,)
+        Attitude mismatch between consecutive poses, rad.
+    """
+    from graph_calib import sensor_model as sm
+    from graph_calib.rotations import quat_to_dcm
+    from graph_calib.strapdown import integrate_attitude
+
+    e = experiment
+    dt = e.dt[:, None]
+    w = e.dtheta / dt
+    f = e.dv / dt
+    if x is not None:
+        w, f = sm.correct(layout, x, "gyro", w, other=e.dv / dt), sm.correct(layout, x, "accel", f, other=e.dtheta / dt)
+    means = np.array([f[a:b].mean(axis=0) for a, b in poses])
+    centres = [(a + b) // 2 for a, b in poses]
+    q0 = np.array([1.0, 0.0, 0.0, 0.0])
+    mismatch = np.empty(max(0, len(poses) - 1))
+    for i, (i0, i1) in enumerate(zip(centres[:-1], centres[1:])):
+        span = slice(i0 + 1, i1 + 1)
+        q = integrate_attitude(w[span] * dt[span], t=e.t[span], rate_hz=e.rate_hz, q_nb0=q0,
+                               latitude_rad=e.latitude_rad)[-1]
+        pred = quat_to_dcm(q).T @ means[i]
+        cosang = pred @ means[i + 1] / (np.linalg.norm(pred) * np.linalg.norm(means[i + 1]))
+        mismatch[i] = np.arccos(np.clip(cosang, -1.0, 1.0))
+    return np.linalg.norm(means, axis=1), mismatch
+
+
 #: A window is static when its mean rate stays within this of the Earth rate, rad/s (about 10 deg/h).
 STATIC_RATE_TOLERANCE_RADPS = 5e-5
 

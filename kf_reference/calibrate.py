@@ -369,7 +369,46 @@ def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2
 # ---------------------------------------------------------------------------
 
 
-def calibrate(model, *, q_nb0, max_passes=50, x_tol=1e-3, attitude_tol=1e-2, progress=None):
+def batch_cost(model, R, x, *, pre, R_prior, x_prior, x_sigma):
+    """The batch least-squares cost at ``(R, x)``: every whitened factor squared, plus the priors.
+
+    The same objective the factor graph minimises; ``pre`` is the preintegration at
+    (or near) ``x``.
+    """
+    cost = 0.0
+    for f in (model.rotation_factors, model.gravity_factors, model.encoder_factors):
+        cost += float(np.sum(f(R, pre, x).whitened() ** 2))
+    cost += float(np.sum(((x - x_prior) / x_sigma) ** 2))
+    r0 = log_so3(R_prior.T @ R[0]) / model.initial_attitude_sigma
+    return cost + float(r0 @ r0)
+
+
+#: Halvings of a pass's step before it is taken as it is.
+MAX_HALVINGS = 8
+
+
+def _backtrack(model, R_lin, x_lin, p, cost, *, R_prior, x_prior, x_sigma):
+    """Take the pass's Gauss-Newton step, halved while it raises the batch cost.
+
+    Near the solution the full step is always taken (the passes stay quadratic);
+    far from it, where an attitude direction is weakly held (the heading of a
+    hand-held unit without a table, known only through the Earth rate), a full step
+    can overshoot and the passes would oscillate.  The fixed point is unchanged.
+    Returns ``(x, R, pre, cost)`` at the new point.
+    """
+    tau = 1.0
+    for _ in range(MAX_HALVINGS + 1):
+        x_t = x_lin + tau * p.dx
+        R_t = R_lin @ exp_so3(tau * p.delta_smoothed)
+        pre_t = model.preintegrate(x_t)
+        cost_t = batch_cost(model, R_t, x_t, pre=pre_t, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+        if cost_t <= cost * (1.0 + 1e-12):
+            break
+        tau *= 0.5
+    return x_t, R_t, pre_t, cost_t
+
+
+def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, progress=None):
     """Calibrate with the iterated square-root filter.
 
     Parameters
@@ -399,6 +438,7 @@ def calibrate(model, *, q_nb0, max_passes=50, x_tol=1e-3, attitude_tol=1e-2, pro
     R_lin, n_initial = initial_attitudes(model, q_nb0=q_nb0, pre=pre)
     passes = []
     converged = False
+    cost = None
     for i in range(1, max_passes + 1):
         p = filter_pass(model, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma, pre=pre)
         if not (np.all(np.isfinite(p.dx)) and np.all(np.isfinite(p.delta_smoothed))):
@@ -417,12 +457,15 @@ def calibrate(model, *, q_nb0, max_passes=50, x_tol=1e-3, attitude_tol=1e-2, pro
         if progress is not None:
             progress(i, info)
         C_filtered = R_lin @ exp_so3(p.delta_filtered)
-        x_lin = x_lin + p.dx
-        R_lin = R_lin @ exp_so3(p.delta_smoothed)
         if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol:
+            x_lin = x_lin + p.dx
+            R_lin = R_lin @ exp_so3(p.delta_smoothed)
             converged = True
             break
-        pre = None
+        if cost is None:
+            cost = batch_cost(model, R_lin, x_lin, pre=pre, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+        x_lin, R_lin, pre, cost = _backtrack(model, R_lin, x_lin, p, cost, R_prior=R_prior, x_prior=x_prior,
+                                             x_sigma=x_sigma)
     return FilterResult(
         layout=model.layout, x=x_lin, covariance=p.cov_x, t_key=model.t_key.copy(), C_nb=R_lin,
         C_nb_filtered=C_filtered, attitude_sigma_filtered=p.sigma_filtered, innovation_t=p.t,
