@@ -144,7 +144,8 @@ def run_factor_graph(problem, *, options=CalibrationOptions(), progress=None):
 
     gr = factor_graph.solve(problem.model, q_nb0=problem.q_nb0, options=options.graph, progress=progress)
     stats = _residual_stats(gr.residuals)
-    stats.update({"iterations": gr.iterations, "final_cost": float(gr.cost_history[-1]), "seconds": gr.seconds})
+    stats.update({"iterations": gr.iterations, "converged": bool(gr.converged),
+                  "final_cost": float(gr.cost_history[-1]), "seconds": gr.seconds})
     res = to_result(model=problem.model, x=gr.x, covariance=gr.covariance, solver="factor-graph", residuals=stats)
     return res, gr
 
@@ -188,10 +189,11 @@ def compare(a, b):
             a.solver: {"value": a.values[name], "sigma": sa},
             b.solver: {"value": b.values[name], "sigma": sb},
             "difference_in_sigma": (b.values[name] - a.values[name]) / big if big > 0 else 0.0,
-            "sigma_ratio": sb / sa if sa > 0 else float("inf"),
+            # None (JSON null) where the first solver reports a zero sigma and the second does not
+            "sigma_ratio": sb / sa if sa > 0 else (1.0 if sb == 0 else None),
         }
     diffs = np.array([abs(r["difference_in_sigma"]) for r in rows.values()]) if rows else np.zeros(0)
-    ratios = np.array([r["sigma_ratio"] for r in rows.values()]) if rows else np.zeros(0)
+    ratios = np.array([np.inf if r["sigma_ratio"] is None else r["sigma_ratio"] for r in rows.values()])
     return {
         "format": "imu-calibration-comparison",
         "version": 1,
@@ -200,7 +202,8 @@ def compare(a, b):
         "summary": {
             "parameters": len(rows),
             "max_abs_difference_in_sigma": float(diffs.max()) if diffs.size else 0.0,
-            "sigma_ratio_range": [float(ratios.min()), float(ratios.max())] if ratios.size else [1.0, 1.0],
+            "sigma_ratio_range": ([float(ratios.min()), float(ratios.max()) if np.isfinite(ratios.max()) else None]
+                                  if ratios.size else [1.0, 1.0]),
             "agree": bool(diffs.size == 0 or (diffs.max() <= 0.1 and ratios.min() >= 0.9 and ratios.max() <= 1.1)),
         },
         "parameters": rows,

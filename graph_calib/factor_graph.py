@@ -52,7 +52,9 @@ class GraphOptions:
     robust : str or None
         ``"huber"`` or ``"cauchy"`` on gravity and encoder factors; None for least squares.
     robust_k : float
-        Threshold of the robust loss, in whitened units.
+        Threshold of the robust loss, in whitened units, for a 3-row factor (one gravity
+        measurement or one encoder reading); an encoder factor stacking ``m`` readings
+        uses ``robust_k * sqrt(m)``, GTSAM applying the loss to a factor's whole residual.
     repreintegrate_tol : float
         Largest first-order keyframe rotation change (rad) before re-preintegration.
     """
@@ -83,7 +85,10 @@ class GraphResult:
         Whitened residual series per factor kind: ``{kind: (times (F,), whitened (F, 3))}``.
     iterations : int
     cost_history : list of float
+        GTSAM's error (half the sum of squared whitened residuals) after each iteration.
     seconds : float
+    converged : bool
+        Whether a stopping rule ended the iterations (else ``max_iterations`` did).
     """
 
     x: np.ndarray
@@ -94,6 +99,7 @@ class GraphResult:
     iterations: int
     cost_history: list = field(default_factory=list)
     seconds: float = 0.0
+    converged: bool = False
 
 
 class _Cache:
@@ -192,7 +198,11 @@ def build_graph(model, cache, *, R_prior, x_prior, x_sigma, robust=None, robust_
         ends = np.concatenate([bounds, [keys.size]])
         for lo, hi in zip(starts, ends):
             k = int(keys[lo])
-            graph.add(gtsam.CustomFactor(_noise(cache.enc.sigma[lo:hi].reshape(-1), robust, robust_k),
+            # GTSAM's robust loss weighs a factor by the norm of its whole whitened residual: a factor of
+            # m stacked readings (norm about sqrt(3 m) at pure noise) gets the threshold k sqrt(m), so
+            # it is down-weighted no sooner than one reading would be
+            k_m = robust_k * np.sqrt(hi - lo)
+            graph.add(gtsam.CustomFactor(_noise(cache.enc.sigma[lo:hi].reshape(-1), robust, k_m),
                                          [X(k), C(0)], partial(_encoder_error, cache, k, int(lo), int(hi))))
     return graph
 
@@ -267,6 +277,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     history = [cost]
     lam = options.lambda_initial
     it = 0
+    converged = False
     pre_current = cache.pre          # preintegrated at the current calibration: its cost is exact
     for it in range(1, options.max_iterations + 1):
         cache.pre = pre_current
@@ -306,8 +317,10 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
             progress(it, cost)
         if accepted and (abs(rel) < options.rel_tol or np.all(np.abs(step) < options.step_tol_sigma * x_sigma)
                          and options.step_tol_sigma > 0):
+            converged = True
             break
         if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
+            converged = True
             break
     # covariance: re-preintegrate at the solution so the Jacobians are exact there
     x = np.asarray(values.atVector(C(0)), dtype=float)
@@ -323,4 +336,4 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     }
     return GraphResult(x=x, covariance=0.5 * (cov + cov.T), layout=model.layout, attitudes=cache.R.copy(),
                        residuals=residuals, iterations=it, cost_history=history,
-                       seconds=time.perf_counter() - t0)
+                       seconds=time.perf_counter() - t0, converged=converged)

@@ -70,7 +70,8 @@ def noise_free_short():
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_noise_free_subrange_within_a_tenth_of_sigma(noise_free_short, solver):
     se, problem, opts = noise_free_short
-    res, _ = SOLVERS[solver](problem, options=opts)
+    res, raw = SOLVERS[solver](problem, options=opts)
+    assert raw.converged and res.residuals["converged"]
     names, z = _z(res, se.truth)
     assert np.abs(z).max() < 0.1, _worst(names, z)
     # what the data cannot inform is not reported as an estimate (readings valid only at rest)
@@ -179,6 +180,7 @@ def consumer_handheld():
 def test_consumer_handheld_converges_from_zero_calibration(consumer_handheld, solver):
     se, problem, opts = consumer_handheld
     res, raw = SOLVERS[solver](problem, options=opts)
+    assert raw.converged
     names, z = _z(res, se.truth)
     prior = problem.model.prior()[1]
     truth_in_prior_sigma = np.array([se.truth.values[n] for n in names]) / prior

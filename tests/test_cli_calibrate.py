@@ -56,3 +56,24 @@ def test_bad_solver_is_exit_2(experiment_file, tmp_path):
     with pytest.raises(SystemExit) as e:
         main(["calibrate", str(experiment_file), "--out", str(tmp_path), "--solver", "magic"])
     assert e.value.code == 2
+
+
+def test_comparison_with_a_zero_sigma_is_valid_json_and_disagrees():
+    """A zero sigma in the first result gives sigma_ratio null (not inf, which JSON cannot hold)."""
+    import numpy as np
+
+    from graph_calib.calibrate import compare
+    from graph_calib.experiment import Result
+
+    def result(solver, sig):
+        return Result(source="x.h5", solver=solver, t_ref_degC=25.0, temperature_range_degC=(20.0, 30.0),
+                      effects=("gyro.bias",), values={"gyro.bias.x": 1e-6, "gyro.bias.y": 0.0},
+                      sigmas={"gyro.bias.x": sig, "gyro.bias.y": 0.0}, covariance_names=("gyro.bias.x", "gyro.bias.y"),
+                      covariance=np.diag([sig**2, 0.0]))
+
+    doc = compare(result("sqrt-kf", 0.0), result("factor-graph", 1e-7))
+    assert doc["parameters"]["gyro.bias.x"]["sigma_ratio"] is None
+    assert doc["parameters"]["gyro.bias.y"]["sigma_ratio"] == 1.0          # both zero: the same
+    assert doc["summary"]["sigma_ratio_range"] == [1.0, None]
+    assert doc["summary"]["agree"] is False
+    json.dumps(doc, allow_nan=False)

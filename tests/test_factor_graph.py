@@ -63,3 +63,29 @@ def test_monte_carlo_sigmas_are_consistent():
             continue
         rms = np.sqrt(np.mean(z_all[:, cols] ** 2))
         assert 0.7 <= rms <= 1.3, (name, rms)
+
+
+def test_robust_loss_leaves_clean_data_alone():
+    """With Huber on and no outliers, estimates and sigmas stay those of least squares.
+
+    (GTSAM weighs a whole factor by its residual norm; an encoder factor stacks several
+    readings, so its threshold grows with sqrt(readings): without that, every encoder factor
+    was down-weighted at pure noise and the sigmas grew.)
+    """
+    from dataclasses import replace
+
+    from graph_calib.factor_graph import GraphOptions
+
+    rng = np.random.default_rng(21)
+    x_true = _truth(rng)
+    exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=30.0, dwell_s=3.0,
+                                  noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
+    problem = build_problem(exp)
+    _, plain = run_factor_graph(problem)
+    opts = CalibrationOptions(graph=replace(GraphOptions(), robust="huber"))
+    _, robust = run_factor_graph(problem, options=opts)
+    assert robust.converged and plain.converged
+    sig = np.sqrt(np.diag(plain.covariance))
+    ratio = np.sqrt(np.diag(robust.covariance)) / sig
+    assert np.all((ratio > 0.95) & (ratio < 1.05)), ratio.max()
+    assert np.abs((robust.x - plain.x) / sig).max() < 0.2
