@@ -623,6 +623,27 @@ def _runs(mask):
     return np.column_stack([change[0::2], change[1::2]])
 
 
+#: Half window of the start window of :func:`detect_static` (``edges='pose'``), in detection half windows.
+_START_WINDOW_FACTOR = 1.5
+
+
+def _settled_starts(quiet_e, starts, lower, h_e):
+    """Pose starts moved back over a settling tail, vectorised over the poses.
+
+    ``quiet_e[c]``: the start window centred at ``c`` (``2 h_e + 1`` samples) is
+    quiet.  For each pose, the earliest ``k`` in ``[lower, start]`` such that every
+    start window that begins in ``[k, start]`` is quiet; ``start`` itself when the
+    start window that begins there is not quiet (or does not fit in the record).
+    """
+    n = quiet_e.shape[0]
+    last_loud = np.maximum.accumulate(np.where(quiet_e, -1, np.arange(n)))  # last loud centre up to each centre
+    c = starts + h_e  # centre of the start window that begins at the detected start
+    inside = c < n
+    c = np.minimum(c, n - 1)
+    earliest = np.maximum(last_loud[c] + 1 - h_e, lower)
+    return np.where(inside & quiet_e[c], np.minimum(earliest, starts), starts)
+
+
 def detect_static(experiment, *, window_s=1.0, min_duration_s=2.0, threshold=None, threshold_mult=2.0,
                   init_static_s=10.0, use_gyro=False, gyro_threshold=None, max_rate=None, edges="core"):
     r"""Static intervals (poses) of an experiment, from the moving-window variance.
@@ -656,9 +677,21 @@ def detect_static(experiment, *, window_s=1.0, min_duration_s=2.0, threshold=Non
         start (end) of the record is extended to sample 0 (``N``): the record's
         edge is no motion, and its first (last) window covers those samples.
     ``'pose'``
-        the extent ``[a - h, b + h)``.  Its edges hardly depend on the window
-        length, but a window may hold a few samples of a slow motion onset below
-        the threshold, so the extent can reach about 0.1 s into the motion.
+        the extent ``[s, b + h)``, its start ``s <= a - h`` placed by the start
+        window (below).  A window may hold a few samples of a slow motion onset
+        below the threshold, so the extent can reach about 0.1 s into the motion.
+
+    Start window (``'pose'`` only).  A pose ends with a pick-up, abrupt, but begins
+    with the settling of the placement (rocking, creep), a tail that decays through
+    the threshold.  At an edge a quiet window holds transient energy (sum of squared
+    deviations) of up to about ``L (threshold^2 - s_pose^2)``: one or two samples of a
+    pick-up whatever ``L``, but of a settling tail a part that grows with ``L``, so
+    the start found with one window length is late against a longer one.  Each pose
+    start is moved back to the earliest ``s`` (not before the end of the previous
+    pose) such that every window of ``2 h_e + 1`` samples, ``h_e = round(1.5 h)``,
+    that begins in ``[s, a - h]`` passes the same tests with the same thresholds: a
+    tail that a window half as long again finds quiet belongs to the pose.  The
+    count, the ends and the cores do not change.
 
     Parameters
     ----------
@@ -702,7 +735,14 @@ def detect_static(experiment, *, window_s=1.0, min_duration_s=2.0, threshold=Non
         return empty
     n_init = min(n, max(2 * h + 1, int(round(init_static_s * rate))))
     f = experiment.dv / dt[:, None]
-    s_a, _ = _moving_stats(f, h)
+    w = experiment.dtheta / dt[:, None] if (use_gyro or max_rate is not None) else None
+
+    def _stats(half):
+        """Scatter of ``f``, and scatter and mean of ``omega`` (when needed), windows of ``2 half + 1``."""
+        s_w, m_w = _moving_stats(w, half) if w is not None else (None, None)
+        return _moving_stats(f, half)[0], s_w, m_w
+
+    stats = _stats(h)
     init_slice = slice(h, n_init - h)
 
     def _floor(s, what):
@@ -712,17 +752,22 @@ def detect_static(experiment, *, window_s=1.0, min_duration_s=2.0, threshold=Non
                              path=experiment.source or None, dataset="/imu")
         return threshold_mult * m if m > 0 else np.finfo(float).tiny
 
-    th_a = float(threshold) if threshold is not None else _floor(s_a, "accelerometer")
-    quiet = s_a < th_a
-    if use_gyro or max_rate is not None:
-        w = experiment.dtheta / dt[:, None]
-        s_g, m_g = _moving_stats(w, h)
+    th_a = float(threshold) if threshold is not None else _floor(stats[0], "accelerometer")
+    th_g = None
+    if use_gyro:
+        th_g = float(gyro_threshold) if gyro_threshold is not None else _floor(stats[1], "gyro")
+    w0 = w[:n_init].mean(axis=0) if max_rate is not None else None
+
+    def _quiet(s_f, s_w, m_w):
+        """Windows that pass every active test, with the thresholds set above."""
+        q = s_f < th_a
         if use_gyro:
-            th_g = float(gyro_threshold) if gyro_threshold is not None else _floor(s_g, "gyro")
-            quiet &= s_g < th_g
+            q &= s_w < th_g
         if max_rate is not None:
-            w0 = w[:n_init].mean(axis=0)
-            quiet &= np.linalg.norm(m_g - w0, axis=1) < float(max_rate)
+            q &= np.linalg.norm(m_w - w0, axis=1) < float(max_rate)
+        return q
+
+    quiet = _quiet(*stats)
     runs = _runs(quiet)
     if runs.shape[0] == 0:
         return empty
@@ -732,12 +777,19 @@ def detect_static(experiment, *, window_s=1.0, min_duration_s=2.0, threshold=Non
                        experiment.t[0] - 1.0 / rate)
     length = experiment.t[poses[:, 1] - 1] - t_start
     keep = length >= min_duration_s - 0.5 / rate
-    if edges == "pose":
-        return poses[keep].astype(np.int64)
-    core = runs.copy()
-    core[core[:, 0] == h, 0] = 0
-    core[core[:, 1] == n - h, 1] = n
-    return core[keep].astype(np.int64)
+    if edges == "core":
+        core = runs.copy()
+        core[core[:, 0] == h, 0] = 0
+        core[core[:, 1] == n - h, 1] = n
+        return core[keep].astype(np.int64)
+    poses = poses[keep]
+    # Start window: a placement ends in a settling tail that decays through the threshold;
+    # the starts are judged with windows half as long again (same tests, same thresholds).
+    h_e = int(round(_START_WINDOW_FACTOR * h))
+    if h_e > h and np.any(poses[:, 0] > 0):
+        lower = np.concatenate([[0], poses[:-1, 1]])
+        poses[:, 0] = _settled_starts(_quiet(*_stats(h_e)), poses[:, 0], lower, h_e)
+    return poses.astype(np.int64)
 
 
 def static_means(experiment, intervals):
