@@ -216,6 +216,7 @@ class _Linearised:
     axis: np.ndarray
     s0: np.ndarray
     Ut0: np.ndarray
+    cost: float = 0.0      # the batch cost at the linearisation point (batch_cost)
 
 
 def _attitude_prior_root(m0, sigma):
@@ -246,7 +247,11 @@ def _linearise(model, pre, R_lin, x_lin, *, R_prior, x_prior, x_sigma):
     s0[CAL] = x_prior - x_lin
     Ut0 = np.diag(np.concatenate([np.zeros(3), x_sigma]))
     Ut0[ATT, ATT] = _attitude_prior_root(s0[ATT], model.initial_attitude_sigma)
-    return _Linearised(B=B, A=A, G=G, c=c, H=H, z=z, sigma=sig, lo=lo, t=t, kind=kind, axis=axis, s0=s0, Ut0=Ut0)
+    r0 = log_so3(R_prior.T @ R_lin[0]) / model.initial_attitude_sigma
+    cost = (float(np.sum(rot.whitened() ** 2)) + float(np.sum((z / sig) ** 2))
+            + float(np.sum((s0[CAL] / x_sigma) ** 2)) + float(r0 @ r0))
+    return _Linearised(B=B, A=A, G=G, c=c, H=H, z=z, sigma=sig, lo=lo, t=t, kind=kind, axis=axis, s0=s0, Ut0=Ut0,
+                       cost=cost)
 
 
 def _smooth_attitudes(lin, dx):
@@ -277,6 +282,7 @@ class _Pass:
     innovation: np.ndarray
     seconds_model: float
     seconds_filter: float
+    cost: float = 0.0
 
 
 def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
@@ -308,6 +314,11 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
     if pre is None:
         pre = model.preintegrate(x_lin)
     lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+    return _run_filter(model, lin, x_lin, seconds_model=time.perf_counter() - t0)
+
+
+def _run_filter(model, lin, x_lin, *, seconds_model):
+    """The square-root filter and the attitude smoother over one linearisation (see :func:`filter_pass`)."""
     t1 = time.perf_counter()
     K = model.n_keyframes
     s, Ut = lin.s0.copy(), lin.Ut0.copy()
@@ -321,7 +332,8 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
     cov = sqrt_kf.covariance(Ut)[CAL, CAL]
     return _Pass(dx=dx, cov_x=0.5 * (cov + cov.T), delta_filtered=delta_f, sigma_filtered=sigma_f,
                  delta_smoothed=delta_s, sigma_smoothed=sigma_s, t=lin.t, kind=lin.kind, axis=lin.axis,
-                 innovation=nu / np.sqrt(nu_var), seconds_model=t1 - t0, seconds_filter=t2 - t1)
+                 innovation=nu / np.sqrt(nu_var), seconds_model=seconds_model, seconds_filter=t2 - t1,
+                 cost=lin.cost)
 
 
 def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2):
@@ -387,27 +399,6 @@ def batch_cost(model, R, x, *, pre, R_prior, x_prior, x_sigma):
 MAX_HALVINGS = 8
 
 
-def _backtrack(model, R_lin, x_lin, p, cost, *, R_prior, x_prior, x_sigma):
-    """Take the pass's Gauss-Newton step, halved while it raises the batch cost.
-
-    Near the solution the full step is always taken (the passes stay quadratic);
-    far from it, where an attitude direction is weakly held (the heading of a
-    hand-held unit without a table, known only through the Earth rate), a full step
-    can overshoot and the passes would oscillate.  The fixed point is unchanged.
-    Returns ``(x, R, pre, cost)`` at the new point.
-    """
-    tau = 1.0
-    for _ in range(MAX_HALVINGS + 1):
-        x_t = x_lin + tau * p.dx
-        R_t = R_lin @ exp_so3(tau * p.delta_smoothed)
-        pre_t = model.preintegrate(x_t)
-        cost_t = batch_cost(model, R_t, x_t, pre=pre_t, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
-        if cost_t <= cost * (1.0 + 1e-12):
-            break
-        tau *= 0.5
-    return x_t, R_t, pre_t, cost_t
-
-
 def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, progress=None):
     """Calibrate with the iterated square-root filter.
 
@@ -438,9 +429,27 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     R_lin, n_initial = initial_attitudes(model, q_nb0=q_nb0, pre=pre)
     passes = []
     converged = False
-    cost = None
+    base = None          # (x, R, cost, dx, delta) of the last pass: the point and its Gauss-Newton step
+    tau = 1.0
     for i in range(1, max_passes + 1):
-        p = filter_pass(model, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma, pre=pre)
+        # Step control: a pass's Gauss-Newton step is taken whole unless it raises the batch cost (the
+        # factor graph's objective, evaluated by the next linearisation at no extra cost); then it is
+        # halved, up to MAX_HALVINGS times.  Near the solution the whole step is always taken (the
+        # passes stay quadratic); far from it, where an attitude direction is weakly held (the heading
+        # of a hand-held unit without a table, known only through the Earth rate), a whole step can
+        # overshoot and the passes would oscillate.  The fixed point is unchanged.
+        while True:
+            t0 = time.perf_counter()
+            if pre is None:
+                pre = model.preintegrate(x_lin)
+            lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+            if base is None or lin.cost <= base[2] * (1.0 + 1e-12) or tau <= 0.5**MAX_HALVINGS:
+                break
+            tau *= 0.5
+            x_lin = base[0] + tau * base[3]
+            R_lin = base[1] @ exp_so3(tau * base[4])
+            pre = None
+        p = _run_filter(model, lin, x_lin, seconds_model=time.perf_counter() - t0)
         if not (np.all(np.isfinite(p.dx)) and np.all(np.isfinite(p.delta_smoothed))):
             raise FloatingPointError(f"square-root filter pass {i} produced non-finite estimates")
         sig_x = np.sqrt(np.diag(p.cov_x))
@@ -457,15 +466,14 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         if progress is not None:
             progress(i, info)
         C_filtered = R_lin @ exp_so3(p.delta_filtered)
+        base = (x_lin, R_lin, p.cost, p.dx, p.delta_smoothed)
+        tau = 1.0
+        x_lin = x_lin + p.dx
+        R_lin = R_lin @ exp_so3(p.delta_smoothed)
+        pre = None
         if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol:
-            x_lin = x_lin + p.dx
-            R_lin = R_lin @ exp_so3(p.delta_smoothed)
             converged = True
             break
-        if cost is None:
-            cost = batch_cost(model, R_lin, x_lin, pre=pre, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
-        x_lin, R_lin, pre, cost = _backtrack(model, R_lin, x_lin, p, cost, R_prior=R_prior, x_prior=x_prior,
-                                             x_sigma=x_sigma)
     return FilterResult(
         layout=model.layout, x=x_lin, covariance=p.cov_x, t_key=model.t_key.copy(), C_nb=R_lin,
         C_nb_filtered=C_filtered, attitude_sigma_filtered=p.sigma_filtered, innovation_t=p.t,

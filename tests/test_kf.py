@@ -316,3 +316,23 @@ def test_to_result_and_progress():
 
 # The simulator's scenarios (noise-free recovery, Monte Carlo, agreement with the graph, remaining
 # sensor errors, the consumer hand-held session) are in tests/test_accuracy.py, for both solvers.
+
+
+def test_linearisation_cost_is_the_batch_cost():
+    """The filter's step control judges steps by the factor graph's objective, read off the linearisation."""
+    from kf_reference.calibrate import _linearise, batch_cost
+
+    rng = np.random.default_rng(9)
+    x_true = _truth(rng, NAV, 0.1)
+    exp, C_true = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=20.0, dwell_s=2.0,
+                                       noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
+    model = CalibrationModel(exp, options=ModelOptions())
+    x0, sig = model.prior()
+    x = x0 + 0.3 * sig * rng.normal(size=sig.size)
+    pre = model.preintegrate(x)
+    R = model.propagate(exp_so3(np.array([0.01, -0.02, 0.03])), pre, x)
+    R_prior = np.eye(3)
+    lin = _linearise(model, pre, R, x, R_prior=R_prior, x_prior=x0, x_sigma=sig)
+    ref = batch_cost(model, R, x, pre=pre, R_prior=R_prior, x_prior=x0, x_sigma=sig)
+    assert ref > 10.0
+    assert lin.cost == pytest.approx(ref, rel=1e-10)
