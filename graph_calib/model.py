@@ -782,6 +782,11 @@ class CalibrationModel:
         if tab is None or not np.any(tab.valid):
             self.tap_w_nb = empty3
         self.tap_lo = np.searchsorted(self.tap_idx, self.k0[:-1], side="left").astype(np.int64)
+        # data-only pieces of the encoder factor, formed once: the turn from the sample end to the
+        # reading, the Earth turn since the keyframe start, the nominal faceplate-to-level attitude
+        self.tap_Ew = exp_so3(self.tap_w * self.tap_dt[:, None])
+        self.tap_E = self.earth_turn(self.tap_tau)
+        self.tap_C_nb_nominal = self.tap_C_nf @ self.C_fb
 
     def _static_keyframes(self, static_mask):
         if static_mask is None:
@@ -948,18 +953,19 @@ class CalibrationModel:
             return Residuals(r=z, key=np.zeros(0, dtype=np.int64), H_R=np.zeros((0, 3, 3)), H_R_next=None,
                              H_x=np.zeros((0, 3, P)), sigma=z)
         dx = np.asarray(x) - pre.x_lin
-        tapR = pre.tap_dR @ exp_so3(pre.tap_J @ dx)
-        Ew = exp_so3(self.tap_w * self.tap_dt[:, None])
+        tapR = pre.tap_dR @ exp_so3(pre.tap_J @ dx) if np.any(dx) else pre.tap_dR
+        Ew = self.tap_Ew
         Bp = tapR @ Ew
         Rk = R[self.tap_key]
-        C_pred = self.earth_turn(self.tap_tau) @ Rk @ Bp
+        C_pred = self.tap_E @ Rk @ Bp
         mount = self.layout.get(x, "mount", np.zeros(3))
         lag = self.layout.get(x, "time_lag.table", np.zeros(1))[0]
         Kd = self.layout.get(x, "damping.stiffness", np.zeros(9)).reshape(3, 3)
         a_lag = self.tap_w_nb * lag
         a_damp = self.tap_f @ Kd.T
-        B = exp_so3(a_lag) @ exp_so3(a_damp)
-        C_meas = self.tap_C_nf @ self.C_fb @ exp_so3(mount) @ B
+        Ed = exp_so3(a_damp) if np.any(Kd) else np.broadcast_to(np.eye(3), (M, 3, 3))
+        B = exp_so3(a_lag) @ Ed if lag != 0.0 else Ed
+        C_meas = self.tap_C_nb_nominal @ (exp_so3(mount) @ B)
         r = log_so3(np.swapaxes(C_meas, 1, 2) @ C_pred)
         Jr_inv = right_jacobian_inv(r)
         Jl_inv = right_jacobian_inv(-r)
@@ -968,7 +974,6 @@ class CalibrationModel:
         if "mount" in self.layout:
             H_x[:, :, self.layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
         if "time_lag.table" in self.layout:
-            Ed = exp_so3(a_damp)
             col = -Jl_inv @ np.swapaxes(Ed, 1, 2) @ right_jacobian(a_lag) @ self.tap_w_nb[..., None]
             H_x[:, :, self.layout.slice("time_lag.table")] = col
         if "damping.stiffness" in self.layout:

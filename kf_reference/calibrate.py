@@ -398,6 +398,17 @@ def batch_cost(model, R, x, *, pre, R_prior, x_prior, x_sigma):
 #: Halvings of a pass's step before it is taken as it is.
 MAX_HALVINGS = 8
 
+#: Largest first-order keyframe rotation change (rad) for which a preintegration is updated to first
+#: order (``dR Exp(J dx)``) instead of redone; the factor graph's ``GraphOptions.repreintegrate_tol``.
+REPREINTEGRATE_TOL = 1e-5
+
+
+def _keep_or_drop(model, pre, x):
+    """``pre`` if it still serves at ``x`` to first order, else None (preintegrate again)."""
+    if pre is None or model.needs_repreintegration(pre, x, tol=REPREINTEGRATE_TOL):
+        return None
+    return pre
+
 
 def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, progress=None):
     """Calibrate with the iterated square-root filter.
@@ -448,7 +459,7 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
             tau *= 0.5
             x_lin = base[0] + tau * base[3]
             R_lin = base[1] @ exp_so3(tau * base[4])
-            pre = None
+            pre = _keep_or_drop(model, pre, x_lin)
         p = _run_filter(model, lin, x_lin, seconds_model=time.perf_counter() - t0)
         if not (np.all(np.isfinite(p.dx)) and np.all(np.isfinite(p.delta_smoothed))):
             raise FloatingPointError(f"square-root filter pass {i} produced non-finite estimates")
@@ -470,7 +481,7 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         tau = 1.0
         x_lin = x_lin + p.dx
         R_lin = R_lin @ exp_so3(p.delta_smoothed)
-        pre = None
+        pre = _keep_or_drop(model, pre, x_lin)
         if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol:
             converged = True
             break

@@ -215,8 +215,10 @@ def test_iterated_filter_reproduces_batch_solution():
     assert np.abs(dz).max() < 1e-6, _worst(fr, dz)
     ratio = fr.sigma / sig_b
     assert np.abs(ratio - 1.0).max() < 1e-6, ratio
-    # the full covariance, in correlation units
-    assert np.abs((fr.covariance - cov_b) / np.outer(sig_b, sig_b)).max() < 1e-6
+    # the full covariance, in correlation units (the filter's last pass linearises with a preintegration
+    # updated to first order when the previous step moved the rotations by under 1e-5 rad, as the graph's
+    # iterations do; the batch reference here preintegrates afresh: 1.1e-6 apart)
+    assert np.abs((fr.covariance - cov_b) / np.outer(sig_b, sig_b)).max() < 3e-6
     # the smoothed attitudes are the batch ones; the filtered ones stay within a few of their sigmas
     assert np.abs(log_so3(np.swapaxes(R_b, 1, 2) @ fr.C_nb)).max() < 1e-9
     d_att = log_so3(np.swapaxes(R_b, 1, 2) @ fr.C_nb_filtered)
