@@ -15,7 +15,7 @@ import numpy as np
 
 from graph_calib.experiment import Result
 from graph_calib.factor_graph import GraphOptions
-from graph_calib.model import CalibrationModel, ModelOptions
+from graph_calib.model import CalibrationModel, ModelOptions, gyrocompass_attitude_sigma
 from graph_calib.params import grade
 from graph_calib.strapdown import alignment, detect_static
 
@@ -71,7 +71,6 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     interval = tuple(static[0]) if len(static) else None
     if interval is not None:
         mopt = _noise_from_static(experiment, interval, mopt)
-    model = CalibrationModel(experiment, options=mopt, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
     method = "table" if (experiment.table is not None and np.any(experiment.table.valid)) else "gyrocompass"
     try:
         al = alignment(experiment, interval=interval, method=method)
@@ -79,6 +78,11 @@ def build_problem(experiment, *, options=CalibrationOptions()):
         if method != "table":
             raise
         al = alignment(experiment, interval=interval, method="gyrocompass")
+        if mopt.initial_attitude_sigma is None:
+            # the table could not give the attitude: the prior is as loose as gyrocompassing is
+            mopt = replace(mopt, initial_attitude_sigma=gyrocompass_attitude_sigma(
+                mopt, latitude_rad=experiment.latitude_rad))
+    model = CalibrationModel(experiment, options=mopt, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
     return Problem(model=model, q_nb0=al.q_nb0, alignment=al)
 
 

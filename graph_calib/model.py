@@ -606,6 +606,19 @@ def boundary_rate_correction(w_mean, k0):
     return fix
 
 
+def gyrocompass_attitude_sigma(options, *, latitude_rad):
+    """Prior sigma (rad) of a gyrocompassed first attitude: gyro-bias prior over the horizontal Earth rate.
+
+    Between :attr:`CalibrationModel.TABLE_ALIGNMENT_SIGMA` and pi (about 0.1 rad
+    for a navigation-grade unit, pi for consumer MEMS).  ``options`` is a
+    :class:`ModelOptions` (its grade and any ``gyro.bias`` prior override).
+    """
+    g = _grade(options.grade)
+    horizontal = float(np.hypot(*_omega_ie_n(latitude_rad)[:2]))
+    bias = float(np.max((options.prior_sigma or {}).get("gyro.bias", g.prior_sigma["gyro.bias"])))
+    return float(min(np.pi, max(CalibrationModel.TABLE_ALIGNMENT_SIGMA, bias / max(horizontal, 1e-12))))
+
+
 class CalibrationModel:
     """The calibration problem of one experiment: data, layout, priors, noise, factors.
 
@@ -695,10 +708,7 @@ class CalibrationModel:
         tab = experiment.table
         if tab is not None and np.any(tab.valid):
             return self.TABLE_ALIGNMENT_SIGMA
-        horizontal = np.hypot(self.omega_ie_n[0], self.omega_ie_n[1])
-        bias = (self.options.prior_sigma or {}).get("gyro.bias", self.grade.prior_sigma["gyro.bias"])
-        bias = float(np.max(bias))
-        return float(min(np.pi, max(self.TABLE_ALIGNMENT_SIGMA, bias / max(horizontal, 1e-12))))
+        return gyrocompass_attitude_sigma(self.options, latitude_rad=experiment.latitude_rad)
 
     # -- data preparation ---------------------------------------------------
 

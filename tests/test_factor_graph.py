@@ -89,3 +89,26 @@ def test_robust_loss_leaves_clean_data_alone():
     ratio = np.sqrt(np.diag(robust.covariance)) / sig
     assert np.all((ratio > 0.95) & (ratio < 1.05)), ratio.max()
     assert np.abs((robust.x - plain.x) / sig).max() < 0.2
+
+
+def test_first_attitude_prior_follows_what_the_alignment_could_use():
+    """Table alignment: 0.05 rad; no valid reading in the first static interval (gyrocompass fallback) or
+    no table: the gyrocompass accuracy (about 0.1 rad for a navigation-grade unit), pi for consumer MEMS."""
+    from dataclasses import replace
+
+    from graph_calib.model import CalibrationModel, ModelOptions, gyrocompass_attitude_sigma
+
+    rng = np.random.default_rng(4)
+    exp, _ = turntable_experiment(layout=DECL, x=_truth(rng), static_s=20.0, dwell_s=2.0)
+    assert build_problem(exp).model.initial_attitude_sigma == CalibrationModel.TABLE_ALIGNMENT_SIGMA
+    gc = gyrocompass_attitude_sigma(ModelOptions(), latitude_rad=exp.latitude_rad)
+    assert 0.06 < gc < 0.2
+    first_static = exp.table.t < exp.t[0] + 21.0          # the whole initial static period
+    late_table = replace(exp.table, valid=exp.table.valid & ~first_static)
+    problem = build_problem(replace(exp, table=late_table))
+    assert problem.alignment.method == "gyrocompass"
+    assert problem.model.initial_attitude_sigma == pytest.approx(gc)
+    no_table = replace(exp, table=None)
+    assert build_problem(no_table).model.initial_attitude_sigma == pytest.approx(gc)
+    consumer = CalibrationOptions(model=ModelOptions(grade="consumer"))
+    assert build_problem(no_table, options=consumer).model.initial_attitude_sigma == pytest.approx(np.pi)
