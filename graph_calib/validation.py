@@ -45,7 +45,6 @@ sensor errors (the check that matters when the reference is an estimate: about
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from functools import partial
 
 import numpy as np
 
@@ -437,23 +436,13 @@ def simulate_validation_record(simulation, *, hours=2.0, start_degC=None, span_d
     -------
     graph_calib.simulation.SimulatedExperiment
     """
-    plan = simulation.plans[0]
-    make = plan.make
-    if not isinstance(make, partial) or "start_degC" not in make.keywords:
-        raise ValueError(f"scenario {simulation.scenario!r} has no turntable experiment to extend")
-    subs = simulation.info.get("subranges") or [[make.keywords["start_degC"],
-                                                 make.keywords["start_degC"] + make.keywords["span_degC"]]]
-    lo = min(s[0] for s in subs)
-    hi = max(s[1] for s in subs)
-    kw = dict(make.keywords)
-    kw.update(file_name=file_name, seed=int(seed), duration_s=float(hours) * 3600.0,
-              start_degC=float(lo if start_degC is None else start_degC),
-              span_degC=float((hi - lo) if span_degC is None else span_degC),
-              description=f"graph-calib validation record: the {simulation.scenario} IMU sweeping "
-                          f"{lo:g}..{hi:g} degC, {hours:g} h", tag="validation")
-    if rate_hz is not None:
-        kw["rate_hz"] = float(rate_hz)
-    return make.func(*make.args, **kw)
+    lo, hi = simulation.temperature_range()
+    start = float(lo if start_degC is None else start_degC)
+    span = float((hi - lo) if span_degC is None else span_degC)
+    return simulation.further_experiment(
+        file_name=file_name, seed=seed, hours=hours, start_degC=start, span_degC=span, rate_hz=rate_hz,
+        description=f"graph-calib validation record: the {simulation.scenario} IMU sweeping "
+                    f"{start:g}..{start + span:g} degC, {hours:g} h", tag="validation")
 
 
 __all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "sensor_error_sigmas", "window_means",

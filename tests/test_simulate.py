@@ -446,3 +446,21 @@ def test_cli_simulate(tmp_path, capsys):
     assert main(["simulate", "nav-subrange", "--out", str(out), "--hours", "-1"]) == 2
     assert main(["simulate", "nav-subrange", "--out", str(out), "--effect", "gyro.nothing"]) == 2
     assert main(["simulate", "nav-subrange"]) == 2
+
+
+def test_further_experiment_of_the_same_imu_and_its_refusal_without_a_table():
+    from graph_calib.simulate import simulate as _simulate
+
+    sim = _simulate("nav-campaign", rng=np.random.default_rng(2), hours=0.05, rate_hz=20.0)
+    assert sim.temperature_range() == (-10.0, 50.0)
+    se = sim.further_experiment(file_name="v.h5", seed=5, hours=0.05, start_degC=0.0, span_degC=30.0,
+                                rate_hz=20.0, description="check")
+    first = sim.plans[0].run()
+    constant = [k for k in first.truth.values if k.startswith(("mount", "lever_arm", "gyro.misalignment"))]
+    assert len(constant) == 12
+    assert all(se.truth.values[k] == first.truth.values[k] for k in constant)   # the same IMU and bench
+    assert se.experiment.n_samples == 3600 and se.file_name == "v.h5"
+    assert not np.array_equal(se.experiment.dtheta[:100], first.experiment.dtheta[:100])   # its own noise
+    hh = _simulate("consumer-handheld", rng=np.random.default_rng(2))
+    with pytest.raises(ValueError, match="'consumer-handheld' has no turntable experiment to extend"):
+        hh.further_experiment(file_name="v.h5", seed=5, hours=0.1, start_degC=0.0, span_degC=10.0)

@@ -274,6 +274,37 @@ class Simulation:
         """Every experiment as ``(Experiment, truth Result)`` pairs."""
         return [(s.experiment, s.truth) for s in self.run()]
 
+    def temperature_range(self):
+        """``(lowest, highest)`` chamber set-point of the scenario's turntable experiments, degC."""
+        subs = self.info.get("subranges")
+        if subs:
+            return float(min(a for a, _ in subs)), float(max(b for _, b in subs))
+        kw = self._table_keywords()
+        return float(kw["start_degC"]), float(kw["start_degC"] + kw["span_degC"])
+
+    def further_experiment(self, *, file_name, seed, hours, start_degC, span_degC, rate_hz=None,
+                           description="", tag=""):
+        """Another turntable experiment of the same IMU, bench and rotation design.
+
+        Its own programme and noise (``seed``), ``hours`` long, the chamber taking the
+        sensors from ``start_degC`` through ``span_degC`` (degC); used for independent
+        validation records.  Returns a :class:`SimulatedExperiment`; ``ValueError`` for
+        a scenario without a turntable (hand-held).
+        """
+        make = self.plans[0].make
+        kw = dict(self._table_keywords())
+        kw.update(file_name=file_name, seed=int(seed), duration_s=float(hours) * 3600.0,
+                  start_degC=float(start_degC), span_degC=float(span_degC), description=description, tag=tag)
+        if rate_hz is not None:
+            kw["rate_hz"] = float(rate_hz)
+        return make.func(*make.args, **kw)
+
+    def _table_keywords(self):
+        make = self.plans[0].make if self.plans else None
+        if not (isinstance(make, partial) and make.func is _make_table_experiment):
+            raise ValueError(f"scenario {self.scenario!r} has no turntable experiment to extend")
+        return make.keywords
+
 
 def _child_rngs(seed, k):
     rng = np.random.default_rng(seed)
