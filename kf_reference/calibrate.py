@@ -125,6 +125,23 @@ class FilterResult:
         """One sigma of every calibration element, shape (P,)."""
         return np.sqrt(np.diag(self.covariance))
 
+    def innovation_series(self):
+        """``{kind name: (t (F,), normalised innovations (F, 3))}``, one row per factor, in time order.
+
+        The three components of a factor are consecutive rows of the filter's scalar
+        updates (``innovation_axis`` 0, 1, 2), so each kind reshapes to (F, 3).
+        """
+        out = {}
+        for code, name in enumerate(KIND_NAMES):
+            m = self.innovation_kind == code
+            if not np.any(m):
+                continue
+            ax = self.innovation_axis[m]
+            if ax.size % 3 or np.any(ax.reshape(-1, 3) != np.arange(3)):
+                raise ValueError(f"{name} innovations are not grouped in axis triples")
+            out[name] = (self.innovation_t[m][::3].copy(), self.innovation[m].reshape(-1, 3).copy())
+        return out
+
     def innovation_stats(self):
         """``{kind name: {"count", "rms", "rms_axis"}}`` of the normalised innovations."""
         out = {}

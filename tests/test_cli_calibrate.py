@@ -77,3 +77,39 @@ def test_comparison_with_a_zero_sigma_is_valid_json_and_disagrees():
     assert doc["summary"]["sigma_ratio_range"] == [1.0, None]
     assert doc["summary"]["agree"] is False
     json.dumps(doc, allow_nan=False)
+
+
+def test_residual_series_files(experiment_file, tmp_path):
+    """--residuals: each solver's series per factor kind, whitened, on the experiment's clock."""
+    import numpy as np
+
+    assert main(["calibrate", str(experiment_file), "--out", str(tmp_path), "--residuals"]) == 0
+    exp = io.read_experiment(experiment_file)
+    attrs, graph = io.read_residuals(tmp_path / "factor-graph.residuals.h5")
+    assert attrs["format"] == "imu-calibration-residuals" and attrs["solver"] == "factor-graph"
+    assert attrs["source"] == experiment_file.name and attrs["quantity"] == "whitened residual"
+    assert set(graph) == {"rotation", "gravity", "encoder"}
+    for t, v in graph.values():
+        assert v.ndim == 2 and v.shape[1] == 3 and t.shape == (v.shape[0],)
+        assert np.all(np.diff(t) >= 0) and exp.t[0] - 1.0 <= t[0] and t[-1] <= exp.t[-1] + 1e-9
+    # noise-level residuals: the model fits the simulated record
+    assert 0.5 < np.sqrt(np.mean(graph["gravity"][1] ** 2)) < 1.5
+    attrs, kf = io.read_residuals(tmp_path / "sqrt-kf.residuals.h5")
+    assert attrs["quantity"] == "normalised innovation" and set(kf) == {"gravity", "encoder"}
+    assert kf["gravity"][1].shape == graph["gravity"][1].shape
+    assert kf["encoder"][1].shape == graph["encoder"][1].shape
+    assert 0.5 < np.sqrt(np.mean(kf["encoder"][1] ** 2)) < 1.5
+    # without the flag nothing extra is written
+    plain = tmp_path / "plain"
+    assert main(["calibrate", str(experiment_file), "--out", str(plain), "--solver", "factor-graph"]) == 0
+    assert not list(plain.glob("*.residuals.h5"))
+
+
+def test_not_a_residual_file_is_refused(tmp_path):
+    import h5py
+
+    p = tmp_path / "x.h5"
+    with h5py.File(p, "w") as f:
+        f.attrs["format"] = "something-else"
+    with pytest.raises(io.InputError, match="not a residual-series file"):
+        io.read_residuals(p)

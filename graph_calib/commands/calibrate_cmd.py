@@ -20,6 +20,8 @@ def add_arguments(p):
                    help="model a further effect of model.md (repeatable)")
     p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
+    p.add_argument("--residuals", action="store_true",
+                   help="also write each solver's residual time series, SOLVER.residuals.h5 (docs/data-format.md)")
 
 
 def options_from_args(args):
@@ -61,8 +63,15 @@ def run(args):
                 f"calibration moved {info.max_dx_sigma:.3g} sigma, chi2/dof {info.chi2_per_dof:.3g}")
             print(f"  {_s}: pass {i}, {what}", file=sys.stderr)
 
-        res = (run_factor_graph if s == "factor-graph" else run_sqrt_kf)(problem, options=options, progress=progress)[0]
+        res, raw = (run_factor_graph if s == "factor-graph" else run_sqrt_kf)(problem, options=options,
+                                                                              progress=progress)
         io.write_result(res, out / f"{s}.json")
+        if args.residuals:
+            if s == "factor-graph":
+                series, quantity = raw.residuals, "whitened residual"
+            else:
+                series, quantity = raw.innovation_series(), "normalised innovation"
+            io.write_residuals(out / f"{s}.residuals.h5", series, solver=s, source=path.name, kind=quantity)
         results[s] = res
         b = [res.values[f"gyro.bias.{a}"] * RS_TO_DH for a in "xyz"]
         print(f"  {s}: gyro bias [deg/h] {b[0]:+.4f} {b[1]:+.4f} {b[2]:+.4f} -> {out / (s + '.json')}")
@@ -70,6 +79,8 @@ def run(args):
         cmp_ = compare(results["sqrt-kf"], results["factor-graph"])
         io.atomic_write_json(out / "comparison.json", cmp_)
         sm = cmp_["summary"]
+        lo, hi = sm["sigma_ratio_range"]
+        hi_text = "inf" if hi is None else f"{hi:.3f}"
         print(f"  comparison: max |difference| {sm['max_abs_difference_in_sigma']:.3f} sigma, sigma ratio "
-              f"{sm['sigma_ratio_range'][0]:.3f}..{sm['sigma_ratio_range'][1]:.3f} -> {out / 'comparison.json'}")
+              f"{lo:.3f}..{hi_text} -> {out / 'comparison.json'}")
     return 0
