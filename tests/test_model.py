@@ -64,6 +64,30 @@ def test_factor_jacobian_in_calibration_matches_fd(problem, kind):
         assert np.abs(fd - res.H_x[:, :, c]).max() / scale < 1e-5, model.layout.element_names()[c]
 
 
+def test_encoder_jacobian_with_readings_inside_sample_intervals_matches_fd():
+    """Readings between sample ends, in motion, with a time lag: the partial-sample turn and the lag use
+    the calibrated rate of the interval holding the reading, so both depend on x."""
+    rng = np.random.default_rng(12)
+    exp = wobbly_experiment(rng=rng)
+    tt = np.sort(rng.uniform(0.02, exp.t[-1] - 0.02, size=120))
+    table = replace(exp.table, t=tt, q_nf=dcm_to_quat(exp_so3(rng.normal(size=(tt.size, 3)))),
+                    valid=np.ones(tt.size, bool))
+    model = CalibrationModel(replace(exp, table=table), options=ModelOptions(keyframe_s=0.5))
+    assert np.abs(model.tap_dt).min() > 1e-6 and "time_lag.table" in model.layout
+    x = rng.normal(size=model.layout.size) * 1e-3
+    x[model.layout.slice("time_lag.table")] = 0.01
+    R = model.propagate(np.eye(3), model.preintegrate(x), x)
+    res = model.encoder_factors(R, model.preintegrate(x), x)
+    for c in range(model.layout.size):
+        xp, xm = x.copy(), x.copy()
+        xp[c] += EPS
+        xm[c] -= EPS
+        fd = (model.encoder_factors(R, model.preintegrate(xp), xp).r
+              - model.encoder_factors(R, model.preintegrate(xm), xm).r) / (2 * EPS)
+        scale = np.abs(fd).max() + np.abs(res.H_x[:, :, c]).max() + 1e-12
+        assert np.abs(fd - res.H_x[:, :, c]).max() / scale < 1e-5, model.layout.element_names()[c]
+
+
 @pytest.mark.parametrize("kind", ["gravity_factors", "encoder_factors"])
 def test_unary_factor_jacobian_in_attitude_matches_fd(problem, kind):
     model, x, pre, R = problem
