@@ -485,6 +485,7 @@ class Preintegrated:
     S1, J_S1 : (K, 3), (K, 3, P)   the same weighted by time since the keyframe start, m s
     w_b, J_w_b : (K+1, 3), (K+1, 3, P)  corrected angular rate omega_ib_b at each boundary, rad/s
     tap_dR, tap_J : (M, 3, 3), (M, 3, P)  partial preintegration up to each encoder reading
+    tap_w, tap_Jw : (M, 3), (M, 3, P)  calibrated mean rate of the sample interval holding each reading
     """
 
     x_lin: np.ndarray
@@ -498,6 +499,8 @@ class Preintegrated:
     J_w_b: np.ndarray
     tap_dR: np.ndarray
     tap_J: np.ndarray
+    tap_w: np.ndarray | None = None
+    tap_Jw: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -737,6 +740,9 @@ class CalibrationModel:
         self.arows_full = term_rows(self.layout, "accel")
         cols = np.unique(np.concatenate([self.grows_full[:, 0], self.arows_full[:, 0]]))
         self.kernel_cols = cols.astype(np.int64)
+        g = self.grows_full[:, 0]
+        # the columns gyro terms can touch, as one slice (views, not gathers; columns in between are zero)
+        self.gyro_cols = slice(int(g.min()), int(g.max()) + 1) if g.size else slice(0, 0)
         remap = -np.ones(self.layout.size, dtype=np.int64)
         remap[cols] = np.arange(cols.size)
         self.grows = self.grows_full.copy()
@@ -866,8 +872,13 @@ class CalibrationModel:
         w_b[1:K] = 0.5 * (wl[:-1] + wf[1:])
         Jw_b[1:K] = 0.5 * (Jwl[:-1] + Jwf[1:])
         w_b += self.w_b_fix
+        n = self.tap_nxt
+        tap_w, tap_Jw = correct(self.layout, x, "gyro", self.w_raw[n], dT=self.dTg[n], dTdt=self.dTdtg[n],
+                                other=self.f_raw[n], domega=self.dw_raw[n], dsignal=self.dw_raw[n],
+                                n_iter=self.options.n_newton, jacobian=True)
         return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=JR, S=S, J_S=JS, S1=S1,
-                             J_S1=JS1, w_b=w_b, J_w_b=Jw_b, tap_dR=tapR, tap_J=tapJ)
+                             J_S1=JS1, w_b=w_b, J_w_b=Jw_b, tap_dR=tapR, tap_J=tapJ, tap_w=tap_w,
+                             tap_Jw=np.ascontiguousarray(tap_Jw[:, :, self.gyro_cols]))
 
     def needs_repreintegration(self, pre, x, *, tol=1e-4):
         """Whether ``x`` moved so far from ``pre.x_lin`` that first-order updates lose accuracy.
@@ -979,10 +990,10 @@ class CalibrationModel:
         dx = np.asarray(x) - pre.x_lin
         tapR = pre.tap_dR @ exp_so3(pre.tap_J @ dx) if np.any(dx) else pre.tap_dR
         # the turn from the sample end to the reading, with the calibrated rate of that sample interval
-        n = self.tap_nxt
-        w_c, J_w = correct(self.layout, x, "gyro", self.w_raw[n], dT=self.dTg[n], dTdt=self.dTdtg[n],
-                           other=self.f_raw[n], domega=self.dw_raw[n], dsignal=self.dw_raw[n],
-                           n_iter=self.options.n_newton, jacobian=True)
+        # (preintegrated with its Jacobian in the gyro columns, updated to first order like the rest)
+        gc = self.gyro_cols
+        J_w = pre.tap_Jw
+        w_c = pre.tap_w + J_w @ dx[gc] if np.any(dx) else pre.tap_w
         phi = w_c * self.tap_dt[:, None] + self.tap_phi_shape
         Ew = exp_so3(phi)
         Bp = tapR @ Ew
@@ -1001,8 +1012,10 @@ class CalibrationModel:
         Jr_inv = right_jacobian_inv(r)
         Jl_inv = right_jacobian_inv(-r)
         H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
-        H_x = Jr_inv @ np.swapaxes(Ew, 1, 2) @ pre.tap_J + Jr_inv @ right_jacobian(phi) @ (
-            J_w * self.tap_dt[:, None, None])
+        # the preintegration and the corrected rate depend on the gyro columns only
+        H_x = np.zeros((M, 3, P))
+        H_x[:, :, gc] = Jr_inv @ (np.swapaxes(Ew, 1, 2) @ pre.tap_J[:, :, gc]
+                                  + (right_jacobian(phi) * self.tap_dt[:, None, None]) @ J_w)
         if "mount" in self.layout:
             H_x[:, :, self.layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
         if "time_lag.table" in self.layout:
@@ -1010,7 +1023,7 @@ class CalibrationModel:
             da = w_nb - lag * self.tap_alpha
             H_x[:, :, self.layout.slice("time_lag.table")] = G_lag @ da[..., None]
             if lag != 0.0:
-                H_x += G_lag @ (lag * J_w)                                 # the calibrated rate in the lag
+                H_x[:, :, gc] += G_lag @ (lag * J_w)                       # the calibrated rate in the lag
         if "damping.stiffness" in self.layout:
             G = -Jl_inv @ right_jacobian(a_damp)                   # (M, 3, 3) per d(a_damp)
             # a_damp_i = sum_j K_ij f_j  ->  d a_damp / d K_ij = e_i f_j
