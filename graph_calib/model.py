@@ -574,6 +574,11 @@ def _moving_slope(y, dt, window_s):
     return np.column_stack([np.interp(t, tb, sb[:, i]) for i in range(y.shape[1])])
 
 
+#: Largest first-order keyframe rotation change (rad) for which a preintegration is updated to first
+#: order (``dR Exp(J dx)``, ``S + J_S dx``) instead of redone; both solvers use it.
+REPREINTEGRATE_TOL = 1e-5
+
+
 def boundary_rate_correction(w_mean, k0):
     """Correction from the two-sample mean to the angular rate at each keyframe boundary.
 
@@ -650,26 +655,29 @@ class CalibrationModel:
         self.options = options
         self.grade = _grade(options.grade)
         self.omega_ie_n = _omega_ie_n(experiment.latitude_rad)
-        self.auto_excluded = self._unobservable(experiment)
-        exclude = tuple(sorted(set(options.exclude) | set(self.auto_excluded)))
-        self.layout = Layout.declared(extra=tuple(options.extra_effects), exclude=exclude)
         self.t_ref_degC = float(experiment.default_t_ref() if t_ref_degC is None else t_ref_degC)
         self.gravity = float(experiment.gravity_mps2)
-        self.initial_attitude_sigma = self._initial_attitude_sigma(experiment)
         self.gyro_noise = float(options.gyro_noise if options.gyro_noise is not None else self.grade.gyro_noise)
         self.accel_noise = float(options.accel_noise if options.accel_noise is not None else self.grade.accel_noise)
         self.encoder_noise = float(options.encoder_noise if options.encoder_noise is not None
                                    else self.grade.encoder_noise)
+        # the data first (nothing here depends on which parameters are estimated) ...
         self._prepare_samples()
         self._prepare_keyframes()
         self._prepare_table()
+        # ... which decides what the record can inform
+        self.auto_excluded = self._unobservable()
+        exclude = tuple(sorted(set(options.exclude) | set(self.auto_excluded)))
+        self.layout = Layout.declared(extra=tuple(options.extra_effects), exclude=exclude)
+        self.initial_attitude_sigma = self._initial_attitude_sigma(experiment)
+        self._prepare_terms()
         self._static_keyframes(static_mask)
 
     #: A valid table reading counts as taken while the table turns above this rate
     #: against the level frame, rad/s (about 0.06 deg/s, 14 times the Earth rate).
     LAG_RATE_THRESHOLD = 1e-3
 
-    def _unobservable(self, experiment):
+    def _unobservable(self):
         """Declared parameters the record cannot inform, left out of the layout (sorted tuple).
 
         Without a table nothing ties the attitude to the faceplate or to a fixed
@@ -679,16 +687,12 @@ class CalibrationModel:
         changes no measurement, so ``time_lag.table`` goes too; estimating it
         would only return its prior mean as if it were a result.
         """
-        tab = experiment.table
+        tab = self.experiment.table
         if tab is None:
             return ("damping.stiffness", "lever_arm", "mount", "time_lag.table")
         if not np.any(tab.valid):
             return ("damping.stiffness", "mount", "time_lag.table")
-        tm = tab.t[tab.valid]
-        j = np.clip(np.searchsorted(experiment.t, tm, side="right"), 0, experiment.n_samples - 1)
-        w_ib_b = experiment.dtheta[j] / experiment.dt[j, None]
-        C_bn = np.swapaxes(quat_to_dcm(tab.q_nf[tab.valid]) @ quat_to_dcm(tab.q_fb_nominal), 1, 2)
-        w_nb_b = w_ib_b - C_bn @ self.omega_ie_n
+        w_nb_b = self.w_raw[self.tap_nxt] + self.tap_w_nb_offset      # raw rate against the level frame
         if np.any(np.linalg.norm(w_nb_b, axis=1) > self.LAG_RATE_THRESHOLD):
             return ()
         return ("time_lag.table",)
@@ -736,6 +740,9 @@ class CalibrationModel:
         self.dTa = np.ascontiguousarray(dT[:, 3:])
         self.dTdtg = np.ascontiguousarray(dTdt[:, :3])
         self.dTdta = np.ascontiguousarray(dTdt[:, 3:])
+
+    def _prepare_terms(self):
+        """The sensor-model term rows of the layout, and the columns the kernel fills."""
         self.grows_full = term_rows(self.layout, "gyro")
         self.arows_full = term_rows(self.layout, "accel")
         cols = np.unique(np.concatenate([self.grows_full[:, 0], self.arows_full[:, 0]]))
@@ -880,7 +887,7 @@ class CalibrationModel:
                              J_S1=JS1, w_b=w_b, J_w_b=Jw_b, tap_dR=tapR, tap_J=tapJ, tap_w=tap_w,
                              tap_Jw=np.ascontiguousarray(tap_Jw[:, :, self.gyro_cols]))
 
-    def needs_repreintegration(self, pre, x, *, tol=1e-4):
+    def needs_repreintegration(self, pre, x, *, tol=REPREINTEGRATE_TOL):
         """Whether ``x`` moved so far from ``pre.x_lin`` that first-order updates lose accuracy.
 
         The test is the largest first-order change of a keyframe rotation, rad.
