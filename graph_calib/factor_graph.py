@@ -29,6 +29,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import C, X
 
+from graph_calib.model import REPREINTEGRATE_TOL
 from graph_calib.rotations import quat_to_dcm
 
 
@@ -65,7 +66,7 @@ class GraphOptions:
     step_tol_sigma: float = 0.0
     robust: str | None = None
     robust_k: float = 3.0
-    repreintegrate_tol: float = 1e-5
+    repreintegrate_tol: float = REPREINTEGRATE_TOL
 
 
 @dataclass(frozen=True)

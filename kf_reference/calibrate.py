@@ -144,20 +144,9 @@ class FilterResult:
 
     def innovation_stats(self):
         """``{kind name: {"count", "rms", "rms_axis"}}`` of the normalised innovations."""
-        out = {}
-        for code, name in enumerate(KIND_NAMES):
-            m = self.innovation_kind == code
-            if not np.any(m):
-                continue
-            v = self.innovation[m]
-            ax = self.innovation_axis[m]
-            out[name] = {
-                "count": int(v.size),
-                "rms": float(np.sqrt(np.mean(v**2))),
-                "rms_axis": [float(np.sqrt(np.mean(v[ax == a] ** 2))) if np.any(ax == a) else 0.0
-                             for a in range(3)],
-            }
-        return out
+        return {name: {"count": int(v.size), "rms": float(np.sqrt(np.mean(v**2))),
+                       "rms_axis": np.sqrt(np.mean(v**2, axis=0)).tolist()}
+                for name, (_, v) in self.innovation_series().items()}
 
 
 # ---------------------------------------------------------------------------
@@ -233,7 +222,7 @@ class _Linearised:
     axis: np.ndarray
     s0: np.ndarray
     Ut0: np.ndarray
-    cost: float = 0.0      # the batch cost at the linearisation point (batch_cost)
+    cost: float = 0.0      # the batch cost at the linearisation point: the factor graph's objective, x2
 
 
 def _attitude_prior_root(m0, sigma):
@@ -398,31 +387,12 @@ def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2
 # ---------------------------------------------------------------------------
 
 
-def batch_cost(model, R, x, *, pre, R_prior, x_prior, x_sigma):
-    """The batch least-squares cost at ``(R, x)``: every whitened factor squared, plus the priors.
-
-    The same objective the factor graph minimises; ``pre`` is the preintegration at
-    (or near) ``x``.
-    """
-    cost = 0.0
-    for f in (model.rotation_factors, model.gravity_factors, model.encoder_factors):
-        cost += float(np.sum(f(R, pre, x).whitened() ** 2))
-    cost += float(np.sum(((x - x_prior) / x_sigma) ** 2))
-    r0 = log_so3(R_prior.T @ R[0]) / model.initial_attitude_sigma
-    return cost + float(r0 @ r0)
-
-
 #: Halvings of a pass's step before it is taken as it is.
 MAX_HALVINGS = 8
 
-#: Largest first-order keyframe rotation change (rad) for which a preintegration is updated to first
-#: order (``dR Exp(J dx)``) instead of redone; the factor graph's ``GraphOptions.repreintegrate_tol``.
-REPREINTEGRATE_TOL = 1e-5
-
-
 def _keep_or_drop(model, pre, x):
     """``pre`` if it still serves at ``x`` to first order, else None (preintegrate again)."""
-    if pre is None or model.needs_repreintegration(pre, x, tol=REPREINTEGRATE_TOL):
+    if pre is None or model.needs_repreintegration(pre, x):
         return None
     return pre
 
