@@ -177,6 +177,12 @@ def calibrate(experiment, *, options=CalibrationOptions(), solvers=SOLVERS):
     return out
 
 
+def sigma_ratio_range_text(summary):
+    """``"lo..hi"`` of a comparison summary's sigma-ratio range (``inf`` where a ratio has no value)."""
+    lo, hi = summary["sigma_ratio_range"]
+    return f"{lo:.3f}..{'inf' if hi is None else f'{hi:.3f}'}"
+
+
 def compare(a, b):
     """Parameter-by-parameter comparison of two results (``comparison.json``).
 

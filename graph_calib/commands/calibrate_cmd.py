@@ -42,7 +42,7 @@ def options_from_args(args):
 
 def run(args):
     from graph_calib import io
-    from graph_calib.calibrate import build_problem, compare, run_factor_graph, run_sqrt_kf
+    from graph_calib.calibrate import build_problem, compare, run_factor_graph, run_sqrt_kf, sigma_ratio_range_text
 
     path = Path(args.experiment)
     if not path.exists():
@@ -79,8 +79,6 @@ def run(args):
         cmp_ = compare(results["sqrt-kf"], results["factor-graph"])
         io.atomic_write_json(out / "comparison.json", cmp_)
         sm = cmp_["summary"]
-        lo, hi = sm["sigma_ratio_range"]
-        hi_text = "inf" if hi is None else f"{hi:.3f}"
         print(f"  comparison: max |difference| {sm['max_abs_difference_in_sigma']:.3f} sigma, sigma ratio "
-              f"{lo:.3f}..{hi_text} -> {out / 'comparison.json'}")
+              f"{sigma_ratio_range_text(sm)} -> {out / 'comparison.json'}")
     return 0

@@ -15,6 +15,7 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib import io, params
+from graph_calib.calibrate import sigma_ratio_range_text
 from graph_calib.reports import html as H
 
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
@@ -332,7 +333,7 @@ def _comparison_table(run):
         if not cmp_:
             continue
         rows.append([e["name"], str(cmp_["parameters"]), f"{cmp_['max_abs_difference_in_sigma']:.2g}",
-                     f"{cmp_['sigma_ratio_range'][0]:.3f} .. {cmp_['sigma_ratio_range'][1]:.3f}",
+                     sigma_ratio_range_text(cmp_),
                      H.verdict(cmp_["agree"], "agree", "DIFFER")])
         classes.append("" if cmp_["agree"] else "bad")
     if not rows:
