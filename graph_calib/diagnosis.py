@@ -1044,6 +1044,12 @@ def _make_stage(problem, gr, options, dopt, *, truth=None, fixed_sigmas=None, sa
     return st
 
 
+def _added_text(t, why=""):
+    """The round's decision when candidate test ``t`` is added (``why``: what the encompassing test said)."""
+    return (f"added {t.name}: score statistic {t.statistic:.1f} > {t.threshold:.1f} "
+            f"(chi-square, {t.dof} dof, log10 p = {t.log10_p:.1f})" + (f"; {why}" if why else ""))
+
+
 def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_add=True, say=lambda m: None):
     """One round: linearise the extended model at the solution, test, decide."""
     from graph_calib.calibrate import build_problem
@@ -1121,9 +1127,7 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
     for t in significant if allow_add else ():
         idx = raw[t.name][0]
         if not dopt.encompassing or not sig_drivers:
-            rnd.added = t.name
-            rnd.decision = (f"added {t.name}: score statistic {t.statistic:.1f} > {t.threshold:.1f} "
-                            f"(chi-square, {t.dof} dof, log10 p = {t.log10_p:.1f})")
+            rnd.added, rnd.decision = t.name, _added_text(t)
             break
         # encompassing: does the candidate explain the driver signatures, or only mimic one?
         A_c = _with_priors(rs, idx)
@@ -1141,10 +1145,7 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
         if not left:
             check["verdict"] = "explains every significant driver signature"
             rnd.checks.append(check)
-            rnd.added = t.name
-            rnd.decision = (f"added {t.name}: score statistic {t.statistic:.1f} > {t.threshold:.1f} "
-                            f"(chi-square, {t.dof} dof, log10 p = {t.log10_p:.1f}); it explains every "
-                            f"significant driver signature")
+            rnd.added, rnd.decision = t.name, _added_text(t, "it explains every significant driver signature")
             break
         # the generic alternative: every driver signature the candidate leaves unexplained
         dcols = np.concatenate([z[2] for z in left])
@@ -1157,10 +1158,8 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
             check["verdict"] = (f"needed beyond the driver signatures it leaves ({names_left}): "
                                 f"{sc_c.statistic:.1f} > {thr_c:.1f}")
             rnd.checks.append(check)
-            rnd.added = t.name
-            rnd.decision = (f"added {t.name}: score statistic {t.statistic:.1f} > {t.threshold:.1f} "
-                            f"(chi-square, {t.dof} dof, log10 p = {t.log10_p:.1f}); still significant given "
-                            f"the driver signatures it does not explain")
+            rnd.added, rnd.decision = t.name, _added_text(
+                t, "still significant given the driver signatures it does not explain")
             break
         check["verdict"] = (f"not added: it only mimics driver signatures the catalogue lacks ({names_left}): "
                             f"{sc_c.statistic:.1f} <= {thr_c:.1f} given those drivers")
