@@ -53,6 +53,11 @@ import numpy as np
 
 from graph_calib import io
 from graph_calib.errors import InputError
+from graph_calib.model import ModelOptions
+from graph_calib.options import CalibrationOptions, FilterOptions, GraphOptions
+from graph_calib.problem import build_problem
+from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
+from graph_calib.solvers.results import compare, to_result
 
 #: Format name of ``campaign.json``.
 CAMPAIGN_FORMAT = "imu-calibration-campaign"
@@ -60,7 +65,7 @@ CAMPAIGN_VERSION = 1
 #: Bumped when a change of the code invalidates cached results.
 CACHE_VERSION = 1
 
-SOLVER_CHOICES = {"both": ("sqrt-kf", "factor-graph"), "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",)}
+SOLVER_CHOICES = {"both": DEFAULT_SOLVERS, "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",)}
 
 
 @dataclass(frozen=True)
@@ -176,10 +181,6 @@ def calibration_options(campaign, *, t_ref_degC=None):
     ``[solver] keyframe_s / max_iterations`` (the latter for both solvers: LM
     iterations and filter passes), and the experiment's ``t_ref_degC``.
     """
-    from graph_calib.calibrate import CalibrationOptions
-    from graph_calib.factor_graph import GraphOptions
-    from graph_calib.model import ModelOptions
-
     s = campaign.solver
     mopt = ModelOptions(
         keyframe_s=float(s.get("keyframe_s", ModelOptions.keyframe_s)), grade=campaign.grade,
@@ -187,7 +188,7 @@ def calibration_options(campaign, *, t_ref_degC=None):
         prior_sigma=dict(sorted(campaign.priors.items())) or None,
     )
     gopt = GraphOptions(max_iterations=int(s["max_iterations"])) if "max_iterations" in s else GraphOptions()
-    kw = {"kf_max_passes": int(s["max_iterations"])} if "max_iterations" in s else {}
+    kw = {"filter": FilterOptions(max_passes=int(s["max_iterations"]))} if "max_iterations" in s else {}
     return CalibrationOptions(model=mopt, graph=gopt, t_ref_degC=t_ref_degC, **kw)
 
 
@@ -250,27 +251,16 @@ def experiment_summary(experiment, *, t_ref_degC, points=1500):
     }
 
 
-def _residual_arrays(solver, native):
-    """Residual series of a solver's native output as flat arrays ``{kind}_t / _axis / _value`` (float32)."""
+def _residual_arrays(output):
+    """Residual series of a solver's output as flat arrays ``{kind}_t / _axis / _value`` (float32)."""
     out = {}
-    if solver == "factor-graph":
-        for kind, (t, w) in native.residuals.items():
-            w = np.asarray(w, dtype=float)
-            if w.size == 0:
-                continue
-            w = w.reshape(w.shape[0], -1)
-            out[f"{kind}_t"] = np.repeat(np.asarray(t, dtype=float), w.shape[1])
-            out[f"{kind}_axis"] = np.tile(np.arange(w.shape[1], dtype=np.int8), w.shape[0])
-            out[f"{kind}_value"] = w.ravel().astype(np.float32)
-    else:
-        names = getattr(sys.modules.get("kf_reference"), "KIND_NAMES", ("gravity", "encoder"))
-        for code, kind in enumerate(names):
-            m = native.innovation_kind == code
-            if not np.any(m):
-                continue
-            out[f"{kind}_t"] = np.asarray(native.innovation_t[m], dtype=float)
-            out[f"{kind}_axis"] = np.asarray(native.innovation_axis[m], dtype=np.int8)
-            out[f"{kind}_value"] = np.asarray(native.innovation[m], dtype=np.float32)
+    for kind, series in output.residuals.items():
+        w = np.asarray(series.values, dtype=float)
+        if w.size == 0:
+            continue
+        out[f"{kind}_t"] = np.repeat(np.asarray(series.t, dtype=float), w.shape[1])
+        out[f"{kind}_axis"] = np.tile(np.arange(w.shape[1], dtype=np.int8), w.shape[0])
+        out[f"{kind}_value"] = w.ravel().astype(np.float32)
     return out
 
 
@@ -289,8 +279,6 @@ def run_tasks(tasks):
         ``input_error`` when the experiment file breaks a rule), ``seconds`` (its share of the set-up
         plus its solve).
     """
-    from graph_calib.calibrate import build_problem, run_factor_graph, run_sqrt_kf
-
     tasks = list(tasks)
     if not tasks:
         return []
@@ -317,10 +305,10 @@ def run_tasks(tasks):
     for task in tasks:
         t1 = time.perf_counter()
         try:
-            runner = run_factor_graph if task.solver == "factor-graph" else run_sqrt_kf
-            result, native = runner(problem, options=task.options)
+            output = solve(task.solver, problem, options=task.options)
+            result = to_result(problem.model, output)
             solve_seconds = time.perf_counter() - t1
-            arrays = _residual_arrays(task.solver, native)
+            arrays = _residual_arrays(output)
             with io.atomic_path(task.residuals_path) as tmp:
                 with open(tmp, "wb") as fh:
                     np.savez_compressed(fh, **arrays)
@@ -644,7 +632,6 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     InputError
         A bad manifest, a missing experiment or validation file, a bad option.
     """
-    from graph_calib.calibrate import compare
     from graph_calib.stitching import stitch
 
     t_start = time.perf_counter()

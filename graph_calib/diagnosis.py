@@ -55,7 +55,11 @@ from scipy import stats
 
 from graph_calib import constants as c
 from graph_calib import params
+from graph_calib.options import CalibrationOptions
+from graph_calib.problem import build_problem
 from graph_calib.rotations import log_so3, quat_to_dcm, right_jacobian_inv
+from graph_calib.solvers.registry import solve
+from graph_calib.solvers.results import to_result
 
 # ---------------------------------------------------------------------------
 # drivers: what could drive a missing effect
@@ -645,11 +649,13 @@ class Stage:
     Attributes
     ----------
     layout : tuple of str
-    problem : graph_calib.calibrate.Problem
-    graph : graph_calib.factor_graph.GraphResult
+    problem : graph_calib.problem.Problem
+    graph : graph_calib.solvers.interface.SolverOutput
+        The factor graph's output.
     results : dict
         ``{solver: Result}``.
-    kf : FilterResult or None
+    kf : graph_calib.solvers.interface.SolverOutput or None
+        The filter's output.
     residuals : dict
         Per factor kind: ``t``, ``key``, ``r`` (SI), ``w`` (whitened; gravity also in body axes).
     innovations : dict
@@ -779,27 +785,13 @@ def _factor_residuals(model, R, x):
     return out
 
 
-def _innovations(fr, model):
-    """Filter innovations per kind as ``{"t", "key", "w" (F, 3)}``."""
-    import kf_reference
-
+def _innovations(output, model):
+    """Filter innovations per kind as ``{"t", "key", "w" (F, 3)}`` from the filter's :class:`SolverOutput`."""
     out = {}
-    for code, name in enumerate(kf_reference.KIND_NAMES):
-        m = fr.innovation_kind == code
-        if not np.any(m):
-            continue
-        v = fr.innovation[m]
-        ax = fr.innovation_axis[m]
-        t = fr.innovation_t[m]
-        if v.size % 3 == 0 and np.array_equal(ax, np.tile(np.arange(3), v.size // 3)):
-            w = v.reshape(-1, 3)
-            tt = t[::3]
-        else:  # pragma: no cover - the filter stacks factors as triplets
-            n = min(np.count_nonzero(ax == a) for a in range(3))
-            w = np.column_stack([v[ax == a][:n] for a in range(3)])
-            tt = t[ax == 0][:n]
+    for name, series in output.residuals.items():
+        tt = np.asarray(series.t, dtype=float)
         key = np.clip(np.searchsorted(model.t_key, tt, side="right") - 1, 0, model.n_keyframes - 1)
-        out[name] = {"t": tt, "key": key, "w": w}
+        out[name] = {"t": tt, "key": key, "w": np.asarray(series.values)}
     return out
 
 
@@ -1009,28 +1001,20 @@ def _with_effects(options, effects):
 
 
 def _solve(problem, options, initial=None):
-    from graph_calib import factor_graph
-
-    return factor_graph.solve(problem.model, q_nb0=problem.q_nb0, options=options.graph, initial=initial)
+    return solve("factor-graph", problem, options=options, initial=initial)
 
 
 def _make_stage(problem, gr, options, dopt, *, truth=None, fixed_sigmas=None, say=lambda m: None):
-    from graph_calib.calibrate import run_sqrt_kf, to_result
-
     model = problem.model
     series = _factor_residuals(model, gr.attitudes, gr.x)
-    fg_stats = {"iterations": gr.iterations, "final_cost": float(gr.cost_history[-1]), "seconds": gr.seconds,
-                "rms_whitened": {k: np.sqrt(np.mean(v["w"] ** 2, axis=0)).tolist()
-                                 for k, v in series.items() if v["w"].size}}
-    results = {"factor-graph": to_result(model=model, x=gr.x, covariance=gr.covariance, solver="factor-graph",
-                                         residuals=fg_stats)}
+    results = {"factor-graph": to_result(model, gr)}
     st = Stage(layout=tuple(model.layout.names), problem=problem, graph=gr, results=results, residuals=series)
     if "sqrt-kf" in dopt.solvers:
         say("  square-root filter ...")
-        res, fr = run_sqrt_kf(problem, options=options)
-        st.results["sqrt-kf"] = res
-        st.kf = fr
-        st.innovations = _innovations(fr, model)
+        kf = solve("sqrt-kf", problem, options=options)
+        st.results["sqrt-kf"] = to_result(model, kf)
+        st.kf = kf
+        st.innovations = _innovations(kf, model)
     st.statistics = residual_statistics(st)
     if truth is not None:
         st.error = {}
@@ -1052,8 +1036,6 @@ def _added_text(t, why=""):
 
 def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_add=True, say=lambda m: None):
     """One round: linearise the extended model at the solution, test, decide."""
-    from graph_calib.calibrate import build_problem
-
     t0 = time.perf_counter()
     model = problem.model
     cand = [c for c in candidates if c not in model.layout]
@@ -1189,8 +1171,6 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     -------
     Diagnosis
     """
-    from graph_calib.calibrate import CalibrationOptions, build_problem
-
     t_start = time.perf_counter()
     say = progress or (lambda msg: None)
     options = CalibrationOptions() if options is None else options

@@ -24,49 +24,16 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from functools import partial
 
 import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import C, X
 
-from graph_calib.model import REPREINTEGRATE_TOL
+from graph_calib.options import GraphOptions
+from graph_calib.params import Layout
 from graph_calib.rotations import quat_to_dcm
-
-
-@dataclass(frozen=True)
-class GraphOptions:
-    """Options of the batch solver.
-
-    Attributes
-    ----------
-    max_iterations : int
-    lambda_initial : float
-        Initial Levenberg-Marquardt damping.
-    rel_tol : float
-        Stop when the relative decrease of the cost is below this.
-    step_tol_sigma : float
-        ... or when every calibration step is below this fraction of its *prior* sigma.
-        Off (0) by default: a prior sigma is no measure of a well-determined element
-        (on the measured MPU-6050 session 1e-4 of the prior stopped the iterations 27
-        steps into a 190-step crawl along the weakly held heading, 0.2 sigma from the
-        optimum); the cost rule is scale-free.
-    robust : str or None
-        ``"huber"`` or ``"cauchy"`` on gravity and encoder factors; None for least squares.
-    robust_k : float
-        Threshold of the robust loss, in whitened units, for a 3-row factor (one gravity
-        measurement or one encoder reading); an encoder factor stacking ``m`` readings
-        uses ``robust_k * sqrt(m)``, GTSAM applying the loss to a factor's whole residual.
-    repreintegrate_tol : float
-        Largest first-order keyframe rotation change (rad) before re-preintegration.
-    """
-
-    max_iterations: int = 500
-    lambda_initial: float = 1e-6
-    rel_tol: float = 1e-10
-    step_tol_sigma: float = 0.0
-    robust: str | None = None
-    robust_k: float = 3.0
-    repreintegrate_tol: float = REPREINTEGRATE_TOL
+from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, ResidualSeries, SolverOutput
 
 
 @dataclass(frozen=True)
@@ -94,7 +61,7 @@ class GraphResult:
 
     x: np.ndarray
     covariance: np.ndarray
-    layout: object
+    layout: Layout
     attitudes: np.ndarray
     residuals: dict
     iterations: int
@@ -178,8 +145,6 @@ def _noise(sigmas, robust, k):
 
 def build_graph(model, cache, *, R_prior, x_prior, x_sigma, robust=None, robust_k=3.0):
     """The nonlinear factor graph of ``model`` (callbacks bound to ``cache``)."""
-    from functools import partial
-
     graph = gtsam.NonlinearFactorGraph()
     K = model.n_keyframes
     att_sigma = model.initial_attitude_sigma
@@ -243,7 +208,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         Prior attitude at the start of the record (alignment), scalar first.
     options : GraphOptions
     progress : callable, optional
-        Called as ``progress(iteration, cost)``.
+        Called with a :class:`graph_calib.solvers.interface.ProgressEvent` after each iteration.
     initial : tuple (R, x), optional
         Starting keyframe attitudes (K+1, 3, 3) and calibration (P,) instead of
         dead reckoning from the priors (e.g. a previous solution embedded in a
@@ -315,7 +280,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         cost = min(cost, new_cost)
         history.append(cost)
         if progress is not None:
-            progress(it, cost)
+            progress(ProgressEvent(solver=FactorGraphSolver.name, iteration=it, cost=float(cost)))
         if accepted and (abs(rel) < options.rel_tol or np.all(np.abs(step) < options.step_tol_sigma * x_sigma)
                          and options.step_tol_sigma > 0):
             converged = True
@@ -338,3 +303,27 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     return GraphResult(x=x, covariance=0.5 * (cov + cov.T), layout=model.layout, attitudes=cache.R.copy(),
                        residuals=residuals, iterations=it, cost_history=history,
                        seconds=time.perf_counter() - t0, converged=converged)
+
+
+class FactorGraphSolver:
+    """The factor graph behind the solver interface (registered as ``"factor-graph"``)."""
+
+    name = "factor-graph"
+
+    def solve(self, problem, *, options, progress=None, initial=None):
+        """Calibrate ``problem`` (:class:`graph_calib.problem.Problem`) with ``options.graph``.
+
+        Returns
+        -------
+        graph_calib.solvers.interface.SolverOutput
+            Residual series: the whitened residuals of every factor kind at the solution.
+        """
+        gr = solve(problem.model, q_nb0=problem.q_nb0, options=options.graph, progress=progress, initial=initial)
+        return SolverOutput(
+            solver=self.name, layout=gr.layout, x=gr.x, covariance=gr.covariance, t_key=problem.model.t_key.copy(),
+            attitudes=gr.attitudes,
+            residuals={kind: ResidualSeries(t=np.asarray(t, dtype=float), values=np.asarray(w, dtype=float))
+                       for kind, (t, w) in gr.residuals.items()},
+            residual_quantity=WHITENED_RESIDUAL, iterations=gr.iterations, converged=bool(gr.converged),
+            final_cost=float(gr.cost_history[-1]), seconds=gr.seconds,
+        )

@@ -2,12 +2,15 @@ r"""The reference square-root Kalman filter of graph-calib.
 
 An iterated, linearised square-root filter over keyframes that consumes the
 shared model's factors (:mod:`graph_calib.model`) and must agree with the factor
-graph (:mod:`graph_calib.factor_graph`) on every parameter.  See
-``docs/kf_reference.md``.
+graph (:mod:`graph_calib.factor_graph`) on every parameter.  It imports only the
+shared model and the solver interface (:mod:`graph_calib.solvers.interface`), and is
+registered as the solver ``"sqrt-kf"`` (:class:`kf_reference.solver.SqrtKalmanSolver`).
+See ``docs/kf_reference.md``.
 
->>> from kf_reference import calibrate, to_result          # doctest: +SKIP
->>> fr = calibrate(model, q_nb0=q_nb0)                       # doctest: +SKIP
->>> result = to_result(fr, model)                            # doctest: +SKIP
+>>> from graph_calib.solvers import solve                           # doctest: +SKIP
+>>> output = solve("sqrt-kf", problem, options=CalibrationOptions())  # doctest: +SKIP
+>>> from kf_reference import calibrate                                # doctest: +SKIP
+>>> fr = calibrate(problem.model, q_nb0=problem.q_nb0)                # the native FilterResult  # doctest: +SKIP
 """
 
 from kf_reference.calibrate import (  # noqa: F401  (public)
@@ -19,7 +22,8 @@ from kf_reference.calibrate import (  # noqa: F401  (public)
     calibrate,
     filter_pass,
     initial_attitudes,
-    to_result,
 )
+from kf_reference.solver import SqrtKalmanSolver, output_of  # noqa: F401  (public)
 
-__all__ = ["calibrate", "to_result", "filter_pass", "initial_attitudes", "FilterResult", "PassInfo", "GRAVITY", "ENCODER", "KIND_NAMES"]
+__all__ = ["calibrate", "filter_pass", "initial_attitudes", "FilterResult", "PassInfo", "GRAVITY", "ENCODER",
+           "KIND_NAMES", "SqrtKalmanSolver", "output_of"]

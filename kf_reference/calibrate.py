@@ -25,8 +25,12 @@ import numpy as np
 
 from graph_calib.params import Layout
 from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm, right_jacobian
+from graph_calib.solvers.interface import ProgressEvent
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
+
+#: The name the filter is registered under (:mod:`graph_calib.solvers.registry`).
+SOLVER_NAME = "sqrt-kf"
 
 #: Kind codes of the innovation series.
 GRAVITY, ENCODER = 0, 1
@@ -49,6 +53,8 @@ class PassInfo:
         The same in units of its sigma given the calibration (largest per-axis ratio).
     chi2_per_dof : float
         Mean squared normalised innovation over every scalar measurement.
+    cost : float
+        Half the batch cost at the pass's linearisation point (the factor graph's objective).
     seconds_model : float
         Preintegration and factors.
     seconds_filter : float
@@ -60,6 +66,7 @@ class PassInfo:
     max_attitude_correction: float
     max_attitude_correction_sigma: float
     chi2_per_dof: float
+    cost: float
     seconds_model: float
     seconds_filter: float
 
@@ -397,7 +404,7 @@ def _keep_or_drop(model, pre, x):
     return pre
 
 
-def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, progress=None):
+def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, progress=None, initial=None):
     """Calibrate with the iterated square-root filter.
 
     Parameters
@@ -412,7 +419,10 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     attitude_tol : float
         ... and every smoothed attitude correction is below ``attitude_tol`` of its sigma.
     progress : callable, optional
-        Called as ``progress(pass_number, PassInfo)`` after each pass.
+        Called with a :class:`graph_calib.solvers.interface.ProgressEvent` after each pass.
+    initial : tuple (R, x), optional
+        First linearisation point, keyframe attitudes (K+1, 3, 3) and calibration (P,), instead of
+        :func:`initial_attitudes` at the prior calibration.
 
     Returns
     -------
@@ -422,9 +432,15 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         raise ValueError(f"max_passes must be at least 1, not {max_passes}")
     R_prior = quat_to_dcm(np.asarray(q_nb0, dtype=float))
     x_prior, x_sigma = model.prior()
-    x_lin = x_prior.copy()
-    pre = model.preintegrate(x_lin)
-    R_lin, n_initial = initial_attitudes(model, q_nb0=q_nb0, pre=pre)
+    if initial is None:
+        x_lin = x_prior.copy()
+        pre = model.preintegrate(x_lin)
+        R_lin, n_initial = initial_attitudes(model, q_nb0=q_nb0, pre=pre)
+    else:
+        R_lin = np.asarray(initial[0], dtype=float).copy()
+        x_lin = np.asarray(initial[1], dtype=float).copy()
+        pre = model.preintegrate(x_lin)
+        n_initial = 0
     passes = []
     converged = False
     base = None          # (x, R, cost, dx, delta) of the last pass: the point and its Gauss-Newton step
@@ -457,12 +473,14 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
             max_attitude_correction=float(np.max(np.linalg.norm(p.delta_smoothed, axis=1))),
             max_attitude_correction_sigma=float(np.max(np.abs(p.delta_smoothed) / p.sigma_smoothed)),
             chi2_per_dof=float(np.mean(p.innovation**2)) if p.innovation.size else 0.0,
+            cost=0.5 * p.cost,
             seconds_model=p.seconds_model,
             seconds_filter=p.seconds_filter,
         )
         passes.append(info)
         if progress is not None:
-            progress(i, info)
+            progress(ProgressEvent(solver=SOLVER_NAME, iteration=i, cost=info.cost, max_step_sigma=info.max_dx_sigma,
+                                   chi2_per_dof=info.chi2_per_dof))
         C_filtered = R_lin @ exp_so3(p.delta_filtered)
         base = (x_lin, R_lin, p.cost, p.dx, p.delta_smoothed)
         tau = 1.0
@@ -479,19 +497,3 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         converged=converged, initial_iterations=n_initial,
     )
 
-
-def to_result(fr, model):
-    """The :class:`graph_calib.experiment.Result` (solver ``"sqrt-kf"``) of a :class:`FilterResult`."""
-    from graph_calib.calibrate import to_result as _to_result
-
-    stats = fr.innovation_stats()
-    residuals = {
-        "normalised_innovations": stats,
-        "rms_normalised_innovation": {k: v["rms"] for k, v in stats.items()},
-        "counts": {k: v["count"] for k, v in stats.items()},
-        "chi2_per_dof": float(np.mean(fr.innovation**2)) if fr.innovation.size else 0.0,
-        "passes": fr.n_passes,
-        "converged": bool(fr.converged),
-        "seconds_filter_per_pass": float(np.mean([p.seconds_filter for p in fr.passes])),
-    }
-    return _to_result(model=model, x=fr.x, covariance=fr.covariance, solver="sqrt-kf", residuals=residuals)

@@ -36,9 +36,8 @@ sys.path.insert(0, str(ROOT))
 from graph_calib import constants as c  # noqa: E402
 from graph_calib import params  # noqa: E402
 from graph_calib import sensor_model as sm  # noqa: E402
-from graph_calib.calibrate import CalibrationOptions  # noqa: E402
+from graph_calib.options import CalibrationOptions, GraphOptions  # noqa: E402
 from graph_calib.diagnosis import DiagnosisOptions, diagnose, residual_rms  # noqa: E402
-from graph_calib.factor_graph import GraphOptions  # noqa: E402
 from graph_calib.importers import import_mpu6050, import_xsens  # noqa: E402
 from graph_calib.io import atomic_write_json, atomic_write_text  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402

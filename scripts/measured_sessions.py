@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from graph_calib.calibrate import CalibrationOptions, build_problem, compare, run_factor_graph, run_sqrt_kf  # noqa: E402
+from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem  # noqa: E402
 from graph_calib.importers import import_mpu6050, import_xsens, mpu6050_reference_calibration  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
 from graph_calib.strapdown import detect_static  # noqa: E402
@@ -32,9 +32,9 @@ def session(name, exp):
     opt = CalibrationOptions(model=ModelOptions(grade="consumer"))
     problem = build_problem(exp, options=opt)
     poses = detect_static(exp)[1:]          # the hand-placed poses (the first interval is the long start)
-    graph, gr = run_factor_graph(problem, options=opt)
-    kf, _ = run_sqrt_kf(problem, options=opt)
-    cmp_ = compare(kf, graph)["summary"]
+    run = solve_problem(problem, options=opt)
+    graph, kf, gr = run.results["factor-graph"], run.results["sqrt-kf"], run.outputs["factor-graph"]
+    cmp_ = run.comparison["summary"]
     raw_mag, raw_mis = pose_metrics(exp, gr.layout, None, poses)
     cal_mag, cal_mis = pose_metrics(exp, gr.layout, gr.x, poses)
     return dict(name=name, exp=exp, graph=graph, kf=kf, cmp=cmp_, poses=poses, raw_mag=raw_mag, cal_mag=cal_mag,

@@ -85,7 +85,7 @@ def run_job(job, work):
 
     numba.set_num_threads(1)
     from graph_calib import io
-    from graph_calib.calibrate import CalibrationOptions, build_problem, run_factor_graph
+    from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
     from graph_calib.model import ModelOptions
     from graph_calib.validation import simulate_validation_record
 
@@ -102,7 +102,7 @@ def run_job(job, work):
     exclude = TC_PARAMS if profile == "traditional" else ()
     opts = CalibrationOptions(model=ModelOptions(exclude=exclude))
     problem = build_problem(se.experiment, options=opts)
-    res, _ = run_factor_graph(problem, options=opts)
+    res = solve_problem(problem, options=opts, solvers=("factor-graph",)).results["factor-graph"]
     T = se.experiment.sensor_temperatures()
     doc = {"result": io.result_to_dict(res), "ranges": np.stack([T.min(0), T.max(0)], 1).tolist()}
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -18,18 +18,19 @@ import numpy as np
 import pytest
 
 from graph_calib import constants as c
-from graph_calib.calibrate import (
-    CalibrationOptions,
-    build_problem,
-    compare,
-    run_factor_graph,
-    run_sqrt_kf,
-)
+from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
 from graph_calib.model import ModelOptions
 from graph_calib.simulate import simulate
 from graph_calib.validation import ResultCalibration, validate
 
-SOLVERS = {"sqrt-kf": run_sqrt_kf, "factor-graph": run_factor_graph}
+from graph_calib.solvers.registry import DEFAULT_SOLVERS as SOLVERS
+from graph_calib.solvers.results import compare
+
+
+def _run(solver, problem, *, options):
+    """``(Result, SolverOutput)`` of one solver, through the one dispatch."""
+    run = solve_problem(problem, options=options, solvers=(solver,))
+    return run.results[solver], run.outputs[solver]
 
 
 def _simulated(name, seed, **options):
@@ -71,7 +72,7 @@ def noise_free_short(request):
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_noise_free_subrange_within_a_tenth_of_sigma(noise_free_short, solver):
     se, problem, opts, valid = noise_free_short
-    res, raw = SOLVERS[solver](problem, options=opts)
+    res, raw = _run(solver, problem, options=opts)
     assert raw.converged and res.residuals["converged"]
     names, z = _z(res, se.truth)
     assert np.abs(z).max() < 0.1, _worst(names, z)
@@ -97,7 +98,7 @@ def monte_carlo():
     for seed in range(20):
         se = _simulated("nav-subrange-short", 1000 + seed, hours=0.25)
         problem, opts = _problem(se)
-        res = {s: run(problem, options=opts)[0] for s, run in SOLVERS.items()}
+        res = {s: _run(s, problem, options=opts)[0] for s in SOLVERS}
         for s, r in res.items():
             names, zs = _z(r, se.truth)
             z[s].append(zs)
@@ -133,7 +134,7 @@ def test_monte_carlo_solvers_on_the_same_estimate(monte_carlo):
 def nav_subrange():
     se = _simulated("nav-subrange", 7)
     problem, opts = _problem(se)
-    return se, {s: run(problem, options=opts)[0] for s, run in SOLVERS.items()}
+    return se, {s: _run(s, problem, options=opts)[0] for s in SOLVERS}
 
 
 @pytest.mark.slow
@@ -185,7 +186,7 @@ def consumer_handheld():
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_consumer_handheld_converges_from_zero_calibration(consumer_handheld, solver):
     se, problem, opts = consumer_handheld
-    res, raw = SOLVERS[solver](problem, options=opts)
+    res, raw = _run(solver, problem, options=opts)
     assert raw.converged
     names, z = _z(res, se.truth)
     prior = problem.model.prior()[1]

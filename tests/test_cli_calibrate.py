@@ -62,7 +62,7 @@ def test_comparison_with_a_zero_sigma_is_valid_json_and_disagrees():
     """A zero sigma in the first result gives sigma_ratio null (not inf, which JSON cannot hold)."""
     import numpy as np
 
-    from graph_calib.calibrate import compare
+    from graph_calib.solvers.results import compare
     from graph_calib.experiment import Result
 
     def result(solver, sig):

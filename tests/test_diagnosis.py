@@ -79,7 +79,7 @@ def test_score_statistic_is_one_gauss_newton_step_of_the_extended_graph():
     """2 x (cost decrease of one Gauss-Newton step of the extended model) = the score statistic."""
     from graph_calib import factor_graph
     from graph_calib.calibrate import CalibrationOptions, build_problem
-    from graph_calib.factor_graph import GraphOptions
+    from graph_calib.options import GraphOptions
 
     se = _sim("effect-accel.nonlinearity", 4, hours=0.05, effect_scale=0.3)
     o = CalibrationOptions()
@@ -229,7 +229,7 @@ def test_a_sinusoidal_accel_bias_is_reported_unexplained_not_as_a_thermal_effect
 def test_measured_mpu6050_session_gyro_g_sensitivity_first(real_data):
     """The MPU-6050 hand-held calibration session: the loop traces the residual to gyro g-sensitivity."""
     from graph_calib.calibrate import CalibrationOptions
-    from graph_calib.factor_graph import GraphOptions
+    from graph_calib.options import GraphOptions
     from graph_calib.importers import import_mpu6050
     from graph_calib.model import ModelOptions
 

@@ -3,7 +3,9 @@
 import numpy as np
 import pytest
 
-from graph_calib.calibrate import CalibrationOptions, build_problem, run_factor_graph
+from graph_calib.calibrate import CalibrationOptions, build_problem
+from graph_calib.options import GraphOptions
+from graph_calib.solvers.registry import solve
 from graph_calib.params import Layout, grade
 
 from _synthetic import turntable_experiment
@@ -30,7 +32,7 @@ def test_noise_free_recovery_within_a_tenth_of_sigma():
     rng = np.random.default_rng(11)
     x_true = _truth(rng)
     exp, _ = turntable_experiment(layout=DECL, x=x_true)
-    _, gr = run_factor_graph(build_problem(exp))
+    gr = solve("factor-graph", build_problem(exp), options=CalibrationOptions())
     z, sig = _normalised_errors(gr, x_true)
     worst = int(np.argmax(np.abs(z)))
     assert np.abs(z).max() < 0.1, (gr.layout.element_names()[worst], z[worst])
@@ -48,7 +50,7 @@ def test_monte_carlo_sigmas_are_consistent():
         x_true = _truth(rng)
         exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=60.0, dwell_s=5.0,
                                       noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
-        _, gr = run_factor_graph(build_problem(exp))
+        gr = solve("factor-graph", build_problem(exp), options=CalibrationOptions())
         z, sig = _normalised_errors(gr, x_true)
         z_all.append(z)
         prior = NAV.prior_vector(gr.layout)
@@ -74,16 +76,15 @@ def test_robust_loss_leaves_clean_data_alone():
     """
     from dataclasses import replace
 
-    from graph_calib.factor_graph import GraphOptions
 
     rng = np.random.default_rng(21)
     x_true = _truth(rng)
     exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=30.0, dwell_s=3.0,
                                   noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
     problem = build_problem(exp)
-    _, plain = run_factor_graph(problem)
+    plain = solve("factor-graph", problem, options=CalibrationOptions())
     opts = CalibrationOptions(graph=replace(GraphOptions(), robust="huber"))
-    _, robust = run_factor_graph(problem, options=opts)
+    robust = solve("factor-graph", problem, options=opts)
     assert robust.converged and plain.converged
     sig = np.sqrt(np.diag(plain.covariance))
     ratio = np.sqrt(np.diag(robust.covariance)) / sig

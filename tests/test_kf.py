@@ -14,6 +14,8 @@ import kf_reference
 from graph_calib.model import CalibrationModel, ModelOptions
 from graph_calib.params import Layout, grade
 from graph_calib.rotations import exp_so3, log_so3, right_jacobian_inv
+from graph_calib.solvers.interface import ProgressEvent
+from graph_calib.solvers.results import to_result
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
 
@@ -297,10 +299,12 @@ def test_to_result_and_progress():
     exp, _ = turntable_experiment(layout=DECL, x=x_true, static_s=20.0, dwell_s=2.0, rate=np.deg2rad(30.0))
     model = CalibrationModel(exp, options=ModelOptions())
     seen = []
-    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=2, progress=lambda i, p: seen.append((i, p)))
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=2,
+                                progress=lambda ev: seen.append((ev.iteration, ev)))
     assert [i for i, _ in seen] == [1, 2] and fr.n_passes == 2
-    assert all(isinstance(p, kf_reference.PassInfo) for _, p in seen)
-    res = kf_reference.to_result(fr, model)
+    # one progress-event type for every solver (graph_calib.solvers.interface)
+    assert all(isinstance(p, ProgressEvent) and p.solver == "sqrt-kf" for _, p in seen)
+    res = to_result(model, kf_reference.output_of(fr, t_key=model.t_key))
     names = model.layout.element_names()
     assert res.solver == "sqrt-kf"
     assert list(res.values) == names and list(res.sigmas) == names
@@ -310,7 +314,7 @@ def test_to_result_and_progress():
     assert res.temperature_range_degC == (pytest.approx(model.temperatures.min()),
                                           pytest.approx(model.temperatures.max()))
     assert res.effects == model.layout.names
-    assert res.residuals["passes"] == 2 and set(res.residuals["counts"]) == {"gravity", "encoder"}
+    assert res.residuals["iterations"] == 2 and set(res.residuals["counts"]) == {"gravity", "encoder"}
     assert res.extra["priors"] == model.priors_used()
     with pytest.raises(ValueError, match="max_passes"):
         kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=0)

@@ -14,7 +14,8 @@ Earth rate. What must hold (issues #3 and #4; figures in docs/measured-sessions.
 import numpy as np
 import pytest
 
-from graph_calib.calibrate import CalibrationOptions, build_problem, compare, run_factor_graph, run_sqrt_kf
+from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
+from graph_calib.solvers.results import compare
 from graph_calib.importers import import_mpu6050, import_xsens, mpu6050_reference_calibration
 from graph_calib.model import ModelOptions
 from graph_calib.strapdown import detect_static
@@ -29,8 +30,8 @@ MPU = REAL_DATA / "mpu6050_uncuyo"
 def _session(exp):
     opts = CalibrationOptions(model=ModelOptions(grade="consumer"))
     problem = build_problem(exp, options=opts)
-    graph, _ = run_factor_graph(problem, options=opts)
-    kf, fr = run_sqrt_kf(problem, options=opts)
+    run = solve_problem(problem, options=opts)
+    graph, kf, fr = run.results["factor-graph"], run.results["sqrt-kf"], run.outputs["sqrt-kf"]
     poses = detect_static(exp)[1:]                 # the hand-placed poses after the long start
     layout = problem.model.layout
     x = np.array([graph.values[n] for n in layout.element_names()])

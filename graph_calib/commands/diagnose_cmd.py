@@ -39,9 +39,9 @@ def add_arguments(p):
 
 
 def _options(args):
-    from graph_calib.calibrate import CalibrationOptions
+    from graph_calib.options import CalibrationOptions
     from graph_calib.diagnosis import DiagnosisOptions
-    from graph_calib.factor_graph import GraphOptions
+    from graph_calib.options import GraphOptions
     from graph_calib.model import ModelOptions
     from graph_calib.params import FURTHER_EFFECTS
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib import io, params
-from graph_calib.calibrate import sigma_ratio_range_text
+from graph_calib.solvers.results import sigma_ratio_range_text
 from graph_calib.reports import html as H
 
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",

@@ -1,0 +1,97 @@
+"""Options that decide a calibration besides the data: the model's and each solver's.
+
+Frozen dataclasses of plain values (their ``repr`` is a campaign's cache key).  They sit below the
+solvers so that the problem builder, every solver and the commands share one definition.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from graph_calib.model import REPREINTEGRATE_TOL, ModelOptions
+
+
+@dataclass(frozen=True)
+class GraphOptions:
+    """Options of the factor-graph batch solver.
+
+    Attributes
+    ----------
+    max_iterations : int
+    lambda_initial : float
+        Initial Levenberg-Marquardt damping.
+    rel_tol : float
+        Stop when the relative decrease of the cost is below this.
+    step_tol_sigma : float
+        ... or when every calibration step is below this fraction of its *prior* sigma.
+        Off (0) by default: a prior sigma is no measure of a well-determined element
+        (on the measured MPU-6050 session 1e-4 of the prior stopped the iterations 27
+        steps into a 190-step crawl along the weakly held heading, 0.2 sigma from the
+        optimum); the cost rule is scale-free.
+    robust : str or None
+        ``"huber"`` or ``"cauchy"`` on gravity and encoder factors; None for least squares.
+    robust_k : float
+        Threshold of the robust loss, in whitened units, for a 3-row factor (one gravity
+        measurement or one encoder reading); an encoder factor stacking ``m`` readings
+        uses ``robust_k * sqrt(m)``, GTSAM applying the loss to a factor's whole residual.
+    repreintegrate_tol : float
+        Largest first-order keyframe rotation change (rad) before re-preintegration.
+    """
+
+    max_iterations: int = 500
+    lambda_initial: float = 1e-6
+    rel_tol: float = 1e-10
+    step_tol_sigma: float = 0.0
+    robust: str | None = None
+    robust_k: float = 3.0
+    repreintegrate_tol: float = REPREINTEGRATE_TOL
+
+
+@dataclass(frozen=True)
+class FilterOptions:
+    """Options of the iterated square-root Kalman filter (``kf_reference``).
+
+    Attributes
+    ----------
+    max_passes : int
+        Largest number of passes over the record.
+    x_tol : float
+        Converged when a pass moves every calibration element by less than ``x_tol`` of its sigma ...
+    attitude_tol : float
+        ... and every smoothed attitude correction is below ``attitude_tol`` of its sigma.
+    """
+
+    max_passes: int = 500
+    x_tol: float = 1e-3
+    attitude_tol: float = 1e-2
+
+
+@dataclass(frozen=True)
+class CalibrationOptions:
+    """Everything that decides a calibration besides the data.
+
+    Attributes
+    ----------
+    model : ModelOptions
+        Keyframes, grade, effects, priors, noise.
+    graph : GraphOptions
+        The factor graph's Levenberg-Marquardt options.
+    filter : FilterOptions
+        The square-root filter's passes and tolerances.
+    t_ref_degC : float or None
+        Reference temperature; None for the mean sensor temperature.
+
+    Examples
+    --------
+    >>> opts = CalibrationOptions(model=ModelOptions(grade="consumer"), graph=GraphOptions(max_iterations=200))
+    >>> opts.model.grade, opts.filter.max_passes
+    ('consumer', 500)
+    """
+
+    model: ModelOptions = field(default_factory=ModelOptions)
+    graph: GraphOptions = field(default_factory=GraphOptions)
+    filter: FilterOptions = field(default_factory=FilterOptions)
+    t_ref_degC: float | None = None
+
+
+__all__ = ["GraphOptions", "FilterOptions", "CalibrationOptions", "ModelOptions"]

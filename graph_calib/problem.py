@@ -1,0 +1,103 @@
+"""One experiment made ready for any solver: the shared model, its static intervals and its alignment.
+
+>>> problem = build_problem(experiment, options=CalibrationOptions())      # doctest: +SKIP
+>>> problem.model.layout.size, problem.q_nb0                                # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
+from graph_calib.options import CalibrationOptions
+from graph_calib.params import grade
+from graph_calib.strapdown import Alignment, alignment, detect_static
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A calibration model with its initial attitude, ready for any solver.
+
+    Attributes
+    ----------
+    model : graph_calib.model.CalibrationModel
+    q_nb0 : ndarray, shape (4,)
+        Attitude ``q_nb`` (scalar first) at the start of the record, from the alignment.
+    alignment : graph_calib.strapdown.Alignment
+        How ``q_nb0`` was found.
+    """
+
+    model: CalibrationModel
+    q_nb0: np.ndarray
+    alignment: Alignment
+
+
+def build_problem(experiment, *, options=CalibrationOptions()):
+    """Set up the shared model of ``experiment`` and align it.
+
+    Without a table, gravity measurements count only where the IMU is static
+    (``ModelOptions.moving_sigma`` then defaults to 1 m/s^2 for moving keyframes).
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    options : CalibrationOptions
+
+    Returns
+    -------
+    Problem
+    """
+    mopt = options.model
+    static = detect_static(experiment)
+    static_mask = None
+    if experiment.table is None:
+        static_mask = np.zeros(experiment.n_samples, dtype=bool)
+        for a, b in static:
+            static_mask[a:b] = True
+        if mopt.moving_sigma is None:
+            mopt = replace(mopt, moving_sigma=1.0)
+    interval = tuple(static[0]) if len(static) else None
+    if interval is not None:
+        mopt = _noise_from_static(experiment, interval, mopt)
+    method = "table" if (experiment.table is not None and np.any(experiment.table.valid)) else "gyrocompass"
+    try:
+        al = alignment(experiment, interval=interval, method=method)
+    except Exception:
+        if method != "table":
+            raise
+        al = alignment(experiment, interval=interval, method="gyrocompass")
+        if mopt.initial_attitude_sigma is None:
+            # the table could not give the attitude: the prior is as loose as gyrocompassing is
+            mopt = replace(mopt, initial_attitude_sigma=gyrocompass_attitude_sigma(
+                mopt, latitude_rad=experiment.latitude_rad))
+    model = CalibrationModel(experiment, options=mopt, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
+    return Problem(model=model, q_nb0=al.q_nb0, alignment=al)
+
+
+def _noise_from_static(experiment, interval, mopt):
+    """White-noise densities: the grade's, raised to what the first static interval shows.
+
+    The density is the per-sample standard deviation of the rate (force) times
+    ``sqrt(dt)``, averaged over the axes.  Options set explicitly are kept.  The
+    grade's value is a floor, so noise-free data keep a sensible weighting.
+    """
+    a, b = int(interval[0]), int(interval[1])
+    if b - a < 50:
+        return mopt
+    g = grade(mopt.grade)
+    dt = experiment.dt[a:b, None]
+    w = experiment.dtheta[a:b] / dt
+    f = experiment.dv[a:b] / dt
+    h = float(np.median(dt))
+    est_g = float(np.sqrt(np.mean(np.var(w, axis=0)) * h))
+    est_a = float(np.sqrt(np.mean(np.var(f, axis=0)) * h))
+    return replace(
+        mopt,
+        gyro_noise=mopt.gyro_noise if mopt.gyro_noise is not None else max(g.gyro_noise, est_g),
+        accel_noise=mopt.accel_noise if mopt.accel_noise is not None else max(g.accel_noise, est_a),
+    )
+
+
+__all__ = ["Problem", "build_problem"]

@@ -1,0 +1,144 @@
+"""Result assembly, the same for every solver: the result file, its ``residuals`` block, comparisons.
+
+:func:`to_result` turns a :class:`graph_calib.solvers.interface.SolverOutput` into the result layout of
+``data-format.md`` (:class:`graph_calib.experiment.Result`); :func:`residual_block` is its
+``residuals`` block, one layout for every solver; :func:`compare` is ``comparison.json``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graph_calib.experiment import Result
+
+
+def residual_block(output):
+    """The ``residuals`` block of a result file: the solver's fit statistics, one layout for all solvers.
+
+    Parameters
+    ----------
+    output : graph_calib.solvers.interface.SolverOutput
+
+    Returns
+    -------
+    dict
+        ``quantity`` (whitened residual or normalised innovation); per factor kind in ``kinds``:
+        ``count``, ``rms_axis`` (rms of each normalised component), ``rms``, ``chi2_per_dof``;
+        ``counts`` (factors per kind); ``chi2_per_dof`` over every measurement (gravity and encoder)
+        component; ``iterations``, ``converged``, ``final_cost``, ``seconds``; and the solver's own
+        ``figures``.
+    """
+    kinds = {}
+    measured = []
+    for kind, series in output.residuals.items():
+        v = np.asarray(series.values, dtype=float)
+        if v.size == 0:
+            continue
+        kinds[kind] = {"count": int(v.shape[0]), "rms_axis": np.sqrt(np.mean(v**2, axis=0)).tolist(),
+                       "rms": float(np.sqrt(np.mean(v**2))), "chi2_per_dof": float(np.mean(v**2))}
+        if kind != "rotation":
+            measured.append(v.ravel())
+    all_measured = np.concatenate(measured) if measured else np.zeros(0)
+    block = {
+        "quantity": output.residual_quantity,
+        "kinds": kinds,
+        "counts": {k: v["count"] for k, v in kinds.items()},
+        "chi2_per_dof": float(np.mean(all_measured**2)) if all_measured.size else 0.0,
+        "iterations": int(output.iterations),
+        "converged": bool(output.converged),
+        "final_cost": float(output.final_cost),
+        "seconds": float(output.seconds),
+    }
+    block.update({k: float(v) for k, v in output.figures.items()})
+    return block
+
+
+def to_result(model, output, *, extra=None):
+    """The :class:`graph_calib.experiment.Result` of a solver's output.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+        The model the solver calibrated (data, layout, priors, noise).
+    output : graph_calib.solvers.interface.SolverOutput
+    extra : dict, optional
+        Further top-level keys for the result file.
+    """
+    names = output.layout.element_names()
+    sig = output.sigma
+    T = model.temperatures
+    ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
+          "noise": {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
+                    "encoder_rad": model.encoder_noise}}
+    ex.update(extra or {})
+    return Result(
+        source=model.experiment.source.rsplit("/", 1)[-1] if model.experiment.source else "",
+        solver=output.solver, t_ref_degC=model.t_ref_degC,
+        temperature_range_degC=(float(T.min()), float(T.max())),
+        effects=tuple(output.layout.names),
+        values=dict(zip(names, np.asarray(output.x, dtype=float).tolist())),
+        sigmas=dict(zip(names, sig.tolist())),
+        covariance_names=tuple(names), covariance=np.asarray(output.covariance, dtype=float),
+        residuals=residual_block(output), extra=ex,
+    )
+
+
+def sigma_ratio_range_text(summary):
+    """``"lo..hi"`` of a comparison summary's sigma-ratio range (``inf`` where a ratio has no value)."""
+    lo, hi = summary["sigma_ratio_range"]
+    return f"{lo:.3f}..{'inf' if hi is None else f'{hi:.3f}'}"
+
+
+def comparison_text(summary):
+    """One line of a comparison summary: largest difference and sigma-ratio range."""
+    return (f"max |difference| {summary['max_abs_difference_in_sigma']:.3f} sigma, sigma ratio "
+            f"{sigma_ratio_range_text(summary)}")
+
+
+#: Two solvers agree when no estimate differs by more than this many sigmas ...
+AGREE_DIFFERENCE_SIGMA = 0.1
+#: ... and every sigma ratio lies within these bounds.
+AGREE_SIGMA_RATIO = (0.9, 1.1)
+
+
+def compare(a, b):
+    """Parameter-by-parameter comparison of two results (``comparison.json``).
+
+    For every element both estimate: the two values and sigmas, the difference
+    in units of the larger sigma and the sigma ratio ``sigma_b / sigma_a``.
+    """
+    rows = {}
+    for name in a.values:
+        if name not in b.values:
+            continue
+        sa, sb = a.sigmas[name], b.sigmas[name]
+        big = max(sa, sb)
+        rows[name] = {
+            a.solver: {"value": a.values[name], "sigma": sa},
+            b.solver: {"value": b.values[name], "sigma": sb},
+            "difference_in_sigma": (b.values[name] - a.values[name]) / big if big > 0 else 0.0,
+            # None (JSON null) where the first solver reports a zero sigma and the second does not
+            "sigma_ratio": sb / sa if sa > 0 else (1.0 if sb == 0 else None),
+        }
+    diffs = np.array([abs(r["difference_in_sigma"]) for r in rows.values()]) if rows else np.zeros(0)
+    ratios = np.array([np.inf if r["sigma_ratio"] is None else r["sigma_ratio"] for r in rows.values()])
+    lo, hi = AGREE_SIGMA_RATIO
+    return {
+        "format": "imu-calibration-comparison",
+        "version": 1,
+        "source": a.source,
+        "solvers": [a.solver, b.solver],
+        "summary": {
+            "parameters": len(rows),
+            "max_abs_difference_in_sigma": float(diffs.max()) if diffs.size else 0.0,
+            "sigma_ratio_range": ([float(ratios.min()), float(ratios.max()) if np.isfinite(ratios.max()) else None]
+                                  if ratios.size else [1.0, 1.0]),
+            "agree": bool(diffs.size == 0 or (diffs.max() <= AGREE_DIFFERENCE_SIGMA and ratios.min() >= lo
+                                              and ratios.max() <= hi)),
+        },
+        "parameters": rows,
+    }
+
+
+__all__ = ["residual_block", "to_result", "compare", "sigma_ratio_range_text", "comparison_text",
+           "AGREE_DIFFERENCE_SIGMA", "AGREE_SIGMA_RATIO"]
