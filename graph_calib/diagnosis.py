@@ -54,7 +54,7 @@ import scipy.sparse.linalg as spla
 from scipy import stats
 
 from graph_calib import constants as c
-from graph_calib import params
+from graph_calib import effects, params
 from graph_calib.options import CalibrationOptions
 from graph_calib.problem import build_problem
 from graph_calib.rotations import log_so3, quat_to_dcm, right_jacobian_inv
@@ -989,7 +989,6 @@ def error_against_truth(result, truth, *, names=None, sigmas=None):
 # ---------------------------------------------------------------------------
 
 #: Why a candidate is not tested when the experiment lacks what it needs.
-NEEDS_TABLE = {"damping.stiffness": "needs a turntable: the tilt on the dampers is seen only by the encoders"}
 
 
 def _columns(layout, name):
@@ -1052,7 +1051,7 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
     skipped = {}
     for c in cand:
         if c not in ext.layout:
-            skipped[c] = NEEDS_TABLE.get(c, "not estimable in this experiment's model")
+            skipped[c] = effects.effect(c).why_needs or "not estimable in this experiment's model"
             continue
         idx = _columns(ext.layout, c)
         sc = score_test(A, b, rs.null, idx, scale=rs.prior_sigma[idx], min_eig=dopt.identifiable, scale_factor=vf)

@@ -58,6 +58,7 @@ import numba
 import numpy as np
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
+from graph_calib.effects import uninformed
 from graph_calib.params import Layout, grade as _grade
 from graph_calib.rotations import (
     exp_so3,
@@ -678,8 +679,9 @@ class CalibrationModel:
     LAG_RATE_THRESHOLD = 1e-3
 
     def _unobservable(self):
-        """Declared parameters the record cannot inform, left out of the layout (sorted tuple).
+        """Parameters the record cannot inform, left out of the layout (sorted tuple).
 
+        What each parameter needs is in the effect registry (:func:`graph_calib.effects.uninformed`).
         Without a table nothing ties the attitude to the faceplate or to a fixed
         rotation centre: ``mount``, ``time_lag.table``, ``damping.stiffness`` and
         ``lever_arm`` go.  With a table whose valid readings are all taken at rest
@@ -688,14 +690,12 @@ class CalibrationModel:
         would only return its prior mean as if it were a result.
         """
         tab = self.experiment.table
-        if tab is None:
-            return ("damping.stiffness", "lever_arm", "mount", "time_lag.table")
-        if not np.any(tab.valid):
-            return ("damping.stiffness", "mount", "time_lag.table")
-        w_nb_b = self.w_raw[self.tap_nxt] + self.tap_w_nb_offset      # raw rate against the level frame
-        if np.any(np.linalg.norm(w_nb_b, axis=1) > self.LAG_RATE_THRESHOLD):
-            return ()
-        return ("time_lag.table",)
+        has_valid = tab is not None and bool(np.any(tab.valid))
+        in_motion = False
+        if has_valid:
+            w_nb_b = self.w_raw[self.tap_nxt] + self.tap_w_nb_offset      # raw rate against the level frame
+            in_motion = bool(np.any(np.linalg.norm(w_nb_b, axis=1) > self.LAG_RATE_THRESHOLD))
+        return uninformed(has_table=tab is not None, has_valid_readings=has_valid, readings_in_motion=in_motion)
 
     #: Prior sigma of the first attitude when valid table readings give it (faceplate
     #: attitude through the nominal mounting; the mounting error is estimated), rad.

@@ -1,9 +1,9 @@
-"""The parameter catalogue of ``model.md`` and the layout of a calibration vector.
+"""The layout of a calibration vector, and the IMU grades (priors and noise).
 
-Every parameter has a flat name (``gyro.bias``), elements (``x y z``), an SI unit
-and a unit for reports.  A :class:`Layout` fixes which parameters a solver
+The parameters themselves (flat names, elements, units, what each needs) are the effect
+registry, :mod:`graph_calib.effects`.  A :class:`Layout` fixes which parameters a solver
 estimates and where each sits in the flat calibration vector ``x``; it is the one
-name-to-slice registry that the model, both solvers and the files use.
+name-to-slice registry that the model, every solver and the files use.
 
 Examples
 --------
@@ -21,99 +21,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib import constants as c
+from graph_calib.effects import DECLARED, EFFECTS, FURTHER_EFFECTS, REGISTRY, XYZ, effect
 
-XYZ = ("x", "y", "z")
-NINE = ("xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz")
-
-
-@dataclass(frozen=True)
-class ParamSpec:
-    """One parameter of the catalogue.
-
-    Attributes
-    ----------
-    name : str
-        Flat name, as in ``model.md``.
-    elements : tuple of str
-        Element names; empty for a scalar parameter.
-    unit : str
-        SI unit of the value.
-    report_unit : str
-        Unit shown in reports and printing.
-    to_report : float
-        Factor from the SI unit into ``report_unit``.
-    declared : bool
-        Whether the parameter belongs to the declared model (else a further effect).
-    """
-
-    name: str
-    elements: tuple
-    unit: str
-    report_unit: str
-    to_report: float
-    declared: bool
-
-    @property
-    def size(self):
-        return max(1, len(self.elements))
-
-    def element_names(self):
-        if not self.elements:
-            return [self.name]
-        return [f"{self.name}.{e}" for e in self.elements]
-
-
-def _p(name, elements, unit, report_unit, to_report, declared):
-    return ParamSpec(name, tuple(elements), unit, report_unit, to_report, declared)
-
-
-_UG = c.MPS2_TO_UG
-_DH = c.RS_TO_DH
-_AS = c.RAD_TO_ARCSEC
-
-#: Every parameter, declared model first, in the canonical order of a calibration vector.
-CATALOGUE = (
-    _p("gyro.bias", XYZ, "rad/s", "deg/h", _DH, True),
-    _p("gyro.bias_tc", XYZ, "rad/s/degC", "deg/h/degC", _DH, True),
-    _p("gyro.scale", XYZ, "1", "ppm", c.TO_PPM, True),
-    _p("gyro.scale_tc", XYZ, "1/degC", "ppm/degC", c.TO_PPM, True),
-    _p("gyro.misalignment", ("xy", "xz", "yx", "yz", "zx", "zy"), "rad", "arcsec", _AS, True),
-    _p("accel.bias", XYZ, "m/s^2", "micro-g", _UG, True),
-    _p("accel.bias_tc", XYZ, "m/s^2/degC", "micro-g/degC", _UG, True),
-    _p("accel.scale", XYZ, "1", "ppm", c.TO_PPM, True),
-    _p("accel.scale_tc", XYZ, "1/degC", "ppm/degC", c.TO_PPM, True),
-    _p("accel.misalignment", ("yx", "zx", "zy"), "rad", "arcsec", _AS, True),
-    _p("mount", XYZ, "rad", "arcsec", _AS, True),
-    _p("lever_arm", XYZ, "m", "mm", 1e3, True),
-    _p("time_lag.table", (), "s", "ms", 1e3, True),
-    # further effects
-    _p("gyro.bias_tc2", XYZ, "rad/s/degC^2", "deg/h/degC^2", _DH, False),
-    _p("accel.bias_tc2", XYZ, "m/s^2/degC^2", "micro-g/degC^2", _UG, False),
-    _p("gyro.scale_tc2", XYZ, "1/degC^2", "ppm/degC^2", c.TO_PPM, False),
-    _p("accel.scale_tc2", XYZ, "1/degC^2", "ppm/degC^2", c.TO_PPM, False),
-    _p("gyro.bias_dtdt", XYZ, "rad/s per degC/s", "deg/h per degC/min", _DH / 60.0, False),
-    _p("accel.bias_dtdt", XYZ, "m/s^2 per degC/s", "micro-g per degC/min", _UG / 60.0, False),
-    _p("gyro.scale_asym", XYZ, "1", "ppm", c.TO_PPM, False),
-    _p("gyro.g_sensitivity", NINE, "rad/s per m/s^2", "deg/h/g", _DH * c.G0, False),
-    _p("accel.nonlinearity", XYZ, "1/(m/s^2)", "micro-g/g^2", _UG * c.G0**2, False),
-    _p("accel.size_effect", ("yx", "yy", "yz", "zx", "zy", "zz"), "m", "mm", 1e3, False),
-    _p("time_lag.accel", (), "s", "ms", 1e3, False),
-    _p("damping.stiffness", NINE, "rad per m/s^2", "arcsec/g", _AS * c.G0, False),
-)
-
-SPECS = {p.name: p for p in CATALOGUE}
-DECLARED = tuple(p.name for p in CATALOGUE if p.declared)
-FURTHER_EFFECTS = tuple(p.name for p in CATALOGUE if not p.declared)
-GYRO_PARAMS = tuple(p.name for p in CATALOGUE if p.name.startswith("gyro."))
-ACCEL_PARAMS = tuple(p.name for p in CATALOGUE if p.name.startswith("accel."))
+#: ``{name: Effect}`` of the registry, as the layout reads it.
+SPECS = EFFECTS
 
 
 def spec(name):
-    """The :class:`ParamSpec` of a parameter name; ``KeyError`` naming it if unknown."""
-    try:
-        return SPECS[name]
-    except KeyError:
-        raise KeyError(f"unknown parameter {name!r}; known: {', '.join(SPECS)}") from None
+    """The :class:`graph_calib.effects.Effect` of a parameter name; ``KeyError`` naming it if unknown."""
+    return effect(name)
 
 
 def split_element_name(flat):
@@ -142,7 +58,7 @@ class Layout:
         unknown = [n for n in self.names if n not in SPECS]
         if unknown:
             raise KeyError(f"unknown parameter(s) {unknown}; known: {', '.join(SPECS)}")
-        ordered = tuple(p.name for p in CATALOGUE if p.name in set(self.names))
+        ordered = tuple(p.name for p in REGISTRY if p.name in set(self.names))
         object.__setattr__(self, "names", ordered)
         offsets = {}
         k = 0
@@ -259,14 +175,9 @@ def _grade(name, *, gb, gbtc, gs, gstc, gm, ab, abtc, as_, astc, am, mount, leve
         "gyro.misalignment": gm, "accel.bias": ab, "accel.bias_tc": abtc, "accel.scale": as_,
         "accel.scale_tc": astc, "accel.misalignment": am, "mount": mount, "lever_arm": lever,
         "time_lag.table": lag,
-        # further effects: loose priors scaled from the declared ones
-        "gyro.bias_tc2": gbtc / 5.0, "accel.bias_tc2": abtc / 5.0,
-        "gyro.scale_tc2": gstc / 5.0, "accel.scale_tc2": astc / 5.0,
-        "gyro.bias_dtdt": gbtc * 600.0, "accel.bias_dtdt": abtc * 600.0,
-        "gyro.scale_asym": gs, "gyro.g_sensitivity": gb / 10.0,
-        "accel.nonlinearity": as_ / 10.0, "accel.size_effect": lever / 2.0,
-        "time_lag.accel": lag, "damping.stiffness": mount / 10.0,
     }
+    # further effects: loose priors scaled from the declared ones, by each effect's rule in the registry
+    prior.update({e.name: e.prior.sigma(prior) for e in REGISTRY if e.prior is not None})
     return Grade(name, prior, gyro_noise, accel_noise, encoder_noise)
 
 

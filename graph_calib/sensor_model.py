@@ -48,22 +48,32 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graph_calib.params import SPECS, XYZ
+from graph_calib.effects import EFFECTS, XYZ
 
 BIAS, BIAS_TC, BIAS_TC2, BIAS_DTDT, SCALE, SCALE_TC, SCALE_TC2, SCALE_ASYM, CROSS, GSENS, NONLIN, SIZE, LAG = range(13)
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
-# parameter name (without the triad prefix) -> code for per-axis parameters
-_PER_AXIS = {
+#: Term code of each sensor-term kind of the effect registry (``Effect.term``).
+TERM_CODES = {
     "bias": BIAS, "bias_tc": BIAS_TC, "bias_tc2": BIAS_TC2, "bias_dtdt": BIAS_DTDT,
     "scale": SCALE, "scale_tc": SCALE_TC, "scale_tc2": SCALE_TC2, "scale_asym": SCALE_ASYM,
-    "nonlinearity": NONLIN,
+    "cross": CROSS, "gsens": GSENS, "nonlin": NONLIN, "size": SIZE, "lag": LAG,
 }
+
+
+def _axes(element):
+    """``(axis, aux)`` of an element name: ``"y"`` -> (1, -1); ``"zx"`` -> (2, 0)."""
+    if len(element) == 1:
+        return _AXIS[element], -1
+    return _AXIS[element[0]], _AXIS[element[1]]
 
 
 def term_rows(layout, triad):
     """Term rows ``(col, axis, code, aux)`` of the ``"gyro"`` or ``"accel"`` triad in ``layout``.
+
+    Read from the effect registry (:mod:`graph_calib.effects`): each element of a parameter whose
+    ``triad`` is this one adds its ``term`` on the axis its name gives (a scalar parameter on all three).
 
     Returns
     -------
@@ -74,27 +84,25 @@ def term_rows(layout, triad):
         raise ValueError(f"triad must be 'gyro' or 'accel', not {triad!r}")
     rows = []
     for name in layout.names:
+        eff = EFFECTS[name]
+        if eff.triad != triad or eff.term is None:
+            continue
+        code = TERM_CODES[eff.term]
         s = layout.slice(name)
-        if name == "time_lag.accel" and triad == "accel":
-            rows.extend((s.start, i, LAG, -1) for i in range(3))
+        if not eff.elements:
+            rows.extend((s.start, i, code, -1) for i in range(3))
             continue
-        prefix, _, short = name.partition(".")
-        if prefix != triad:
-            continue
-        elements = SPECS[name].elements
-        for k, el in enumerate(elements):
-            col = s.start + k
-            if short in _PER_AXIS:
-                rows.append((col, _AXIS[el], _PER_AXIS[short], -1))
-            elif short == "misalignment":
-                rows.append((col, _AXIS[el[0]], CROSS, _AXIS[el[1]]))
-            elif short == "g_sensitivity":
-                rows.append((col, _AXIS[el[0]], GSENS, _AXIS[el[1]]))
-            elif short == "size_effect":
-                rows.append((col, _AXIS[el[0]], SIZE, _AXIS[el[1]]))
-            else:  # pragma: no cover - guarded by the catalogue
-                raise KeyError(f"no sensor term for {name}")
+        for k, el in enumerate(eff.elements):
+            axis, aux = _axes(el)
+            rows.append((s.start + k, axis, code, aux))
     return np.array(rows, dtype=np.int64).reshape(-1, 4)
+
+
+@numba.njit(cache=True, inline="always")
+def _is_slope_term(code):
+    """Whether the term's feature depends on the triad's own signal (it then enters ``I + dPhi x/ds``)."""
+    return (code == SCALE or code == SCALE_TC or code == SCALE_TC2 or code == SCALE_ASYM or code == CROSS
+            or code == NONLIN)
 
 
 @numba.njit(cache=True, inline="always")
@@ -201,7 +209,7 @@ def _slope(rows, x, s, dT, A):
             A[i, k] = 1.0 if i == k else 0.0
     for r in range(rows.shape[0]):
         col, axis, code, aux = rows[r, 0], rows[r, 1], rows[r, 2], rows[r, 3]
-        if code < SCALE or code == GSENS or code > NONLIN:
+        if not _is_slope_term(code):
             continue
         # every slope term has one nonzero derivative: in s[aux] (CROSS), else in s[axis]
         k = aux if code == CROSS else axis

@@ -76,6 +76,7 @@ from math import comb
 import numpy as np
 
 from graph_calib import params
+from graph_calib.effects import REGISTRY, temperature_family
 
 #: The six sensors whose temperatures the model uses, in ``temperature_map`` order.
 SENSORS = ("gyro.x", "gyro.y", "gyro.z", "accel.x", "accel.y", "accel.z")
@@ -93,7 +94,6 @@ FAMILY_FALSE_ALARM = 0.01
 MIN_KNOT_SPACING_DEGC = 1.0
 
 #: Suffixes of temperature coefficients, by polynomial order.
-TC_SUFFIXES = {1: "_tc", 2: "_tc2"}
 
 
 def sensor_of(element):
@@ -114,14 +114,12 @@ def sensor_of(element):
 
 
 def family(parameter):
-    """``(base, {order: coefficient name})`` of a parameter: ``gyro.bias_tc`` -> ``('gyro.bias', ...)``."""
-    base = parameter
-    for suffix in sorted(TC_SUFFIXES.values(), key=len, reverse=True):
-        if parameter.endswith(suffix) and parameter[: -len(suffix)] in params.SPECS:
-            base = parameter[: -len(suffix)]
-            break
-    orders = {k: base + s for k, s in TC_SUFFIXES.items() if base + s in params.SPECS}
-    return base, orders
+    """``(base, {order: coefficient name})`` of a parameter: ``gyro.bias_tc`` -> ``('gyro.bias', ...)``.
+
+    The temperature coefficients of each parameter come from the effect registry
+    (:func:`graph_calib.effects.temperature_family`).
+    """
+    return temperature_family(parameter)
 
 
 def is_stitched(parameter):
@@ -359,7 +357,7 @@ class Stitched:
     def parameters(self):
         """Stitched parameter names, catalogue order."""
         names = {c.parameter for c in self.curves.values()}
-        return [p.name for p in params.CATALOGUE if p.name in names]
+        return [p.name for p in REGISTRY if p.name in names]
 
     def elements(self, parameter):
         return [c for c in self.curves.values() if c.parameter == parameter]
@@ -645,7 +643,7 @@ def stitch(results, *, names=None, sensor_ranges=None, solver=None):
         for flat, pt in result_points(r, name=nm, sensor_ranges=rg).items():
             points.setdefault(flat, []).append(pt)
     curves = {}
-    order = {n: i for i, n in enumerate(p.name for p in params.CATALOGUE)}
+    order = {n: i for i, n in enumerate(p.name for p in REGISTRY)}
     for flat in sorted(points, key=lambda f: (order[params.split_element_name(f)[0]], f)):
         curves[flat] = fit_element(flat, points[flat])
     ordered = [nm for _, nm in sorted(zip([r.t_ref_degC for r in results], names))]

@@ -16,23 +16,11 @@ from __future__ import annotations
 import numpy as np
 
 from graph_calib import params
+from graph_calib.effects import REGISTRY
 from graph_calib.reports import html
 
 #: For each further effect: the driver its signature follows, and the triad whose residuals show it.
-EFFECT_VIEW = {
-    "gyro.bias_tc2": ("temperature", "gyro"),
-    "gyro.scale_tc2": ("temperature", "gyro"),
-    "gyro.bias_dtdt": ("temperature_rate", "gyro"),
-    "gyro.scale_asym": ("rate", "gyro"),
-    "gyro.g_sensitivity": ("specific_force", "gyro"),
-    "accel.bias_tc2": ("temperature", "accel"),
-    "accel.scale_tc2": ("temperature", "accel"),
-    "accel.bias_dtdt": ("temperature_rate", "accel"),
-    "accel.nonlinearity": ("specific_force", "accel"),
-    "accel.size_effect": ("rate_size", "accel"),
-    "time_lag.accel": ("rate", "accel"),
-    "damping.stiffness": ("specific_force", "gyro"),
-}
+EFFECT_VIEW = {e.name: e.report_view for e in REGISTRY if e.report_view is not None}
 
 #: Axis labels of the drivers (SI, temperatures in degC).
 DRIVER_LABEL = {

@@ -35,7 +35,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib.params import DECLARED, FURTHER_EFFECTS, SPECS, Layout
+from graph_calib.effects import DECLARED, EFFECTS, FURTHER_EFFECTS, REGISTRY
+from graph_calib.params import Layout
 
 DH = c.DH_TO_RS
 AS = c.ARCSEC_TO_RAD
@@ -117,26 +118,13 @@ TRUTH_RANGES = {
     },
 }
 
-#: Size (low, high), SI, of each further effect when a scenario switches it on:
-#: chosen for the ``nav-subrange-short`` design (about 18 min, sensors drifting
-#: about 5 degC) to be several times its own estimation sigma (rough estimates
-#: in ``docs/simulator.md``), yet within what real navigation-grade units show.
-EFFECT_SIZES = {
-    "gyro.bias_tc2": (0.010 * DH, 0.015 * DH),            # deg/h/degC^2
-    "accel.bias_tc2": (15 * UG, 25 * UG),                  # micro-g/degC^2 (in m/s^2)
-    "gyro.scale_tc2": (1.0 * PPM, 1.5 * PPM),              # ppm/degC^2
-    "accel.scale_tc2": (2.0 * PPM, 3.0 * PPM),             # ppm/degC^2
-    "gyro.bias_dtdt": (15 * DH, 20 * DH),                  # deg/h per degC/s (0.25-0.33 deg/h per degC/min)
-    "accel.bias_dtdt": (0.015, 0.025),                     # m/s^2 per degC/s (25-40 micro-g per degC/min)
-    "gyro.scale_asym": (3 * PPM, 5 * PPM),                 # ppm
-    "gyro.g_sensitivity": (0.03 * DH / c.G0, 0.06 * DH / c.G0),   # 0.03-0.06 deg/h/g
-    "accel.nonlinearity": (8 * UG / c.G0**2, 15 * UG / c.G0**2),  # 8-15 micro-g/g^2
-    "accel.size_effect": (0.005, 0.015),                   # m
-    "time_lag.accel": (0.0005, 0.001),                     # s
-    "damping.stiffness": (5 * AS / c.G0, 10 * AS / c.G0),  # 5-10 arcsec/g
-}
+#: Size (low, high), SI, of each further effect when a scenario switches it on (the effect registry's
+#: ``simulation_size``): chosen for the ``nav-subrange-short`` design (about 18 min, sensors drifting
+#: about 5 degC) to be several times its own estimation sigma (rough estimates in ``docs/simulator.md``),
+#: yet within what real navigation-grade units show.
+EFFECT_SIZES = {e: EFFECTS[e].simulation_size for e in FURTHER_EFFECTS if EFFECTS[e].simulation_size is not None}
 
-_POSITIVE = ("time_lag.table", "time_lag.accel")
+_POSITIVE = tuple(e.name for e in REGISTRY if e.positive)
 
 
 def _draw(rng, lo, hi, size, positive=False):
@@ -223,7 +211,7 @@ class ImuTruth:
         unmodelled = {}
         for n in sl.names:
             if n not in tl:
-                unmodelled.update(dict(zip(SPECS[n].element_names(), values[n].tolist())))
+                unmodelled.update(dict(zip(EFFECTS[n].element_names(), values[n].tolist())))
         return tl, x_truth, sl, x_sim, unmodelled
 
 
@@ -264,17 +252,20 @@ def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature
                     "accel.scale", "accel.scale_tc"):
             continue
         lo, hi = ranges[name]
-        consts[name] = _draw(rng, lo, hi, SPECS[name].size, positive=name in _POSITIVE)
+        consts[name] = _draw(rng, lo, hi, EFFECTS[name].size, positive=name in _POSITIVE)
     curves = {}
     for p, ptc, ptc2 in TEMPERATURE_TRIPLES:
         curves[p] = tuple(_draw(rng, *ranges[n], 3) for n in (p, ptc, ptc2))
-    for e in FURTHER_EFFECTS:  # always drawn, in catalogue order, so effects do not shift other draws
-        lo, hi = EFFECT_SIZES[e]
-        v = _draw(rng, lo * effect_scale, hi * effect_scale, SPECS[e].size, positive=e in _POSITIVE)
+    for e, (lo, hi) in EFFECT_SIZES.items():
+        # the first effects are always drawn, in registry order, so switching one on shifts no other draw;
+        # effects added later are drawn only when on (after those), so every existing seed's data stay
+        if not (EFFECTS[e].drawn_when_off or e in effects):
+            continue
+        v = _draw(rng, lo * effect_scale, hi * effect_scale, EFFECTS[e].size, positive=e in _POSITIVE)
         if e in effects:
             consts[e] = v
     for name in exclude:
-        consts[name] = np.zeros(SPECS[name].size)
+        consts[name] = np.zeros(EFFECTS[name].size)
     if not errors:
         consts = {n: np.zeros_like(v) for n, v in consts.items()}
         curves = {n: tuple(np.zeros(3) for _ in range(3)) for n in curves}
