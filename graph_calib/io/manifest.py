@@ -9,9 +9,14 @@ from __future__ import annotations
 
 import contextlib
 import math
-import tomllib
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the tomli backport, declared in pyproject.toml for it
+    import tomli as tomllib
 
 from graph_calib import params
 from graph_calib.errors import InputError
