@@ -18,8 +18,10 @@ process.  A task writes, into ``OUT/<experiment name>/``, each file atomically:
 
 - ``summary.json``: the experiment's length, reference temperature, sensor
   temperature ranges and a thinned temperature series;
-- ``<solver>.residuals.npz``: the solver's whitened residuals (factor graph) or
-  normalised innovations (filter) per measurement kind, for the residual plots;
+- ``<solver>.residuals.h5``: the solver's whitened residuals (factor graph) or
+  normalised innovations (filter) per measurement kind, for the residual plots:
+  the residual-series file of ``docs/data-format.md``, the one ``graph-calib
+  calibrate --residuals`` writes (:func:`graph_calib.io.write_residuals`);
 - ``<solver>.json``: the result (``data-format.md``), written last; its
   top-level ``campaign`` object holds the task's cache key.
 
@@ -123,7 +125,7 @@ class Task:
 
     @property
     def residuals_path(self):
-        return Path(self.out_dir) / f"{self.solver}.residuals.npz"
+        return Path(self.out_dir) / f"{self.solver}.residuals.h5"
 
     @property
     def summary_path(self):
@@ -250,28 +252,15 @@ def experiment_summary(experiment, *, t_ref_degC, points=1500):
     }
 
 
-def _residual_arrays(solver, native):
-    """Residual series of a solver's native output as flat arrays ``{kind}_t / _axis / _value`` (float32)."""
-    out = {}
+def _residual_series(solver, native):
+    """``(series, quantity)`` of a solver's native output for :func:`graph_calib.io.write_residuals`.
+
+    ``series`` is ``{kind: (t (F,) s, values (F, 3) dimensionless)}``: the factor graph's whitened
+    residuals, or the filter's normalised innovations (one row per factor), as ``calibrate --residuals``.
+    """
     if solver == "factor-graph":
-        for kind, (t, w) in native.residuals.items():
-            w = np.asarray(w, dtype=float)
-            if w.size == 0:
-                continue
-            w = w.reshape(w.shape[0], -1)
-            out[f"{kind}_t"] = np.repeat(np.asarray(t, dtype=float), w.shape[1])
-            out[f"{kind}_axis"] = np.tile(np.arange(w.shape[1], dtype=np.int8), w.shape[0])
-            out[f"{kind}_value"] = w.ravel().astype(np.float32)
-    else:
-        names = getattr(sys.modules.get("kf_reference"), "KIND_NAMES", ("gravity", "encoder"))
-        for code, kind in enumerate(names):
-            m = native.innovation_kind == code
-            if not np.any(m):
-                continue
-            out[f"{kind}_t"] = np.asarray(native.innovation_t[m], dtype=float)
-            out[f"{kind}_axis"] = np.asarray(native.innovation_axis[m], dtype=np.int8)
-            out[f"{kind}_value"] = np.asarray(native.innovation[m], dtype=np.float32)
-    return out
+        return native.residuals, "whitened residual"
+    return native.innovation_series(), "normalised innovation"
 
 
 def run_tasks(tasks):
@@ -320,10 +309,9 @@ def run_tasks(tasks):
             runner = run_factor_graph if task.solver == "factor-graph" else run_sqrt_kf
             result, native = runner(problem, options=task.options)
             solve_seconds = time.perf_counter() - t1
-            arrays = _residual_arrays(task.solver, native)
-            with io.atomic_path(task.residuals_path) as tmp:
-                with open(tmp, "wb") as fh:
-                    np.savez_compressed(fh, **arrays)
+            series, quantity = _residual_series(task.solver, native)
+            io.write_residuals(task.residuals_path, series, solver=task.solver, source=Path(task.file).name,
+                               kind=quantity)
             seconds = build_seconds / len(tasks) + solve_seconds
             extra = dict(result.extra)
             extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
