@@ -18,8 +18,10 @@ process.  A task writes, into ``OUT/<experiment name>/``, each file atomically:
 
 - ``summary.json``: the experiment's length, reference temperature, sensor
   temperature ranges and a thinned temperature series;
-- ``<solver>.residuals.npz``: the solver's whitened residuals (factor graph) or
-  normalised innovations (filter) per measurement kind, for the residual plots;
+- ``<solver>.residuals.h5``: the solver's whitened residuals (factor graph) or
+  normalised innovations (filter) per measurement kind, for the residual plots:
+  the residual-series file of ``docs/data-format.md``, the one ``graph-calib
+  calibrate --residuals`` writes (:func:`graph_calib.io.write_residuals`);
 - ``<solver>.json``: the result (``data-format.md``), written last; its
   top-level ``campaign`` object holds the task's cache key.
 
@@ -128,7 +130,7 @@ class Task:
 
     @property
     def residuals_path(self):
-        return Path(self.out_dir) / f"{self.solver}.residuals.npz"
+        return Path(self.out_dir) / f"{self.solver}.residuals.h5"
 
     @property
     def summary_path(self):
@@ -251,17 +253,6 @@ def experiment_summary(experiment, *, t_ref_degC, points=1500):
     }
 
 
-def _residual_arrays(output):
-    """Residual series of a solver's output as flat arrays ``{kind}_t / _axis / _value`` (float32)."""
-    out = {}
-    for kind, series in output.residuals.items():
-        w = np.asarray(series.values, dtype=float)
-        if w.size == 0:
-            continue
-        out[f"{kind}_t"] = np.repeat(np.asarray(series.t, dtype=float), w.shape[1])
-        out[f"{kind}_axis"] = np.tile(np.arange(w.shape[1], dtype=np.int8), w.shape[0])
-        out[f"{kind}_value"] = w.ravel().astype(np.float32)
-    return out
 
 
 def run_tasks(tasks):
@@ -308,10 +299,8 @@ def run_tasks(tasks):
             output = solve(task.solver, problem, options=task.options)
             result = to_result(problem.model, output)
             solve_seconds = time.perf_counter() - t1
-            arrays = _residual_arrays(output)
-            with io.atomic_path(task.residuals_path) as tmp:
-                with open(tmp, "wb") as fh:
-                    np.savez_compressed(fh, **arrays)
+            io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
+                               source=Path(task.file).name, kind=output.residual_quantity)
             seconds = build_seconds / len(tasks) + solve_seconds
             extra = dict(result.extra)
             extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,

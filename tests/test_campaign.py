@@ -61,8 +61,10 @@ def test_files_of_every_experiment(campaign_run):
     for e in doc["experiments"]:
         folder = out / e["name"]
         for f in ("sqrt-kf.json", "factor-graph.json", "comparison.json", "summary.json",
-                  "sqrt-kf.residuals.npz", "factor-graph.residuals.npz"):
+                  "sqrt-kf.residuals.h5", "factor-graph.residuals.h5"):
             assert (folder / f).is_file(), f"{folder / f} missing"
+        attrs, series = io.read_residuals(folder / "sqrt-kf.residuals.h5")
+        assert attrs["solver"] == "sqrt-kf" and attrs["quantity"] == "normalised innovation" and series
         r = io.read_result(folder / "factor-graph.json")
         assert r.solver == "factor-graph" and len(r.extra["campaign"]["key"]) == 64
         assert e["results"]["sqrt-kf"]["status"] == "computed"

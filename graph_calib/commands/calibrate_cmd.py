@@ -65,8 +65,7 @@ def run(args):
         io.write_result(res, out / f"{s}.json")
         output = calibration.outputs[s]
         if args.residuals:
-            series = {kind: (r.t, r.values) for kind, r in output.residuals.items()}
-            io.write_residuals(out / f"{s}.residuals.h5", series, solver=s, source=path.name,
+            io.write_residuals(out / f"{s}.residuals.h5", output.residual_arrays(), solver=s, source=path.name,
                                kind=output.residual_quantity)
         b = [res.values[f"gyro.bias.{a}"] * RS_TO_DH for a in "xyz"]
         print(f"  {s}: gyro bias [deg/h] {b[0]:+.4f} {b[1]:+.4f} {b[2]:+.4f} -> {out / (s + '.json')}")

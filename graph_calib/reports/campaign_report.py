@@ -251,17 +251,20 @@ def fig_validation(v):
 
 
 def _load_residuals(path):
+    """``{kind: (t (F,) s, values (F, 3))}`` of a residual-series file (:func:`graph_calib.io.read_residuals`).
+
+    Kinds sorted by name, empty kinds left out; ``{}`` when the file is missing.
+    """
     if not Path(path).is_file():
         return {}
-    with np.load(path) as z:
-        kinds = sorted({k.rsplit("_", 1)[0] for k in z.files})
-        return {kd: (z[f"{kd}_t"], z[f"{kd}_axis"], z[f"{kd}_value"]) for kd in kinds}
+    _, series = io.read_residuals(path)
+    return {kd: series[kd] for kd in sorted(series) if series[kd][1].size}
 
 
 def fig_residuals(run, solver):
     plt = _plt()
     names = [n for n in run.results if solver in run.results[n]]
-    data = {n: _load_residuals(run.out / n / f"{solver}.residuals.npz") for n in names}
+    data = {n: _load_residuals(run.out / n / f"{solver}.residuals.h5") for n in names}
     kinds = []
     for d in data.values():
         for k in d:
@@ -275,13 +278,12 @@ def fig_residuals(run, solver):
         for j, kd in enumerate(kinds):
             ax = axes[i, j]
             if kd in data[n]:
-                t, axis, val = data[n][kd]
+                t, val = data[n][kd]
+                step = max(1, t.size // 1500)
                 for a in range(3):
-                    m = axis == a
-                    step = max(1, int(np.count_nonzero(m)) // 1500)
-                    ax.plot(t[m][::step] / 3600.0, val[m][::step], ".", ms=0.8, color=_AXIS_COLORS[a],
+                    ax.plot(t[::step] / 3600.0, val[::step, a], ".", ms=0.8, color=_AXIS_COLORS[a],
                             label="xyz"[a] if (i == 0 and j == 0) else None)
-                rms = float(np.sqrt(np.mean(val.astype(float) ** 2)))
+                rms = float(np.sqrt(np.mean(val ** 2)))
                 ax.text(0.99, 0.95, f"rms {rms:.2f}", transform=ax.transAxes, ha="right", va="top", fontsize=7)
             ax.set_ylim(-5, 5)
             ax.grid(alpha=0.3)

@@ -144,6 +144,10 @@ class SolverOutput:
         """One sigma of every calibration element, shape (P,)."""
         return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
 
+    def residual_arrays(self):
+        """``{kind: (t (F,), values (F, 3))}``: the residual series as :func:`graph_calib.io.write_residuals` takes them."""
+        return {kind: (s.t, s.values) for kind, s in self.residuals.items()}
+
 
 class Solver(Protocol):
     """The interface every solver implements (see the module docstring)."""
