@@ -25,7 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _synthetic import turntable_experiment  # noqa: E402
 
 from graph_calib.model import CalibrationModel, ModelOptions  # noqa: E402
-from graph_calib.params import FURTHER_EFFECTS, Layout, grade  # noqa: E402
+from graph_calib.effects import FURTHER_EFFECTS
+from graph_calib.params import Layout, grade  # noqa: E402
 
 
 def main():
@@ -55,10 +56,10 @@ def main():
         t0 = time.perf_counter()
         pre = model.preintegrate(x)
         warm = time.perf_counter() - t0
-        assert np.all(np.isfinite(pre.J_S)) and np.all(np.isfinite(pre.tap_J))
-        cols = model.kernel_cols.size
+        assert np.all(np.isfinite(pre.J_S)) and np.all(np.isfinite(pre.reading_J))
+        cols = model.terms.columns.size
         print(f"{label}: {model.layout.size} parameters, {cols} kernel columns, {model.n_keyframes} keyframes, "
-              f"{model.tap_idx.size} encoder readings; first call {warm:.2f} s")
+              f"{model.record.reading_sample.size} encoder readings; first call {warm:.2f} s")
         for nt in threads:
             numba.set_num_threads(nt)
             best = np.inf

@@ -54,10 +54,10 @@ import scipy.sparse.linalg as spla
 from scipy import stats
 
 from graph_calib import constants as c
-from graph_calib import effects, params
+from graph_calib import effects
 from graph_calib.options import CalibrationOptions
 from graph_calib.problem import build_problem
-from graph_calib.rotations import log_so3, quat_to_dcm, right_jacobian_inv
+from graph_calib.rotations import quat_to_dcm
 from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import to_result
 
@@ -127,10 +127,10 @@ def driver_series(model, *, n_segments=TIME_SEGMENTS, deadband=RATE_SIGN_DEADBAN
     drivers : list of Driver
     """
     e = model.experiment
-    w = model.w_raw
-    f = model.f_raw
-    dw = model.dw_raw
-    dT = np.column_stack([model.dTg, model.dTa])          # (N, 6) per sensor
+    w = model.record.w_raw
+    f = model.record.f_raw
+    dw = model.record.dw_raw
+    dT = np.column_stack([model.record.dTg, model.record.dTa])          # (N, 6) per sensor
     cols = []
     names = {}
 
@@ -240,17 +240,6 @@ def _add_at(target, keys, values):
     target[keys[starts]] += np.add.reduceat(values, starts, axis=0)
 
 
-def _whiten(res):
-    """Whitened ``r, H_R, H_R_next, H_x`` of a :class:`graph_calib.model.Residuals`."""
-    if res.sigma.ndim == 2:
-        s = res.sigma
-        hn = None if res.H_R_next is None else res.H_R_next / s[:, :, None]
-        return res.r / s, res.H_R / s[:, :, None], hn, res.H_x / s[:, :, None]
-    Linv = np.linalg.inv(np.linalg.cholesky(res.sigma))
-    hn = None if res.H_R_next is None else Linv @ res.H_R_next
-    return np.einsum("fij,fj->fi", Linv, res.r), Linv @ res.H_R, hn, Linv @ res.H_x
-
-
 def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_SEGMENTS, chunk=4096):
     """Linearise ``model`` (an extended layout) at ``(R, x)`` and eliminate the attitudes.
 
@@ -305,19 +294,19 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     gx = np.zeros(Q)
     chi2 = 0.0
     m_data = 0
-    k0 = model.k0
+    k0 = model.record.k0
     for kind, res in kinds:
         F = res.r.shape[0]
         if F == 0:
             continue
-        r, HR, HRn, Hx = _whiten(res)
+        r, HR, HRn, Hx = res.whitened_system()
         chi2 += float(np.sum(r**2))
         m_data += r.size
         key = res.key
         if drivers:
             lo = k0[key]
             if kind == "encoder":
-                hi = model.tap_idx + 1
+                hi = model.record.reading_sample + 1
             else:
                 hi = k0[key + 1]
         for a in range(0, F, chunk):
@@ -347,15 +336,15 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     # attitude prior on the first keyframe (as factor_graph.build_graph)
     # (the alignment prior: its residual at the solution is part of the current fit)
     # priors of the current model's calibration columns
-    x_prior, x_sigma = model.prior()
+    cal_prior = model.calibration_prior(x)
+    x_sigma = cal_prior.sigma
     null_idx = np.concatenate([np.arange(P)[layout.slice(n)] for n in null_names]).astype(np.int64)
-    Hxx[null_idx, null_idx] += 1.0 / x_sigma[null_idx] ** 2
-    gx[null_idx] += (x[null_idx] - x_prior[null_idx]) / x_sigma[null_idx] ** 2
-    att = model.initial_attitude_sigma
-    r0 = log_so3(quat_to_dcm(q_nb0).T @ R[0]) / att
-    H0 = right_jacobian_inv(r0 * att) / att
-    Hdiag[0] += H0.T @ H0
-    ga[0] += H0.T @ r0
+    h = np.diag(cal_prior.H)[null_idx]
+    Hxx[null_idx, null_idx] += h**2
+    gx[null_idx] += h * cal_prior.r[null_idx]
+    att_prior = model.attitude_prior(R[0], R_prior=quat_to_dcm(q_nb0))
+    Hdiag[0] += att_prior.H.T @ att_prior.H
+    ga[0] += att_prior.H.T @ att_prior.r
     # eliminate the attitudes
     rows, cols, vals = [], [], []
     base = np.arange(3)
@@ -559,7 +548,7 @@ class CandidateTest:
     sigma: tuple
 
     def to_json(self):
-        s = params.spec(self.name)
+        s = effects.effect(self.name)
         d = {"name": self.name, "statistic": self.statistic, "dof": self.dof, "dim": self.dim,
              "threshold": self.threshold, "log10_p": self.log10_p, "significant": self.significant}
         if self.skipped:
@@ -771,7 +760,7 @@ def _factor_residuals(model, R, x):
     out = {}
     for kind, res, t in (("rotation", model.rotation_factors(R, pre, x), model.t_key[1:]),
                          ("gravity", model.gravity_factors(R, pre, x), model.t_key[:-1]),
-                         ("encoder", model.encoder_factors(R, pre, x), model.tap_t)):
+                         ("encoder", model.encoder_factors(R, pre, x), model.record.reading_t)):
         w = res.whitened()
         d = {"t": np.asarray(t, dtype=float), "key": res.key.copy(), "r": res.r.copy(), "w": w}
         if kind == "gravity":
@@ -780,7 +769,7 @@ def _factor_residuals(model, R, x):
             sig_v = res.sigma[:, 2] if res.sigma.ndim == 2 else np.sqrt(res.sigma[:, 2, 2])
             d["r_body"] = r_b
             d["w_body"] = r_b / sig_v[:, None]
-            d["static"] = model.static_key.copy()
+            d["static"] = model.record.static_key.copy()
         out[kind] = d
     return out
 
@@ -817,7 +806,7 @@ def ljung_box(y, lags=10):
 
 def keyframe_context(model):
     """Keyframe means of the drivers, for regressions and figures: ``{name: (K, ...)}``."""
-    k0 = model.k0
+    k0 = model.record.k0
     lo, hi = k0[:-1], k0[1:]
 
     def mean(a):
@@ -825,9 +814,9 @@ def keyframe_context(model):
         return _interval_means(_cumulative(a), lo, hi).reshape((lo.size,) + a.shape[1:])
 
     t = model.experiment.t
-    dT = np.column_stack([model.dTg, model.dTa])
-    dTdt = np.column_stack([model.dTdtg, model.dTdta])
-    w = model.w_raw
+    dT = np.column_stack([model.record.dTg, model.record.dTa])
+    dTdt = np.column_stack([model.record.dTdtg, model.record.dTdta])
+    w = model.record.w_raw
     return {
         "time": mean(t - t[0]),
         "temperature": mean(dT),
@@ -835,9 +824,9 @@ def keyframe_context(model):
         "rate": mean(w),
         "rate_size": mean(np.abs(w)),
         "rate_sign": mean(np.sign(w) * (np.abs(w) > RATE_SIGN_DEADBAND)),
-        "angular_acceleration": mean(model.dw_raw),
-        "specific_force": mean(model.f_raw),
-        "specific_force_sq": mean(model.f_raw**2),
+        "angular_acceleration": mean(model.record.dw_raw),
+        "specific_force": mean(model.record.f_raw),
+        "specific_force_sq": mean(model.record.f_raw**2),
     }
 
 
@@ -953,13 +942,13 @@ def error_against_truth(result, truth, *, names=None, sigmas=None):
         ``rms_z``, ``max_abs_z`` and ``worst`` (element), ``rms_prior`` (error in prior
         sigmas, RMS), ``groups`` ``{parameter: {"rms_z", "rms_abs", "report_unit"}}``.
     """
-    names = params.DECLARED if names is None else names
+    names = effects.DECLARED if names is None else names
     sigmas = result.sigmas if sigmas is None else sigmas
     priors = result.extra.get("priors", {}) if result.extra else {}
     z, zp, groups = [], [], {}
     worst, wz = None, 0.0
     for n in names:
-        spec = params.spec(n)
+        spec = effects.effect(n)
         els = [e for e in spec.element_names() if e in result.values and e in truth.values]
         if not els:
             continue
@@ -987,9 +976,6 @@ def error_against_truth(result, truth, *, names=None, sigmas=None):
 # ---------------------------------------------------------------------------
 # the loop
 # ---------------------------------------------------------------------------
-
-#: Why a candidate is not tested when the experiment lacks what it needs.
-
 
 def _columns(layout, name):
     return np.arange(layout.size)[layout.slice(name)]
@@ -1038,9 +1024,8 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
     t0 = time.perf_counter()
     model = problem.model
     cand = [c for c in candidates if c not in model.layout]
-    ext_problem = build_problem(experiment, options=_with_effects(options, tuple(options.model.extra_effects)
-                                                                  + tuple(cand)))
-    ext = ext_problem.model
+    # the same prepared record, static intervals and alignment: only the layout grows
+    ext = model.with_effects(tuple(options.model.extra_effects) + tuple(cand))
     x_ext = ext.layout.embed(model.layout, gr.x)
     rs, dlist = linearise(ext, gr.attitudes, x_ext, q_nb0=problem.q_nb0, null_names=model.layout.names,
                           n_segments=dopt.time_segments)
@@ -1064,7 +1049,7 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
     tests = []
     for c in cand:
         if c in skipped:
-            tests.append(CandidateTest(c, 0.0, 0, params.spec(c).size, float("nan"), 0.0, False, skipped[c],
+            tests.append(CandidateTest(c, 0.0, 0, effects.effect(c).size, float("nan"), 0.0, False, skipped[c],
                                        (), ()))
             continue
         idx, sc = raw[c]
@@ -1085,7 +1070,7 @@ def _round(index, experiment, options, problem, gr, dopt, candidates, *, allow_a
     dtests = []
     dthr = {}
     # where an accelerometer bias is seen: every keyframe, or only the static ones without a table
-    acc_keys = ext.static_key if ext.options.moving_sigma is not None else np.ones(ext.n_keyframes, bool)
+    acc_keys = ext.record.static_key if ext.options.moving_sigma is not None else np.ones(ext.n_keyframes, bool)
     for (g, ax), (idx, ii, sc) in draw.items():
         thr = float(stats.chi2.isf(dopt.alpha / md, sc.dof))
         dthr[(g, ax)] = thr
@@ -1175,7 +1160,7 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     options = CalibrationOptions() if options is None else options
     problem = build_problem(experiment, options=options)
     options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
-    candidates = tuple(diagnosis.candidates or params.FURTHER_EFFECTS)
+    candidates = tuple(diagnosis.candidates or effects.FURTHER_EFFECTS)
     m = problem.model
     say(f"declared model: {m.layout.size} parameters, {m.n_keyframes} keyframes; factor graph ...")
     gr = _solve(problem, options)
@@ -1192,7 +1177,7 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
             break
         added.append(rnd.added)
         options = _with_effects(options, tuple(options.model.extra_effects) + (rnd.added,))
-        new = build_problem(experiment, options=options)
+        new = problem.with_effects(options.model.extra_effects)
         x0 = new.model.layout.embed(problem.model.layout, gr.x)
         say(f"re-solving with {rnd.added} ...")
         gr = _solve(new, options, initial=(gr.attitudes, x0))

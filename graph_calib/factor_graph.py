@@ -143,13 +143,31 @@ def _noise(sigmas, robust, k):
     return gtsam.noiseModel.Robust.Create(est.Create(k), base)
 
 
-def build_graph(model, cache, *, R_prior, x_prior, x_sigma, robust=None, robust_k=3.0):
-    """The nonlinear factor graph of ``model`` (callbacks bound to ``cache``)."""
+def _attitude_prior_error(model, R_prior, this, values, H):
+    p = model.attitude_prior(values.atRot3(X(0)).matrix(), R_prior=R_prior)
+    if H is not None:
+        H[0] = p.H
+    return p.r
+
+
+def _calibration_prior_error(model, this, values, H):
+    p = model.calibration_prior(np.asarray(values.atVector(C(0)), dtype=float))
+    if H is not None:
+        H[0] = p.H
+    return p.r
+
+
+def build_graph(model, cache, *, R_prior, robust=None, robust_k=3.0):
+    """The nonlinear factor graph of ``model`` (callbacks bound to ``cache``).
+
+    The priors are the model's prior residuals (already whitened), like every other factor.
+    """
     graph = gtsam.NonlinearFactorGraph()
     K = model.n_keyframes
-    att_sigma = model.initial_attitude_sigma
-    graph.add(gtsam.PriorFactorRot3(X(0), gtsam.Rot3(R_prior), gtsam.noiseModel.Isotropic.Sigma(3, att_sigma)))
-    graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
+    P = model.layout.size
+    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3), [X(0)],
+                                 partial(_attitude_prior_error, model, np.asarray(R_prior, dtype=float))))
+    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(P), [C(0)], partial(_calibration_prior_error, model)))
     rot_sigma = cache.rot.sigma
     grav_sigma = cache.grav.sigma
     for k in range(K):
@@ -231,7 +249,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         pre = model.preintegrate(x)
     cache = _Cache(model, pre)
     cache.evaluate(R, x)
-    graph = build_graph(model, cache, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma,
+    graph = build_graph(model, cache, R_prior=R_prior,
                         robust=options.robust, robust_k=options.robust_k)
     K = model.n_keyframes
     P = model.layout.size
@@ -260,7 +278,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
             trial = values.retract(delta)
             x_trial = np.asarray(trial.atVector(C(0)))
             # a trial far from the preintegration point is judged by an exact preintegration
-            if model.needs_repreintegration(pre_current, x_trial, tol=options.repreintegrate_tol):
+            if pre_current.needs_repreintegration(x_trial, tol=options.repreintegrate_tol):
                 cache.pre = model.preintegrate(x_trial)
             else:
                 cache.pre = pre_current
@@ -298,7 +316,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     residuals = {
         "rotation": (model.t_key[1:], cache.rot.whitened()),
         "gravity": (model.t_key[:-1], cache.grav.whitened()),
-        "encoder": (model.tap_t, cache.enc.whitened()),
+        "encoder": (model.record.reading_t, cache.enc.whitened()),
     }
     return GraphResult(x=x, covariance=0.5 * (cov + cov.T), layout=model.layout, attitudes=cache.R.copy(),
                        residuals=residuals, iterations=it, cost_history=history,

@@ -21,23 +21,15 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib.effects import DECLARED, EFFECTS, FURTHER_EFFECTS, REGISTRY, XYZ, effect
-
-#: ``{name: Effect}`` of the registry, as the layout reads it.
-SPECS = EFFECTS
-
-
-def spec(name):
-    """The :class:`graph_calib.effects.Effect` of a parameter name; ``KeyError`` naming it if unknown."""
-    return effect(name)
+from graph_calib.effects import DECLARED, EFFECTS, REGISTRY
 
 
 def split_element_name(flat):
     """Split ``'gyro.misalignment.zx'`` into ``('gyro.misalignment', 'zx')``; a scalar gives ``(name, None)``."""
-    if flat in SPECS and not SPECS[flat].elements:
+    if flat in EFFECTS and not EFFECTS[flat].elements:
         return flat, None
     name, _, element = flat.rpartition(".")
-    if name not in SPECS or element not in SPECS[name].elements:
+    if name not in EFFECTS or element not in EFFECTS[name].elements:
         raise KeyError(f"unknown parameter element {flat!r}")
     return name, element
 
@@ -55,16 +47,16 @@ class Layout:
     names: tuple
 
     def __post_init__(self):
-        unknown = [n for n in self.names if n not in SPECS]
+        unknown = [n for n in self.names if n not in EFFECTS]
         if unknown:
-            raise KeyError(f"unknown parameter(s) {unknown}; known: {', '.join(SPECS)}")
+            raise KeyError(f"unknown parameter(s) {unknown}; known: {', '.join(EFFECTS)}")
         ordered = tuple(p.name for p in REGISTRY if p.name in set(self.names))
         object.__setattr__(self, "names", ordered)
         offsets = {}
         k = 0
         for n in ordered:
-            offsets[n] = slice(k, k + SPECS[n].size)
-            k += SPECS[n].size
+            offsets[n] = slice(k, k + EFFECTS[n].size)
+            k += EFFECTS[n].size
         object.__setattr__(self, "_slices", offsets)
         object.__setattr__(self, "size", k)
 
@@ -94,14 +86,14 @@ class Layout:
         """Flat element names in vector order."""
         out = []
         for n in self.names:
-            out.extend(SPECS[n].element_names())
+            out.extend(EFFECTS[n].element_names())
         return out
 
     def index(self, flat):
         """Vector index of a flat element name."""
         name, element = split_element_name(flat)
         s = self.slice(name)
-        return s.start if element is None else s.start + SPECS[name].elements.index(element)
+        return s.start if element is None else s.start + EFFECTS[name].elements.index(element)
 
     def with_names(self, *names):
         """A new layout with ``names`` added."""

@@ -33,6 +33,10 @@ class Problem:
     q_nb0: np.ndarray
     alignment: Alignment
 
+    def with_effects(self, extra_effects):
+        """The same record, static intervals and alignment, with ``extra_effects`` as the further effects."""
+        return replace(self, model=self.model.with_effects(extra_effects))
+
 
 def build_problem(experiment, *, options=CalibrationOptions()):
     """Set up the shared model of ``experiment`` and align it.

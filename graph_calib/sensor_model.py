@@ -348,19 +348,7 @@ def measure(layout, x, triad, signal, *, dT=None, dTdt=None, other=None, domega=
     return out
 
 
-def correct(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domega=None,
-            dsignal=None, n_iter=3, jacobian=False):
-    """Inverse model: the true signal from the measured one, and optionally ``d true / dx``.
-
-    Parameters are those of :func:`measure`, with ``measured`` in place of ``signal``
-    (``other``, ``domega`` and ``dsignal`` from the raw measurements).
-
-    Returns
-    -------
-    signal : ndarray, shape (N, 3)
-    J : ndarray, shape (N, 3, layout.size)
-        Only when ``jacobian`` is true; a tuple ``(signal, J)`` is then returned.
-    """
+def _inverse(layout, x, triad, measured, *, dT, dTdt, other, domega, dsignal, n_iter, jacobian):
     measured = np.ascontiguousarray(measured, dtype=float)
     n = measured.shape[0]
     rows = term_rows(layout, triad)
@@ -368,8 +356,36 @@ def correct(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domeg
     J = np.zeros((n, 3, layout.size)) if jacobian else np.zeros((n, 3, 1))
     _inverse_many(rows, np.asarray(x, dtype=float), measured, _as3(dT, n), _as3(dTdt, n),
                   _as3(other, n), _as3(domega, n), _as3(dsignal, n), n_iter, out, J, jacobian)
-    return (out, J) if jacobian else out
+    return out, J
 
 
-__all__ = ["term_rows", "measure", "correct", "correct_sample", "invert_sample", "sample_features",
+def correct(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domega=None, dsignal=None, n_iter=3):
+    """Inverse model: the true signal from the measured one.
+
+    Parameters are those of :func:`measure`, with ``measured`` in place of ``signal``
+    (``other``, ``domega`` and ``dsignal`` from the raw measurements).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    return _inverse(layout, x, triad, measured, dT=dT, dTdt=dTdt, other=other, domega=domega, dsignal=dsignal,
+                    n_iter=n_iter, jacobian=False)[0]
+
+
+def correct_with_jacobian(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domega=None,
+                          dsignal=None, n_iter=3):
+    """:func:`correct` and the Jacobian of the true signal in the calibration.
+
+    Returns
+    -------
+    signal : ndarray, shape (N, 3)
+    J : ndarray, shape (N, 3, layout.size)
+        ``d signal / d x``.
+    """
+    return _inverse(layout, x, triad, measured, dT=dT, dTdt=dTdt, other=other, domega=domega, dsignal=dsignal,
+                    n_iter=n_iter, jacobian=True)
+
+
+__all__ = ["term_rows", "measure", "correct", "correct_with_jacobian", "correct_sample", "invert_sample", "sample_features",
            "is_nonlinear", "XYZ"]

@@ -33,7 +33,7 @@ def main():
     model = problem.model
     calibrate(model, q_nb0=problem.q_nb0, max_passes=1)          # compile (or load) the kernels
     print(f"{se.experiment.n_samples} samples, {model.n_keyframes} keyframes, {model.layout.size} states + 3, "
-          f"{model.tap_idx.size} encoder readings")
+          f"{model.record.reading_sample.size} encoder readings")
     t0 = time.perf_counter()
     fr = calibrate(model, q_nb0=problem.q_nb0)
     total = time.perf_counter() - t0

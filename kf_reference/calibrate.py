@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.params import Layout
-from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm, right_jacobian
+from graph_calib.rotations import exp_so3, quat_to_dcm
 from graph_calib.solvers.interface import ProgressEvent
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
@@ -161,15 +161,6 @@ class FilterResult:
 # ---------------------------------------------------------------------------
 
 
-def _diagonal_noise(res):
-    """``(r, H_R, H_x, sigma)`` with per-component sigmas; a full covariance is whitened first."""
-    if res.sigma.ndim == 2:
-        return res.r, res.H_R, res.H_x, res.sigma
-    Linv = np.linalg.inv(np.linalg.cholesky(res.sigma))
-    return (np.einsum("fij,fj->fi", Linv, res.r), Linv @ res.H_R, Linv @ res.H_x,
-            np.ones(res.r.shape))
-
-
 def _transition(rot):
     """``B, A, G, c`` of ``delta_{k+1} = B delta_k + A dx + c + G w`` from the rotation factors."""
     N_inv = np.linalg.inv(rot.H_R_next)
@@ -189,7 +180,7 @@ def _measurements(model, grav, enc):
 
     Within a keyframe the gravity rows come first, then the encoder rows in time order.
     """
-    parts = ((grav, GRAVITY, model.t_key[grav.key]), (enc, ENCODER, model.tap_t))
+    parts = ((grav, GRAVITY, model.t_key[grav.key]), (enc, ENCODER, model.record.reading_t))
     key = np.concatenate([np.repeat(res.key, 3) for res, _, _ in parts])
     dest = np.empty(key.size, dtype=np.int64)
     dest[np.argsort(key, kind="stable")] = np.arange(key.size)        # row of each factor component
@@ -198,7 +189,8 @@ def _measurements(model, grav, enc):
     kind_out, axis = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
     start = 0
     for res, kind, t in parts:
-        r, H_R, H_x, sg = _diagonal_noise(res)
+        r, H_R, _, H_x = res.whitened_system()
+        sg = np.ones(r.shape)
         F3 = 3 * r.shape[0]
         d = dest[start:start + F3]
         start += F3
@@ -232,21 +224,20 @@ class _Linearised:
     cost: float = 0.0      # the batch cost at the linearisation point: the factor graph's objective, x2
 
 
-def _attitude_prior_root(m0, sigma):
-    """Transposed upper-triangular square root of the first attitude's prior covariance, (3, 3).
+def _prior_state(prior):
+    """Mean and transposed upper-triangular root of the covariance of a prior residual's variable error.
 
-    The prior factor ``Log(R_prior^T R_lin Exp(delta)) / sigma`` is linear in
-    ``delta`` with slope ``Jr^-1(-m0)``, ``m0 = Log(R_lin^T R_prior)``: ``delta``
-    has mean ``m0`` and covariance ``sigma^2 Jr(-m0) Jr(-m0)^T`` (exactly the
-    batch factor's information, whatever the size of ``m0``).
+    A prior residual ``r + H delta`` (:class:`graph_calib.model.factors.PriorResidual`, whitened) is
+    linear in ``delta``: ``delta`` has mean ``-H^-1 r`` and covariance ``(H^T H)^-1`` (exactly the
+    batch factor's information, however far the linearisation point lies from the prior's centre).
     """
-    Jr = right_jacobian(-np.asarray(m0, dtype=float))
-    P = sigma**2 * (Jr @ Jr.T)
+    H_inv = np.linalg.inv(prior.H)
+    P = H_inv @ H_inv.T
     L = np.linalg.cholesky(P[::-1, ::-1])       # P = U U^T with U upper triangular: U = flip(chol(flip(P)))
-    return L[::-1, ::-1].T
+    return -H_inv @ prior.r, L[::-1, ::-1].T
 
 
-def _linearise(model, pre, R_lin, x_lin, *, R_prior, x_prior, x_sigma):
+def _linearise(model, pre, R_lin, x_lin, *, R_prior):
     """Every factor at ``(R_lin, x_lin)`` (``pre`` preintegrated at ``x_lin``), as a :class:`_Linearised`."""
     rot = model.rotation_factors(R_lin, pre, x_lin)
     grav = model.gravity_factors(R_lin, pre, x_lin)
@@ -255,14 +246,14 @@ def _linearise(model, pre, R_lin, x_lin, *, R_prior, x_prior, x_sigma):
     key, H, z, sig, t, kind, axis = _measurements(model, grav, enc)
     lo = np.searchsorted(key, np.arange(model.n_keyframes + 2)).astype(np.int64)
     CAL = sqrt_kf.cal_slice(x_lin.size)
+    att_prior = model.attitude_prior(R_lin[0], R_prior=R_prior)
+    cal_prior = model.calibration_prior(x_lin)
     s0 = np.zeros(sqrt_kf.N_ATT + x_lin.size)
-    s0[ATT] = log_so3(R_lin[0].T @ R_prior)
-    s0[CAL] = x_prior - x_lin
-    Ut0 = np.diag(np.concatenate([np.zeros(3), x_sigma]))
-    Ut0[ATT, ATT] = _attitude_prior_root(s0[ATT], model.initial_attitude_sigma)
-    r0 = log_so3(R_prior.T @ R_lin[0]) / model.initial_attitude_sigma
+    Ut0 = np.zeros((s0.size, s0.size))
+    s0[ATT], Ut0[ATT, ATT] = _prior_state(att_prior)
+    s0[CAL], Ut0[CAL, CAL] = _prior_state(cal_prior)
     cost = (float(np.sum(rot.whitened() ** 2)) + float(np.sum((z / sig) ** 2))
-            + float(np.sum((s0[CAL] / x_sigma) ** 2)) + float(r0 @ r0))
+            + 2.0 * (cal_prior.cost + att_prior.cost))
     return _Linearised(B=B, A=A, G=G, c=c, H=H, z=z, sigma=sig, lo=lo, t=t, kind=kind, axis=axis, s0=s0, Ut0=Ut0,
                        cost=cost)
 
@@ -298,7 +289,7 @@ class _Pass:
     cost: float = 0.0
 
 
-def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
+def filter_pass(model, R_lin, x_lin, *, R_prior, pre=None):
     """One linearised pass at ``(R_lin, x_lin)``: the filter, then the attitude smoother.
 
     Parameters
@@ -309,9 +300,8 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
     x_lin : ndarray, shape (P,)
         Linearisation calibration.
     R_prior : ndarray, shape (3, 3)
-        Prior attitude at the first boundary, sigma ``model.initial_attitude_sigma``.
-    x_prior, x_sigma : ndarray, shape (P,)
-        Prior mean and sigma of the calibration.
+        Prior attitude at the first boundary (the model's attitude prior residual is centred there;
+        the calibration prior is the model's too).
     pre : graph_calib.model.Preintegrated, optional
         The preintegration at ``x_lin``; computed here when not given.
 
@@ -326,7 +316,7 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, x_prior, x_sigma, pre=None):
     t0 = time.perf_counter()
     if pre is None:
         pre = model.preintegrate(x_lin)
-    lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+    lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior)
     return _run_filter(model, lin, x_lin, seconds_model=time.perf_counter() - t0)
 
 
@@ -381,7 +371,7 @@ def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2
         pre = model.preintegrate(x_prior)
     R = model.propagate(R_prior, pre, x_prior)
     for it in range(1, max_iterations + 1):
-        lin = _linearise(model, pre, R, x_prior, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+        lin = _linearise(model, pre, R, x_prior, R_prior=R_prior)
         delta, _ = _smooth_attitudes(lin, np.zeros_like(x_prior))
         R = R @ exp_so3(delta)
         if np.max(np.linalg.norm(delta, axis=1)) < tol_rad:
@@ -399,7 +389,7 @@ MAX_HALVINGS = 8
 
 def _keep_or_drop(model, pre, x):
     """``pre`` if it still serves at ``x`` to first order, else None (preintegrate again)."""
-    if pre is None or model.needs_repreintegration(pre, x):
+    if pre is None or pre.needs_repreintegration(x):
         return None
     return pre
 
@@ -456,7 +446,7 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
             t0 = time.perf_counter()
             if pre is None:
                 pre = model.preintegrate(x_lin)
-            lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior, x_prior=x_prior, x_sigma=x_sigma)
+            lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior)
             if base is None or lin.cost <= base[2] * (1.0 + 1e-12) or tau <= 0.5**MAX_HALVINGS:
                 break
             tau *= 0.5

@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from graph_calib import constants as c  # noqa: E402
-from graph_calib import params  # noqa: E402
+from graph_calib import effects  # noqa: E402
 from graph_calib import sensor_model as sm  # noqa: E402
 from graph_calib.options import CalibrationOptions, GraphOptions  # noqa: E402
 from graph_calib.diagnosis import DiagnosisOptions, diagnose, residual_rms  # noqa: E402
@@ -186,7 +186,7 @@ def _pose_figure(title, exp, raw_f, raw_m, before, after, added):
 
 
 def _effect_rows(stage, name):
-    s = params.spec(name)
+    s = effects.effect(name)
     res = stage.results["factor-graph"]
     rows = []
     gyro_consumer = name.startswith("gyro.") and s.unit.startswith("rad/s")
@@ -347,7 +347,7 @@ def _findings(results):
                f"({t.dof} identifiable directions, log10 p = {t.log10_p:.0f})."]
         if first == "gyro.g_sensitivity":
             res = d.after.results["factor-graph"]
-            strong = [(el, res.values[el], res.sigmas[el]) for el in params.spec(first).element_names()
+            strong = [(el, res.values[el], res.sigmas[el]) for el in effects.effect(first).element_names()
                       if abs(res.values[el]) > 5 * res.sigmas[el]]
             k = c.RAD_TO_DEG * c.G0
             if strong:

@@ -17,7 +17,7 @@ import pytest
 from scipy import stats
 
 from graph_calib import constants as c
-from graph_calib import params
+from graph_calib import effects
 from graph_calib.diagnosis import (
     DiagnosisOptions,
     diagnose,
@@ -147,7 +147,7 @@ def test_diagnose_command_writes_the_files_of_cli_md(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("effect", params.FURTHER_EFFECTS)
+@pytest.mark.parametrize("effect", effects.FURTHER_EFFECTS)
 def test_the_missing_effect_is_added_first_and_the_error_falls(effect):
     """effect-<name> (18 min), absent from the declared model: the loop adds exactly it first."""
     se = _sim(f"effect-{effect}", 7, effect_scale=EFFECT_SCALE.get(effect, 1.0))

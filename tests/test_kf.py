@@ -189,10 +189,12 @@ def _batch_gauss_newton(model, *, R, x, R_prior, iterations=6):
 
 def test_attitude_prior_root_is_the_batch_factor_information():
     """The first attitude's prior: upper-triangular root whose information is the batch factor's."""
-    from kf_reference.calibrate import _attitude_prior_root
+    from graph_calib.model.factors import attitude_prior
+    from kf_reference.calibrate import _prior_state
 
     m0 = np.array([0.3, -0.2, 1.6])                       # far from the prior's centre (loose heading)
-    Ut = _attitude_prior_root(m0, 2.0)
+    mean, Ut = _prior_state(attitude_prior(exp_so3(-m0), R_prior=np.eye(3), sigma=2.0))
+    np.testing.assert_allclose(mean, m0, rtol=1e-12)
     U = Ut.T
     assert np.all(np.tril(U, -1) == 0.0)
     J = right_jacobian_inv(-m0) / 2.0                    # slope of Log(R_prior^T R_lin Exp(delta)) / sigma
@@ -244,7 +246,7 @@ def test_noise_free_turntable_recovers_truth_to_a_tenth_of_sigma():
     # the gyro biases are really resolved, far below the prior
     assert np.all(fr.sigma[fr.layout.slice("gyro.bias")] < 0.01 * NAV.prior_sigma["gyro.bias"])
     # the filtered attitudes follow the truth (the last one is a prediction)
-    R_true = np.concatenate([np.eye(3)[None], C_true[model.k0[1:] - 1]])
+    R_true = np.concatenate([np.eye(3)[None], C_true[model.record.k0[1:] - 1]])
     assert np.abs(log_so3(np.swapaxes(R_true, 1, 2) @ fr.C_nb)).max() < 1e-5
 
 
@@ -264,7 +266,7 @@ def test_noisy_turntable_within_a_few_sigma_and_innovations_white():
     for kind in ("gravity", "encoder"):
         assert 0.85 < stats[kind]["rms"] < 1.15, (kind, stats[kind])
     # the innovation series is complete and in time order within each kind
-    assert fr.innovation.size == 3 * (model.n_keyframes + model.tap_idx.size)
+    assert fr.innovation.size == 3 * (model.n_keyframes + model.record.reading_sample.size)
     for code in (kf_reference.GRAVITY, kf_reference.ENCODER):
         assert np.all(np.diff(fr.innovation_t[fr.innovation_kind == code]) >= 0)
 
@@ -282,7 +284,7 @@ def test_consumer_grade_converges_from_zero_calibration():
                                        noise=(CONSUMER.gyro_noise, CONSUMER.accel_noise, CONSUMER.encoder_noise))
     model = CalibrationModel(exp, options=ModelOptions(grade="consumer"))
     x0 = model.prior()[0]
-    R_true = np.concatenate([np.eye(3)[None], C_true[model.k0[1:] - 1]])
+    R_true = np.concatenate([np.eye(3)[None], C_true[model.record.k0[1:] - 1]])
     R_dr = model.propagate(np.eye(3), model.preintegrate(x0), x0)
     assert np.abs(log_so3(np.swapaxes(R_true, 1, 2) @ R_dr)).max() > 0.3      # really far from linear
     fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
@@ -349,7 +351,7 @@ def test_linearisation_cost_is_the_batch_cost():
     pre = model.preintegrate(x)
     R = model.propagate(exp_so3(np.array([0.01, -0.02, 0.03])), pre, x)
     R_prior = np.eye(3)
-    lin = _linearise(model, pre, R, x, R_prior=R_prior, x_prior=x0, x_sigma=sig)
+    lin = _linearise(model, pre, R, x, R_prior=R_prior)
     ref = _batch_cost(model, R, x, pre=pre, R_prior=R_prior, x_prior=x0, x_sigma=sig)
     assert ref > 10.0
     assert lin.cost == pytest.approx(ref, rel=1e-10)

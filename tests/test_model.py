@@ -8,7 +8,8 @@ import pytest
 
 from graph_calib import sensor_model as sm
 from graph_calib.model import CalibrationModel, ModelOptions, boundary_rate_correction
-from graph_calib.params import FURTHER_EFFECTS, Layout
+from graph_calib.effects import FURTHER_EFFECTS
+from graph_calib.params import Layout
 from graph_calib.rotations import dcm_to_quat, exp_so3, exp_so3_nb, right_jacobian_nb
 
 from _synthetic import wobbly_experiment
@@ -38,7 +39,7 @@ def test_sensor_inverse_is_exact_and_its_jacobian_matches_fd(triad):
                other=rng.normal(size=(n, 3)), domega=rng.normal(size=(n, 3)), dsignal=rng.normal(size=(n, 3)))
     meas = sm.measure(layout, x, triad, sig, **ctx)
     assert np.abs(meas - sig).max() > 1e-3                  # the errors are really there
-    s, J = sm.correct(layout, x, triad, meas, jacobian=True, **ctx)
+    s, J = sm.correct_with_jacobian(layout, x, triad, meas, **ctx)
     np.testing.assert_allclose(s, sig, atol=1e-12)
     for c in range(layout.size):
         xp, xm = x.copy(), x.copy()
@@ -73,7 +74,7 @@ def test_encoder_jacobian_with_readings_inside_sample_intervals_matches_fd():
     table = replace(exp.table, t=tt, q_nf=dcm_to_quat(exp_so3(rng.normal(size=(tt.size, 3)))),
                     valid=np.ones(tt.size, bool))
     model = CalibrationModel(replace(exp, table=table), options=ModelOptions(keyframe_s=0.5))
-    assert np.abs(model.tap_dt).min() > 1e-6 and "time_lag.table" in model.layout
+    assert np.abs(model.record.reading_dt).min() > 1e-6 and "time_lag.table" in model.layout
     x = rng.normal(size=model.layout.size) * 1e-3
     x[model.layout.slice("time_lag.table")] = 0.01
     R = model.propagate(np.eye(3), model.preintegrate(x), x)
@@ -247,18 +248,20 @@ def _reference_preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta, w_r
 
 def _reference_preintegration(model, x):
     """Preintegrated quantities of ``model`` at ``x`` by the direct recursion, as a dict."""
-    nc = model.kernel_cols.size
+    nc = model.terms.columns.size
     K = model.n_keyframes
-    M = model.tap_idx.size
+    M = model.record.reading_sample.size
     out = dict(dR=np.empty((K, 3, 3)), J_dR=np.zeros((K, 3, nc)), S=np.empty((K, 3)), J_S=np.zeros((K, 3, nc)),
                S1=np.empty((K, 3)), J_S1=np.zeros((K, 3, nc)), wf=np.empty((K, 3)), Jwf=np.zeros((K, 3, nc)),
-               wl=np.empty((K, 3)), Jwl=np.zeros((K, 3, nc)), tap_dR=np.empty((M, 3, 3)), tap_J=np.zeros((M, 3, nc)))
-    _reference_preintegrate(model.dt, model.k0, x[model.kernel_cols], model.grows, model.arows, model.dTg,
-                            model.dTdtg, model.dTa, model.dTdta, model.w_raw, model.f_raw, model.dw_raw,
-                            model.df_raw, model.tap_idx, model.tap_lo, model.options.n_newton, nc, *out.values())
+               wl=np.empty((K, 3)), Jwl=np.zeros((K, 3, nc)), reading_dR=np.empty((M, 3, 3)),
+               reading_J=np.zeros((M, 3, nc)))
+    rec, terms = model.record, model.terms
+    _reference_preintegrate(rec.dt, rec.k0, x[terms.columns], terms.gyro_rows_compact, terms.accel_rows_compact,
+                            rec.dTg, rec.dTdtg, rec.dTa, rec.dTdta, rec.w_raw, rec.f_raw, rec.dw_raw, rec.df_raw,
+                            rec.reading_sample, rec.reading_lo, model.options.n_newton, nc, *out.values())
     wf, Jwf, wl, Jwl = out.pop("wf"), out.pop("Jwf"), out.pop("wl"), out.pop("Jwl")
     out["w_b"] = np.concatenate([wf[:1], 0.5 * (wl[:-1] + wf[1:]), wl[-1:]])
-    out["w_b"] += model.w_b_fix
+    out["w_b"] += model.record.w_b_fix
     out["J_w_b"] = np.concatenate([Jwf[:1], 0.5 * (Jwl[:-1] + Jwf[1:]), Jwl[-1:]])
     return out
 
@@ -298,16 +301,16 @@ def test_preintegration_kernel_matches_direct_recursion(extra, keyframe_s):
                     valid=np.ones(tt.size, bool))
     model = CalibrationModel(replace(exp, table=table),
                              options=ModelOptions(keyframe_s=keyframe_s, extra_effects=extra))
-    assert np.any(np.diff(model.tap_idx) == 0)
+    assert np.any(np.diff(model.record.reading_sample) == 0)
     x = rng.normal(size=model.layout.size) * 1e-2       # percent level: the nonlinear terms matter
     pre = model.preintegrate(x)
     ref = _reference_preintegration(model, x)
-    cols = model.kernel_cols
+    cols = model.terms.columns
     others = np.setdiff1d(np.arange(model.layout.size), cols)
     for name, b in ref.items():
         a = getattr(pre, name)
         assert a.shape[:-1] == b.shape[:-1], name
-        if name.startswith(("J_", "tap_J")):
+        if name.startswith(("J_", "reading_J")):
             assert not np.any(a[..., others]), name
             a = a[..., cols]
             # each column against its own scale

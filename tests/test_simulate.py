@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from graph_calib import io, params
+from graph_calib import effects, io, params
 from graph_calib.cli import main
 from graph_calib.constants import ARCSEC_TO_RAD, DH_TO_RS, RAD_TO_ARCSEC, omega_ie_n
 from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
@@ -377,7 +377,7 @@ def test_registry_has_every_effect():
     names = scenario_names()
     for required in ("nav-subrange", "nav-subrange-short", "nav-campaign", "consumer-handheld"):
         assert required in names
-    for effect in params.FURTHER_EFFECTS:
+    for effect in effects.FURTHER_EFFECTS:
         assert f"effect-{effect}" in names
 
 
@@ -396,7 +396,7 @@ def test_scenario_writes_valid_files(name, tmp_path):
         lo, hi = truth.temperature_range_degC
         T = exp.sensor_temperatures()
         assert lo == T.min() and hi == T.max()
-        assert set(truth.effects) <= set(campaign.layout().names) | set(params.FURTHER_EFFECTS)
+        assert set(truth.effects) <= set(campaign.layout().names) | set(effects.FURTHER_EFFECTS)
         if name == "consumer-handheld":
             assert exp.table is None and "lever_arm" not in truth.effects
             assert {"mount", "lever_arm", "time_lag.table"} == set(campaign.exclude)
@@ -406,12 +406,12 @@ def test_scenario_writes_valid_files(name, tmp_path):
         assert [ce.file.name for ce in campaign.experiments][0] == "sub1_m10_0.h5"
 
 
-@pytest.mark.parametrize("effect", params.FURTHER_EFFECTS)
+@pytest.mark.parametrize("effect", effects.FURTHER_EFFECTS)
 def test_effect_scenario_switches_its_effect_on(effect):
     on = _one(f"effect-{effect}", seed=6, hours=SHORT, noise=False)
     off = _one(f"effect-{effect}", seed=6, hours=SHORT, noise=False, effect_scale=0.0)
     assert effect in on.truth.effects
-    spec = params.SPECS[effect]
+    spec = effects.EFFECTS[effect]
     v = np.array([on.truth.values[n] for n in spec.element_names()])
     assert np.all(v != 0)
     # everything else is the same IMU, so the difference in the data is the effect's

@@ -11,7 +11,7 @@ from graph_calib.constants import RS_TO_DH
 from graph_calib.errors import InputError
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, GraphOptions
-from graph_calib.params import FURTHER_EFFECTS
+from graph_calib.effects import FURTHER_EFFECTS
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
 from graph_calib.solvers.results import comparison_text
 

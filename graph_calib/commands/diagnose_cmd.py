@@ -43,7 +43,7 @@ def _options(args):
     from graph_calib.diagnosis import DiagnosisOptions
     from graph_calib.options import GraphOptions
     from graph_calib.model import ModelOptions
-    from graph_calib.params import FURTHER_EFFECTS
+    from graph_calib.effects import FURTHER_EFFECTS
 
     for e in args.effect:
         if e not in FURTHER_EFFECTS:

@@ -18,7 +18,7 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the tomli backport, declared in pyproject.toml for it
     import tomli as tomllib
 
-from graph_calib import params
+from graph_calib import effects, params
 from graph_calib.errors import InputError
 from graph_calib.io.checks import _is_int, _is_real, _show
 
@@ -211,11 +211,11 @@ def read_manifest(path):
         raise InputError("must be a table", path=path, dataset="[priors]")
     for name, sigma in _flatten_priors(raw_priors).items():
         where = f'[priors]."{name}"'
-        if name not in params.SPECS:
+        if name not in effects.EFFECTS:
             hint = ""
             with contextlib.suppress(KeyError):
                 hint = f" (priors are per parameter: use {_show(params.split_element_name(name)[0])})"
-            raise InputError(f"unknown parameter {_show(name)}{hint}; known: {', '.join(params.SPECS)}",
+            raise InputError(f"unknown parameter {_show(name)}{hint}; known: {', '.join(effects.EFFECTS)}",
                              path=path, dataset=where)
         if not _is_real(sigma) or not math.isfinite(sigma) or sigma <= 0:
             raise InputError(f"prior sigma must be a positive number (SI), got {_show(sigma)}", path=path, dataset=where)
@@ -225,17 +225,17 @@ def read_manifest(path):
     if not isinstance(model, dict):
         raise InputError("must be a table", path=path, dataset="[model]")
     _unknown_keys(model, _MODEL_KEYS, path=path, where="[model]")
-    effects = _name_list(model.get("effects", []), path=path, where="[model].effects")
-    for name in effects:
-        if name in params.DECLARED:
+    further = _name_list(model.get("effects", []), path=path, where="[model].effects")
+    for name in further:
+        if name in effects.DECLARED:
             raise InputError(f"{_show(name)} is already in the declared model", path=path, dataset="[model].effects")
-        if name not in params.FURTHER_EFFECTS:
-            raise InputError(f"unknown effect {_show(name)}; known: {', '.join(params.FURTHER_EFFECTS)}",
+        if name not in effects.FURTHER_EFFECTS:
+            raise InputError(f"unknown effect {_show(name)}; known: {', '.join(effects.FURTHER_EFFECTS)}",
                              path=path, dataset="[model].effects")
     exclude = _name_list(model.get("exclude", []), path=path, where="[model].exclude")
     for name in exclude:
-        if name not in params.DECLARED:
-            raise InputError(f"{_show(name)} is not a declared parameter; known: {', '.join(params.DECLARED)}",
+        if name not in effects.DECLARED:
+            raise InputError(f"{_show(name)} is not a declared parameter; known: {', '.join(effects.DECLARED)}",
                              path=path, dataset="[model].exclude")
 
     solver = doc.get("solver", {})
@@ -248,4 +248,4 @@ def read_manifest(path):
             raise InputError(f"{problem}, got {_show(value)}", path=path, dataset=f"[solver].{key}")
 
     return Campaign(path=path, imu_id=imu_id, grade=grade, experiments=tuple(experiments), priors=priors,
-                    effects=effects, exclude=exclude, solver=dict(solver))
+                    effects=further, exclude=exclude, solver=dict(solver))

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from graph_calib import params
+from graph_calib import effects, params
 from graph_calib.errors import InputError
 from graph_calib.experiment import Result
 from graph_calib.io.atomic import atomic_write_text, dumps_json
@@ -86,8 +86,8 @@ def validate_result(result, *, path):
     if not isinstance(r.effects, (list, tuple)):
         raise InputError(f"must be a list of parameter names, got {_show(r.effects)}", path=path, dataset="effects")
     for name in r.effects:
-        if not isinstance(name, str) or name not in params.SPECS:
-            raise InputError(f"unknown parameter {_show(name)}; known: {', '.join(params.SPECS)}",
+        if not isinstance(name, str) or name not in effects.EFFECTS:
+            raise InputError(f"unknown parameter {_show(name)}; known: {', '.join(effects.EFFECTS)}",
                              path=path, dataset="effects")
     if not isinstance(r.values, dict):
         raise InputError("must be an object of estimates", path=path, dataset="estimates")

@@ -3,7 +3,7 @@
 Built from a :class:`graph_calib.campaign.CampaignRun` (results, stitched
 curves, validations in memory; residual series read from the experiment
 folders).  Every figure is embedded as PNG, so the file stands alone.  Values
-are shown in the report unit of each parameter (``params.SPECS[name].report_unit``).
+are shown in the report unit of each parameter (``effects.EFFECTS[name].report_unit``).
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib import io, params
+from graph_calib import effects, io, params
 from graph_calib.solvers.results import sigma_ratio_range_text
 from graph_calib.reports import html as H
 
@@ -45,7 +45,7 @@ def _fmt(v, digits=4):
 
 
 def _unit(parameter):
-    sp = params.SPECS[parameter]
+    sp = effects.EFFECTS[parameter]
     return sp.report_unit, sp.to_report
 
 
@@ -398,7 +398,7 @@ def _bench_table(run, solver):
     names = [n for n in run.results if solver in run.results[n]]
     bench = [p for p in ("mount", "lever_arm", "time_lag.table") if any(
         any(k.startswith(p) for k in run.results[n][solver].values) for n in names)]
-    els = [e for p in bench for e in params.SPECS[p].element_names()]
+    els = [e for p in bench for e in effects.EFFECTS[p].element_names()]
     if not els:
         return None
     rows = []

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib import params
+from graph_calib import effects
 from graph_calib.effects import REGISTRY
 from graph_calib.reports import html
 
@@ -234,7 +234,7 @@ def _candidate_table(rnd):
             rows.append([c.name, "", "", "", "", "skipped: " + c.skipped])
             classes.append("")
             continue
-        s = params.spec(c.name)
+        s = effects.effect(c.name)
         z = [abs(e) / sg for e, sg in zip(c.estimate, c.sigma) if np.isfinite(sg) and sg > 0]
         est = ", ".join(f"{e * s.to_report:.3g}" for e in c.estimate)
         rows.append([c.name, _fmt(c.statistic), c.dof, _fmt(c.threshold), _fmt(c.log10_p),
@@ -375,7 +375,7 @@ def write_report(diag, path, *, figures_dir=None):
             f"finds structure that no candidate explains. See docs/diagnosis.md.", cls="note"),
         anchor="summary"))
     for rnd in diag.rounds:
-        items = [html.paragraph(f"Model: {', '.join(n for n in rnd.layout if not params.SPECS[n].declared) or 'declared'}"
+        items = [html.paragraph(f"Model: {', '.join(n for n in rnd.layout if not effects.EFFECTS[n].declared) or 'declared'}"
                                 f"; chi^2/dof of the fit {rnd.chi2_per_dof:.3f}, variance factor "
                                 f"{rnd.variance_factor:.3f}. Decision: {rnd.decision}."),
                  _candidate_table(rnd),

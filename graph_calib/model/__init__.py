@@ -1,0 +1,25 @@
+"""The shared calibration model: one place for every equation every solver uses.
+
+Modules, from the data up:
+
+- :mod:`graph_calib.model.options`: :class:`ModelOptions`;
+- :mod:`graph_calib.model.record`: :class:`PreparedRecord`, the data of one experiment prepared once
+  (rates, temperatures and their slopes, keyframes, table readings), whatever the layout;
+- :mod:`graph_calib.model.kernel`: the compiled per-sample preintegration kernel;
+- :mod:`graph_calib.model.preintegration`: :class:`Preintegrated`, which owns its first-order
+  correction in the calibration, and :func:`preintegrate`;
+- :mod:`graph_calib.model.factors`: the rotation, gravity and encoder factors and the priors, each a
+  residual with its Jacobians (equations in that module's docstring);
+- :mod:`graph_calib.model.calibration_model`: :class:`CalibrationModel`, the thin problem object
+  (layout, priors, noise) the solvers call.
+"""
+
+from graph_calib.model.calibration_model import TABLE_ALIGNMENT_SIGMA, CalibrationModel, gyrocompass_attitude_sigma
+from graph_calib.model.factors import Noise, PriorResidual, Residuals
+from graph_calib.model.options import ModelOptions
+from graph_calib.model.preintegration import REPREINTEGRATE_TOL, Preintegrated, SensorTerms
+from graph_calib.model.record import PreparedRecord, boundary_rate_correction
+
+__all__ = ["CalibrationModel", "ModelOptions", "PreparedRecord", "Preintegrated", "SensorTerms", "Residuals",
+           "PriorResidual", "Noise", "REPREINTEGRATE_TOL", "TABLE_ALIGNMENT_SIGMA", "gyrocompass_attitude_sigma",
+           "boundary_rate_correction"]

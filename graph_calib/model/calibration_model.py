@@ -1,0 +1,221 @@
+"""The calibration problem of one experiment: a prepared record, the layout it can inform, priors and noise.
+
+:class:`CalibrationModel` is a thin object over :class:`graph_calib.model.record.PreparedRecord`
+(the data), the sensor terms of its layout, the preintegration and the factors: every solver sees
+the problem only through :meth:`CalibrationModel.preintegrate`, the three factor methods and the
+two prior residuals, so that the equations are written once.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from graph_calib.constants import omega_ie_n as _omega_ie_n
+from graph_calib.effects import uninformed
+from graph_calib.model import factors
+from graph_calib.model.options import ModelOptions
+from graph_calib.model.preintegration import SensorTerms, preintegrate
+from graph_calib.model.record import PreparedRecord
+from graph_calib.params import Layout, grade as _grade
+
+#: Prior sigma of the first attitude when valid table readings give it (faceplate
+#: attitude through the nominal mounting; the mounting error is estimated), rad.
+TABLE_ALIGNMENT_SIGMA = 0.05
+
+
+def gyrocompass_attitude_sigma(options, *, latitude_rad):
+    """Prior sigma (rad) of a gyrocompassed first attitude: gyro-bias prior over the horizontal Earth rate.
+
+    Between :attr:`TABLE_ALIGNMENT_SIGMA` and pi (about 0.1 rad
+    for a navigation-grade unit, pi for consumer MEMS).  ``options`` is a
+    :class:`ModelOptions` (its grade and any ``gyro.bias`` prior override).
+    """
+    g = _grade(options.grade)
+    horizontal = float(np.hypot(*_omega_ie_n(latitude_rad)[:2]))
+    bias = float(np.max((options.prior_sigma or {}).get("gyro.bias", g.prior_sigma["gyro.bias"])))
+    return float(min(np.pi, max(TABLE_ALIGNMENT_SIGMA, bias / max(horizontal, 1e-12))))
+
+
+class CalibrationModel:
+    """The calibration problem of one experiment: data, layout, priors, noise, factors.
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    options : ModelOptions
+    t_ref_degC : float, optional
+        Reference temperature; default the mean of the six sensors' temperatures.
+    static_mask : ndarray of bool, shape (N,), optional
+        Samples known to be static (gravity counts only there when ``options.moving_sigma`` is set).
+
+    Attributes
+    ----------
+    record : graph_calib.model.record.PreparedRecord
+        The prepared data (shared by every layout of the same record: :meth:`with_effects`).
+    layout : graph_calib.params.Layout
+        What is estimated: the declared model, the requested further effects, less what the record
+        cannot inform (``auto_excluded``) and ``options.exclude``.
+    noise : graph_calib.model.factors.Noise
+    initial_attitude_sigma : float
+        Prior sigma of the first keyframe attitude, rad.
+    """
+
+    def __init__(self, experiment, *, options=ModelOptions(), t_ref_degC=None, static_mask=None):
+        record = PreparedRecord(experiment, keyframe_s=options.keyframe_s, t_ref_degC=t_ref_degC,
+                                static_mask=static_mask)
+        self._setup(record, options)
+
+    @classmethod
+    def from_record(cls, record, *, options=ModelOptions()):
+        """The model of an already prepared record (its keyframes and ``T_ref`` are the record's)."""
+        self = cls.__new__(cls)
+        self._setup(record, options)
+        return self
+
+    def with_effects(self, extra_effects):
+        """The same record and options with ``extra_effects`` as the further effects modelled."""
+        return CalibrationModel.from_record(self.record,
+                                            options=replace(self.options, extra_effects=tuple(extra_effects)))
+
+    def _setup(self, record, options):
+        self.record = record
+        self.options = options
+        self.grade = _grade(options.grade)
+        self.gyro_noise = float(options.gyro_noise if options.gyro_noise is not None else self.grade.gyro_noise)
+        self.accel_noise = float(options.accel_noise if options.accel_noise is not None else self.grade.accel_noise)
+        self.encoder_noise = float(options.encoder_noise if options.encoder_noise is not None
+                                   else self.grade.encoder_noise)
+        self.noise = factors.Noise(gyro=self.gyro_noise, accel=self.accel_noise, encoder=self.encoder_noise)
+        # what the record can inform decides the layout
+        self.auto_excluded = self._unobservable()
+        exclude = tuple(sorted(set(options.exclude) | set(self.auto_excluded)))
+        self.layout = Layout.declared(extra=tuple(options.extra_effects), exclude=exclude)
+        self.initial_attitude_sigma = self._initial_attitude_sigma(record.experiment)
+        self.terms = SensorTerms.of(self.layout)
+
+    # -- the record's figures every caller needs ----------------------------
+
+    @property
+    def experiment(self):
+        return self.record.experiment
+
+    @property
+    def t_ref_degC(self):
+        return self.record.t_ref_degC
+
+    @property
+    def temperatures(self):
+        """Sensor temperatures (N, 6), degC."""
+        return self.record.temperatures
+
+    @property
+    def n_keyframes(self):
+        return self.record.n_keyframes
+
+    @property
+    def t_key(self):
+        """Keyframe boundary times (K+1,), s."""
+        return self.record.t_key
+
+    @property
+    def omega_ie_n(self):
+        return self.record.omega_ie_n
+
+    def _unobservable(self):
+        """Parameters the record cannot inform, left out of the layout (sorted tuple).
+
+        What each parameter needs is in the effect registry (:func:`graph_calib.effects.uninformed`).
+        Without a table nothing ties the attitude to the faceplate or to a fixed
+        rotation centre: ``mount``, ``time_lag.table``, ``damping.stiffness`` and
+        ``lever_arm`` go.  With a table whose valid readings are all taken at rest
+        (the usual bench: encoders trusted only in static positions) a time lag
+        changes no measurement, so ``time_lag.table`` goes too; estimating it
+        would only return its prior mean as if it were a result.
+        """
+        rec = self.record
+        return uninformed(has_table=rec.experiment.table is not None, has_valid_readings=rec.has_valid_readings,
+                          readings_in_motion=rec.readings_in_motion)
+
+    #: Prior sigma of the first attitude when valid table readings give it (faceplate
+    #: attitude through the nominal mounting; the mounting error is estimated), rad.
+    TABLE_ALIGNMENT_SIGMA = 0.05
+
+    def _initial_attitude_sigma(self, experiment):
+        """Prior sigma of the first keyframe attitude (isotropic), rad.
+
+        With valid table readings the alignment takes the table's attitude:
+        :attr:`TABLE_ALIGNMENT_SIGMA`.  Otherwise the heading comes from
+        gyrocompassing, good to about the gyro bias over the horizontal Earth
+        rate (0.1 rad for a navigation-grade unit, nothing at all for consumer
+        MEMS, whose bias is a hundred times the Earth rate): the sigma is that,
+        capped at pi.  The whole record then fixes the heading through the Earth
+        rate; a tight prior around a wrong gyrocompass heading would instead turn
+        the Earth-rate compensation into a false gyro bias (4 sigma on the
+        consumer hand-held scenario).
+        """
+        if self.options.initial_attitude_sigma is not None:
+            return float(self.options.initial_attitude_sigma)
+        tab = experiment.table
+        if tab is not None and np.any(tab.valid):
+            return TABLE_ALIGNMENT_SIGMA
+        return gyrocompass_attitude_sigma(self.options, latitude_rad=experiment.latitude_rad)
+
+    # -- priors -------------------------------------------------------------
+
+    def prior(self):
+        """Prior mean and one sigma of the calibration vector, shapes (P,), (P,)."""
+        sig = self.grade.prior_vector(self.layout)
+        for name, value in (self.options.prior_sigma or {}).items():
+            if name in self.layout:
+                sig[self.layout.slice(name)] = value
+        return self.layout.zeros(), sig
+
+    def priors_used(self):
+        """``{parameter name: sigma}`` actually used (for the result file)."""
+        _, sig = self.prior()
+        return {n: sig[self.layout.slice(n)].tolist() for n in self.layout.names}
+
+    def attitude_prior(self, R0, *, R_prior):
+        """The first keyframe attitude's prior residual (:func:`graph_calib.model.factors.attitude_prior`)."""
+        return factors.attitude_prior(R0, R_prior=R_prior, sigma=self.initial_attitude_sigma)
+
+    def calibration_prior(self, x):
+        """The calibration vector's prior residual (:func:`graph_calib.model.factors.calibration_prior`)."""
+        mean, sigma = self.prior()
+        return factors.calibration_prior(x, mean=mean, sigma=sigma)
+
+    # -- preintegration and attitudes ----------------------------------------
+
+    def preintegrate(self, x):
+        """Preintegrate every keyframe and encoder reading at calibration ``x`` (P,)."""
+        return preintegrate(self.record, self.terms, x, layout=self.layout, n_newton=self.options.n_newton)
+
+    def propagate(self, R0, preint, x):
+        """Dead-reckoned attitude at every keyframe boundary from ``R0``, shape (K+1, 3, 3)."""
+        dR = preint.corrected(x).dR
+        E = self.record.earth_turn(self.record.T_key)
+        R = np.empty((self.n_keyframes + 1, 3, 3))
+        R[0] = R0
+        for k in range(self.n_keyframes):  # keyframe rate, not sample rate
+            R[k + 1] = E[k] @ R[k] @ dR[k]
+        return R
+
+    # -- factors --------------------------------------------------------------
+
+    def rotation_factors(self, R, preint, x):
+        """:func:`graph_calib.model.factors.rotation_factors` of this model."""
+        return factors.rotation_factors(self.record, R, preint, x, noise=self.noise)
+
+    def gravity_factors(self, R, preint, x):
+        """:func:`graph_calib.model.factors.gravity_factors` of this model."""
+        return factors.gravity_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise,
+                                       moving_sigma=self.options.moving_sigma)
+
+    def encoder_factors(self, R, preint, x):
+        """:func:`graph_calib.model.factors.encoder_factors` of this model."""
+        return factors.encoder_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise)
+
+
+__all__ = ["CalibrationModel", "gyrocompass_attitude_sigma", "TABLE_ALIGNMENT_SIGMA"]

@@ -1,0 +1,338 @@
+r"""The factors of the shared model: one place for every equation every solver uses.
+
+The record is cut into keyframe intervals (about 0.1-1 s).  For interval ``k``,
+``R_k = C_nb`` at its start, and with the gyro and accelerometer samples
+corrected by the calibration ``x`` (:mod:`graph_calib.sensor_model`):
+
+Rotation (process) model
+    ``R_{k+1} = E(T_k) @ R_k @ dR_k(x)``, with ``dR_k`` the preintegrated
+    rotation of the corrected increments (two-sample coning correction) and
+    ``E(T) = Exp(-omega_ie_n * T)`` the turn of the level frame with the Earth.
+    Residual ``Log((E R_k dR_k)^T R_{k+1})``, covariance ``q_g^2 T_k I``
+    (``q_g`` the gyro angle random walk).
+
+Gravity measurement
+    The specific force integrated in the level frame over the interval, each
+    sample rotated with its own attitude,
+    ``dv_n = sum_j C_nb(t_{j-1}) u_j``,
+    ``u = dv + 1/2 dth x dv + 1/6 dth x (dth x dv) + h^2/12 (dth x fdot - alpha x dv)``
+    (exact to third order in the sample interval ``h`` when the rate and the
+    specific force vary linearly over the sample; the angular acceleration
+    ``alpha`` and ``fdot = df_b/dt`` are taken from the raw data),
+    equals ``g_up * T_k`` plus the change of the velocity of the accelerometer
+    point, ``C_nb (omega_nb_b x l)`` (the rotation centre is fixed), and the
+    Coriolis integral ``2 omega_ie_n x`` the change of its position ``C_nb l``:
+    with ``v = C_nb (omega_ib_b x l) + omega_ie_n x (C_nb l)`` (which is both),
+    ``r = (dv_n - [v(t_{k+1}) - v(t_k)]) / T_k - [0, 0, g]``.  With
+    ``C_nb(t) = E(t - t_k) R_k dR(t)``, ``dv_n = R_k S - [omega_ie_n x] R_k S1``
+    where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} + h_j/2 - t_k) dR_{j-1} u_j``
+    are preintegrated once per calibration.  Covariance
+    ``q_a^2 / T_k`` per axis plus ``g^2 q_g^2 T_k / 3`` on the horizontal axes
+    (attitude noise inside the interval).
+
+Encoder measurement
+    A valid table reading at ``t_m`` (sample ``j``, ``dt_m = t_m - t_j``; the
+    sample interval of length ``h`` holding ``t_m`` has the calibrated mean rate
+    ``w(x)`` and the raw slope ``alpha``, the rate taken linear inside it):
+    ``C_meas = C_nf(t_m) C_fb Exp(mount) Exp(a_lag) Exp(K f_m)`` against
+    ``C_pred = E(t_m - t_k) R_k dR_{k,j} Exp(phi)``, residual
+    ``Log(C_meas^T C_pred)``, with the turn from the sample end to the reading
+    ``phi = w dt_m + alpha dt_m (dt_m - h) / 2`` and the turn over the lag before
+    it ``a_lag = w_nb lag - alpha lag^2 / 2``, ``w_nb = w + alpha (dt_m - h/2) -
+    (C_nf C_fb)^T omega_ie_n`` (the rate against the level frame at ``t_m``);
+    ``f_m`` is the raw specific force of that interval and ``K``
+    ``damping.stiffness`` when modelled.  Covariance ``sigma_enc^2 + q_g^2 (t_m - t_k)``.
+
+Jacobians are with respect to the right perturbation of ``R_k``
+(``R_k Exp(delta)``) and the calibration vector; the preintegration carries its
+first-order Jacobian in ``x``, so a small change ``dx`` from the linearisation
+point is applied as ``dR Exp(J dx)``, ``S + J_S dx``; the caller re-preintegrates
+when ``dx`` grows (:meth:`graph_calib.model.preintegration.Preintegrated.needs_repreintegration`).
+
+Priors are residuals like the others (:class:`PriorResidual`): the prior of the first keyframe
+attitude (the alignment) and of the calibration vector (the grade's priors).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from graph_calib.rotations import exp_so3, log_so3, right_jacobian, right_jacobian_inv, skew
+
+
+@dataclass(frozen=True)
+class Noise:
+    """White-noise levels of the factors.
+
+    Attributes
+    ----------
+    gyro : float
+        Angle random walk, rad/sqrt(s).
+    accel : float
+        Velocity random walk, m/s/sqrt(s).
+    encoder : float
+        Table reading noise, rad (one sigma per axis).
+    """
+
+    gyro: float
+    accel: float
+    encoder: float
+
+
+@dataclass(frozen=True)
+class Residuals:
+    """One kind of factor, stacked: residual, Jacobians and one-sigma noise.
+
+    Attributes
+    ----------
+    r : (F, 3)
+    key : (F,) int       keyframe whose attitude the factor touches (the first one)
+    H_R : (F, 3, 3)      d r / d delta of that keyframe
+    H_R_next : (F, 3, 3) or None   d r / d delta of keyframe key+1 (rotation factors)
+    H_x : (F, 3, P)      d r / d x
+    sigma : (F, 3) or (F, 3, 3)   one sigma per component, or a full covariance per factor
+    """
+
+    r: np.ndarray
+    key: np.ndarray
+    H_R: np.ndarray
+    H_R_next: np.ndarray | None
+    H_x: np.ndarray
+    sigma: np.ndarray
+
+    def whitened(self):
+        """Residuals divided by their sigmas (diagonal) or by the Cholesky factor (full)."""
+        if self.sigma.ndim == 2:
+            return self.r / self.sigma
+        L = np.linalg.cholesky(self.sigma)
+        return np.linalg.solve(L, self.r[..., None])[..., 0]
+
+    def whitened_system(self):
+        """``(r, H_R, H_R_next, H_x)`` divided by the sigmas (diagonal) or by the Cholesky factor (full).
+
+        The one whitening every solver and the diagnosis use; ``H_R_next`` is None where absent.
+        """
+        if self.sigma.ndim == 2:
+            s = self.sigma
+            hn = None if self.H_R_next is None else self.H_R_next / s[:, :, None]
+            return self.r / s, self.H_R / s[:, :, None], hn, self.H_x / s[:, :, None]
+        Linv = np.linalg.inv(np.linalg.cholesky(self.sigma))
+        hn = None if self.H_R_next is None else Linv @ self.H_R_next
+        return np.einsum("fij,fj->fi", Linv, self.r), Linv @ self.H_R, hn, Linv @ self.H_x
+
+
+def rotation_factors(record, R, preint, x, *, noise):
+    """Residuals between consecutive keyframe attitudes ``R`` (K+1, 3, 3).
+
+    Parameters
+    ----------
+    record : graph_calib.model.record.PreparedRecord
+    R : ndarray, shape (K+1, 3, 3)
+        Keyframe attitudes ``C_nb``.
+    preint : graph_calib.model.preintegration.Preintegrated
+    x : ndarray, shape (P,)
+    noise : Noise
+
+    Returns
+    -------
+    Residuals
+    """
+    dR = preint.corrected(x).dR
+    E = record.earth_turn(record.T_key)
+    A = E @ R[:-1] @ dR
+    r = log_so3(np.swapaxes(A, 1, 2) @ R[1:])
+    Jr_inv = right_jacobian_inv(r)
+    Jl_inv = right_jacobian_inv(-r)
+    H_next = Jr_inv
+    H_prev = -Jl_inv @ np.swapaxes(dR, 1, 2)
+    H_x = -Jl_inv @ preint.J_dR
+    sigma = noise.gyro * np.sqrt(record.T_key)[:, None] * np.ones(3)
+    return Residuals(r=r, key=np.arange(record.n_keyframes), H_R=H_prev, H_R_next=H_next,
+                     H_x=H_x, sigma=sigma)
+
+def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None):
+    """Gravity (reaction-force) mismatch of every keyframe, m/s^2; ``R`` (K+1 or K, 3, 3).
+
+    Parameters
+    ----------
+    record : graph_calib.model.record.PreparedRecord
+    R : ndarray, shape (K+1, 3, 3) or (K, 3, 3)
+    preint : graph_calib.model.preintegration.Preintegrated
+    x : ndarray, shape (P,)
+    layout : graph_calib.params.Layout
+    noise : Noise
+    moving_sigma : float, optional
+        Sigma (m/s^2) of the keyframes that are not static (a bench that may translate).
+
+    Returns
+    -------
+    Residuals
+    """
+    K = record.n_keyframes
+    Rk = R[:K]
+    c = preint.corrected(x)
+    dR, S, S1, w_b = c.dR, c.S, c.S1, c.w_b
+    W = skew(record.omega_ie_n)
+    T = record.T_key
+    l = layout.get(x, "lever_arm", np.zeros(3))
+    E = record.earth_turn(T)
+    C1 = E @ Rk @ dR                                         # attitude at the keyframe end
+    dv_n = np.einsum("kij,kj->ki", Rk, S) - np.einsum("ij,kjl,kl->ki", W, Rk, S1)
+    a0 = np.cross(w_b[:-1], l)                               # omega x l at the start
+    a1 = np.cross(w_b[1:], l)
+    # v = C (omega_ib x l) + omega_ie x (C l): the point's velocity in the Earth-fixed level frame,
+    # C (omega_nb x l), plus 2 omega_ie x (C l) whose change is the Coriolis integral
+    v0 = np.einsum("kij,kj->ki", Rk, a0) + np.cross(record.omega_ie_n, np.einsum("kij,j->ki", Rk, l))
+    v1 = np.einsum("kij,kj->ki", C1, a1) + np.cross(record.omega_ie_n, np.einsum("kij,j->ki", C1, l))
+    g_up = np.array([0.0, 0.0, record.gravity])
+    r = (dv_n - (v1 - v0)) / T[:, None] - g_up
+    # Jacobian in the right perturbation of R_k
+    H_R = -Rk @ skew(S) + W @ Rk @ skew(S1)
+    H_R += -Rk @ skew(a0) - W @ Rk @ skew(l)                 # -(-dv0)
+    dRT = np.swapaxes(dR, 1, 2)
+    H_R -= (-C1 @ skew(a1) - W @ C1 @ skew(l)) @ dRT
+    # Jacobian in x
+    H_x = Rk @ preint.J_S - W @ Rk @ preint.J_S1
+    # v0 = Rk (w0 x l) + ...: d/dw0 = -Rk [l x]; d/dl = Rk [w0 x] + W Rk
+    H_x -= Rk @ skew(l) @ preint.J_w_b[:-1]
+    H_x -= -C1 @ skew(l) @ preint.J_w_b[1:]
+    # C1 depends on x through dR: d(C1 a) = -C1 [a x] J
+    H_x -= (-C1 @ skew(a1) - W @ C1 @ skew(l)) @ preint.J_dR
+    if "lever_arm" in layout:
+        s = layout.slice("lever_arm")
+        H_x[:, :, s] += Rk @ skew(w_b[:-1]) + W @ Rk
+        H_x[:, :, s] -= C1 @ skew(w_b[1:]) + W @ C1
+    r_scale = 1.0 / T[:, None, None]
+    H_R = H_R * r_scale
+    H_x = H_x * r_scale
+    var = np.empty((K, 3))
+    var[:] = (noise.accel**2 / T)[:, None]
+    var[:, :2] += (record.gravity * noise.gyro) ** 2 * T[:, None] / 3.0
+    sigma = np.sqrt(var)
+    if moving_sigma is not None:
+        sigma[~record.static_key] = np.maximum(sigma[~record.static_key], moving_sigma)
+    return Residuals(r=r, key=np.arange(K), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+
+def encoder_factors(record, R, preint, x, *, layout, noise):
+    """Gyro attitude against every valid table reading, rad; ``R`` (K+1 or K, 3, 3).
+
+    Parameters
+    ----------
+    record : graph_calib.model.record.PreparedRecord
+    R : ndarray, shape (K+1, 3, 3) or (K, 3, 3)
+    preint : graph_calib.model.preintegration.Preintegrated
+    x : ndarray, shape (P,)
+    layout : graph_calib.params.Layout
+    noise : Noise
+
+    Returns
+    -------
+    Residuals
+    """
+    M = record.reading_sample.size
+    P = layout.size
+    if M == 0:
+        z = np.zeros((0, 3))
+        return Residuals(r=z, key=np.zeros(0, dtype=np.int64), H_R=np.zeros((0, 3, 3)), H_R_next=None,
+                         H_x=np.zeros((0, 3, P)), sigma=z)
+    # the turn from the sample end to the reading, with the calibrated rate of that sample interval
+    # (preintegrated with its Jacobian in the gyro columns, updated to first order like the rest)
+    readR, w_c = preint.readings_corrected(x)
+    gc = preint.gyro_cols
+    J_w = preint.reading_Jw
+    phi = w_c * record.reading_dt[:, None] + record.reading_phi_shape
+    Ew = exp_so3(phi)
+    Bp = readR @ Ew
+    Rk = R[record.reading_key]
+    C_pred = record.reading_E @ Rk @ Bp
+    mount = layout.get(x, "mount", np.zeros(3))
+    lag = layout.get(x, "time_lag.table", np.zeros(1))[0]
+    Kd = layout.get(x, "damping.stiffness", np.zeros(9)).reshape(3, 3)
+    w_nb = w_c + record.reading_w_nb_offset                                  # calibrated, at the reading
+    a_lag = w_nb * lag - (0.5 * lag * lag) * record.reading_alpha               # the turn over the lag before t_m
+    a_damp = record.reading_f @ Kd.T
+    Ed = exp_so3(a_damp) if np.any(Kd) else np.broadcast_to(np.eye(3), (M, 3, 3))
+    B = exp_so3(a_lag) @ Ed if lag != 0.0 else Ed
+    C_meas = record.reading_C_nb_nominal @ (exp_so3(mount) @ B)
+    r = log_so3(np.swapaxes(C_meas, 1, 2) @ C_pred)
+    Jr_inv = right_jacobian_inv(r)
+    Jl_inv = right_jacobian_inv(-r)
+    H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
+    # the preintegration and the corrected rate depend on the gyro columns only
+    H_x = np.zeros((M, 3, P))
+    H_x[:, :, gc] = Jr_inv @ (np.swapaxes(Ew, 1, 2) @ preint.reading_J[:, :, gc]
+                              + (right_jacobian(phi) * record.reading_dt[:, None, None]) @ J_w)
+    if "mount" in layout:
+        H_x[:, :, layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
+    if "time_lag.table" in layout:
+        G_lag = -Jl_inv @ np.swapaxes(Ed, 1, 2) @ right_jacobian(a_lag)  # d r / d a_lag
+        da = w_nb - lag * record.reading_alpha
+        H_x[:, :, layout.slice("time_lag.table")] = G_lag @ da[..., None]
+        if lag != 0.0:
+            H_x[:, :, gc] += G_lag @ (lag * J_w)                       # the calibrated rate in the lag
+    if "damping.stiffness" in layout:
+        G = -Jl_inv @ right_jacobian(a_damp)                   # (M, 3, 3) per d(a_damp)
+        # a_damp_i = sum_j K_ij f_j  ->  d a_damp / d K_ij = e_i f_j
+        dK = np.einsum("mab,mj->mabj", G, record.reading_f).reshape(M, 3, 9)
+        H_x[:, :, layout.slice("damping.stiffness")] = dK
+    var = noise.encoder**2 + noise.gyro**2 * record.reading_tau
+    sigma = np.sqrt(var)[:, None] * np.ones(3)
+    return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+
+
+
+@dataclass(frozen=True)
+class PriorResidual:
+    """A Gaussian prior as a whitened residual, like every other factor (navlie's ``PriorResidual``).
+
+    Attributes
+    ----------
+    r : ndarray, shape (n,)
+        Whitened residual at the evaluation point.
+    H : ndarray, shape (n, n)
+        Its Jacobian in the variable's perturbation (right perturbation for a rotation).
+    sigma : ndarray, shape (n,)
+        The prior's one sigma per component (SI).
+    """
+
+    r: np.ndarray
+    H: np.ndarray
+    sigma: np.ndarray
+
+    @property
+    def cost(self):
+        """Half the squared norm of the whitened residual."""
+        return 0.5 * float(self.r @ self.r)
+
+
+def attitude_prior(R0, *, R_prior, sigma):
+    """The prior of the first keyframe attitude: ``Log(R_prior^T R0) / sigma``.
+
+    Parameters
+    ----------
+    R0 : ndarray, shape (3, 3)
+        First keyframe attitude ``C_nb``.
+    R_prior : ndarray, shape (3, 3)
+        The alignment.
+    sigma : float
+        Isotropic prior sigma, rad.
+
+    Returns
+    -------
+    PriorResidual
+        Jacobian ``Jr^-1(r) / sigma`` in the right perturbation of ``R0``.
+    """
+    e = log_so3(R_prior.T @ R0)
+    return PriorResidual(r=e / sigma, H=right_jacobian_inv(e) / sigma, sigma=np.full(3, float(sigma)))
+
+
+def calibration_prior(x, *, mean, sigma):
+    """The prior of the calibration vector: ``(x - mean) / sigma``, Jacobian ``diag(1 / sigma)``."""
+    sigma = np.asarray(sigma, dtype=float)
+    return PriorResidual(r=(np.asarray(x, dtype=float) - mean) / sigma, H=np.diag(1.0 / sigma), sigma=sigma)
+
+
+__all__ = ["Noise", "Residuals", "PriorResidual", "rotation_factors", "gravity_factors", "encoder_factors",
+           "attitude_prior", "calibration_prior"]

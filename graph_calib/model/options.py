@@ -1,0 +1,47 @@
+"""How an experiment is turned into a calibration problem: :class:`ModelOptions`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+
+@dataclass(frozen=True)
+class ModelOptions:
+    """How an experiment is turned into a calibration problem.
+
+    Attributes
+    ----------
+    keyframe_s : float
+        Keyframe interval, s.
+    grade : str
+        IMU grade for default priors and noise (``params.GRADES``).
+    extra_effects : tuple of str
+        Further effects of ``model.md`` added to the declared model.
+    exclude : tuple of str
+        Declared parameters not estimated (e.g. ``lever_arm`` without a table).
+    prior_sigma : dict
+        Overrides of the grade's prior sigmas, ``{parameter name: sigma}`` (SI).
+    gyro_noise, accel_noise, encoder_noise : float or None
+        Overrides of the grade's noise (rad/sqrt(s), m/s/sqrt(s), rad).
+    initial_attitude_sigma : float or None
+        Prior sigma of the first keyframe attitude around the alignment, rad.
+        None: what the alignment can know (:attr:`CalibrationModel.initial_attitude_sigma`).
+    moving_sigma : float or None
+        Without a table the bench may translate: gravity measurements of keyframes
+        that are not static get this sigma (m/s^2).  None: every keyframe counts.
+    n_newton : int
+        Newton steps of the sensor-model inversion.
+    """
+
+    keyframe_s: float = 1.0
+    grade: str = "navigation"
+    extra_effects: tuple = ()
+    exclude: tuple = ()
+    prior_sigma: dict | None = None
+    gyro_noise: float | None = None
+    accel_noise: float | None = None
+    encoder_noise: float | None = None
+    initial_attitude_sigma: float | None = None
+    moving_sigma: float | None = None
+    n_newton: int = 2

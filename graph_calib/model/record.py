@@ -1,0 +1,256 @@
+"""One experiment's data prepared once for the factors, whatever parameters are estimated.
+
+A :class:`PreparedRecord` holds what the factors need from the samples and does not depend on the
+layout (which parameters are estimated): rates and specific forces with their slope-limited
+derivatives, sensor temperatures and their rates, keyframes, the valid table readings.  The
+diagnosis builds it once and reuses it for every layout it tries.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.signal import savgol_filter
+
+from graph_calib.constants import omega_ie_n as _omega_ie_n
+from graph_calib.rotations import exp_so3, quat_to_dcm
+
+
+def _limited_derivative(y, t):
+    """Time derivative of sample means ``y`` (N, 3) at each sample, slope-limited (minmod).
+
+    Where the signal varies linearly both one-sided differences agree; at a jump
+    (a rate step) one of them is zero and so is the estimate, instead of the
+    spurious spike a central difference puts on both neighbours of the jump.
+    """
+    d = np.diff(y, axis=0) / np.diff(t)[:, None]
+    back = np.vstack([d[:1], d])
+    fwd = np.vstack([d, d[-1:]])
+    same = np.sign(back) == np.sign(fwd)
+    return np.where(same, np.sign(back) * np.minimum(np.abs(back), np.abs(fwd)), 0.0)
+
+
+def _moving_slope(y, dt, window_s):
+    """Least-squares slope of ``y`` (N, K) over a centred window of about ``window_s``, per sample.
+
+    Temperature channels are slow and often quantised, so a long window is wanted.
+    The series is first averaged over blocks of about 1 s, the quadratic
+    Savitzky-Golay slope is taken on the block means, and it is interpolated back
+    to the samples: O(N) and accurate for any smooth temperature.
+    """
+    y = np.asarray(y, dtype=float)
+    n = y.shape[0]
+    per = max(1, int(round(1.0 / dt)))
+    nb = n // per
+    if nb < 7:
+        if n < 2:
+            return np.zeros_like(y)
+        t = np.arange(n) * dt
+        return np.broadcast_to(np.polyfit(t, y, 1)[0], y.shape).copy()
+    yb = y[: nb * per].reshape(nb, per, -1).mean(axis=1)
+    tb = (np.arange(nb) * per + 0.5 * (per - 1)) * dt
+    win = int(round(window_s / (per * dt))) | 1
+    win = max(5, min(win, nb if nb % 2 else nb - 1))
+    sb = savgol_filter(yb, win, 2, deriv=1, delta=per * dt, axis=0, mode="interp")
+    t = np.arange(n) * dt
+    return np.column_stack([np.interp(t, tb, sb[:, i]) for i in range(y.shape[1])])
+
+
+def boundary_rate_correction(w_mean, k0):
+    """Correction from the two-sample mean to the angular rate at each keyframe boundary.
+
+    The lever-arm term needs the rate at a boundary instant, but the data are
+    interval means.  The mean of the two adjacent samples is off by ``h^2/6``
+    times the rate's second derivative (at a turn's cosine ramp 3e-5 rad/s, i.e.
+    0.3 sigma of a navigation-grade gravity factor with a 0.15 m lever arm); the
+    four-sample value ``(-m[-2] + 7 m[-1] + 7 m[0] - m[1]) / 12`` is exact for
+    cubics and also where a ramp starts exactly at the boundary.  At the ends of
+    the record the first (last) sample is extrapolated linearly.  The correction
+    is a property of the data: its dependence on the calibration is of the order
+    of a scale error times itself and is left out.
+
+    Parameters
+    ----------
+    w_mean : ndarray, shape (N, 3)
+        Interval-mean rates of equally spaced samples, rad/s.
+    k0 : ndarray of int, shape (K+1,)
+        First sample of each keyframe, and N.
+
+    Returns
+    -------
+    ndarray, shape (K+1, 3)
+        Add to ``[m[0] of keyframe 0, (m[-1] + m[0]) / 2 at inner boundaries, m[-1] of the last]``.
+    """
+    w = np.asarray(w_mean, dtype=float)
+    b = np.asarray(k0)
+    n = w.shape[0]
+    fix = np.zeros((b.size, 3))
+    inner = np.arange(1, b.size - 1)
+    ok = inner[(b[inner] >= 2) & (b[inner] + 1 < n)]
+    j = b[ok]
+    fix[ok] = (-w[j - 2] + w[j - 1] + w[j] - w[j + 1]) / 12.0
+    if n >= 2:
+        fix[0] = 0.5 * (w[0] - w[1])
+        fix[-1] = 0.5 * (w[n - 1] - w[n - 2])
+    return fix
+
+
+class PreparedRecord:
+    """The data of one experiment cut into keyframes, ready for any layout.
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    keyframe_s : float
+        Keyframe interval, s.
+    t_ref_degC : float, optional
+        Reference temperature; default the mean of the six sensors' temperatures.
+    static_mask : ndarray of bool, shape (N,), optional
+        Samples known to be static; None: every keyframe counts as static.
+
+    Attributes
+    ----------
+    t_key : ndarray, shape (K+1,)
+        Keyframe boundary times, s; ``T_key`` their intervals; ``k0`` their first samples (and N).
+    w_raw, f_raw : ndarray, shape (N, 3)
+        Raw interval-mean angular rate (rad/s) and specific force (m/s^2); ``dw_raw``, ``df_raw``
+        their slope-limited time derivatives.
+    temperatures : ndarray, shape (N, 6)
+        Sensor temperatures (gyro x, y, z, accel x, y, z), degC; ``dTg``, ``dTa`` their offsets from
+        ``t_ref_degC`` per triad (N, 3), ``dTdtg``, ``dTdta`` their rates, degC/s.
+    reading_* : ndarray
+        The valid table readings inside the record (M of them): ``reading_t`` time, ``reading_sample``
+        the last sample ending before it, ``reading_interval`` the sample interval holding it,
+        ``reading_key`` its keyframe, ``reading_C_nf`` the faceplate attitude, and the data-only pieces
+        of the encoder factor (``reading_dt``, ``reading_tau``, ``reading_alpha``, ``reading_phi_shape``,
+        ``reading_f``, ``reading_w_nb_offset``, ``reading_E``, ``reading_C_nb_nominal``, ``reading_lo``).
+    static_key : ndarray of bool, shape (K,)
+        Whether each keyframe is static.
+    """
+
+    #: A valid table reading counts as taken while the table turns above this rate
+    #: against the level frame, rad/s (about 0.06 deg/s, 14 times the Earth rate).
+    LAG_RATE_THRESHOLD = 1e-3
+
+    def __init__(self, experiment, *, keyframe_s, t_ref_degC=None, static_mask=None):
+        self.experiment = experiment
+        self.keyframe_s = float(keyframe_s)
+        self.omega_ie_n = _omega_ie_n(experiment.latitude_rad)
+        self.t_ref_degC = float(experiment.default_t_ref() if t_ref_degC is None else t_ref_degC)
+        self.gravity = float(experiment.gravity_mps2)
+        self._prepare_samples()
+        self._prepare_keyframes()
+        self._prepare_table()
+        self._static_keyframes(static_mask)
+
+    @property
+    def has_valid_readings(self):
+        """Whether the record holds valid table readings."""
+        return self.reading_sample.size > 0
+
+    @property
+    def readings_in_motion(self):
+        """Whether a valid reading was taken while the table turned (above :attr:`LAG_RATE_THRESHOLD`)."""
+        if not self.has_valid_readings:
+            return False
+        w_nb_b = self.w_raw[self.reading_interval] + self.reading_w_nb_offset   # raw rate against the level frame
+        return bool(np.any(np.linalg.norm(w_nb_b, axis=1) > self.LAG_RATE_THRESHOLD))
+
+    def _prepare_samples(self):
+        e = self.experiment
+        dt = e.dt
+        self.dt = dt
+        self.w_raw = e.dtheta / dt[:, None]
+        self.f_raw = e.dv / dt[:, None]
+        h = 1.0 / e.rate_hz
+        self.dw_raw = _limited_derivative(self.w_raw, e.t)
+        self.df_raw = _limited_derivative(self.f_raw, e.t)
+        T = e.sensor_temperatures()
+        self.temperatures = T
+        dT = T - self.t_ref_degC
+        dTdt = _moving_slope(T, h, 60.0)
+        self.dTg = np.ascontiguousarray(dT[:, :3])
+        self.dTa = np.ascontiguousarray(dT[:, 3:])
+        self.dTdtg = np.ascontiguousarray(dTdt[:, :3])
+        self.dTdta = np.ascontiguousarray(dTdt[:, 3:])
+
+    def _prepare_keyframes(self):
+        e = self.experiment
+        n = e.n_samples
+        per = max(1, int(round(self.keyframe_s * e.rate_hz)))
+        k0 = np.arange(0, n, per, dtype=np.int64)
+        if n - k0[-1] < max(1, per // 2) and k0.size > 1:
+            k0 = k0[:-1]
+        self.k0 = np.append(k0, n).astype(np.int64)
+        self.n_keyframes = self.k0.size - 1
+        t_start = e.t - self.dt
+        self.t_key = np.append(t_start[self.k0[:-1]], e.t[-1])  # time of each boundary, (K+1,)
+        self.T_key = np.diff(self.t_key)
+        self.w_b_fix = boundary_rate_correction(self.w_raw, self.k0)
+
+    def _prepare_table(self):
+        e = self.experiment
+        tab = e.table
+        self.has_table = tab is not None
+        empty3 = np.zeros((0, 3))
+        if tab is None or not np.any(tab.valid):
+            self.reading_sample = np.zeros(0, dtype=np.int64)
+            self.reading_t = np.zeros(0)
+            self.reading_key = np.zeros(0, dtype=np.int64)
+            self.reading_dt = np.zeros(0)
+            self.reading_tau = np.zeros(0)
+            self.reading_C_nf = np.zeros((0, 3, 3))
+            self.reading_interval = np.zeros(0, dtype=np.int64)
+            self.reading_f = empty3
+            self.reading_alpha = empty3
+            self.reading_phi_shape = empty3
+            self.C_fb = np.eye(3) if tab is None else quat_to_dcm(tab.q_fb_nominal)
+        else:
+            tm = tab.t[tab.valid]
+            q = tab.q_nf[tab.valid]
+            j = np.searchsorted(e.t, tm, side="right") - 1
+            keep = (j >= 0) & (tm <= e.t[-1])
+            tm, q, j = tm[keep], q[keep], j[keep]
+            self.reading_sample = j.astype(np.int64)
+            self.reading_t = tm
+            self.reading_key = (np.searchsorted(self.k0, j, side="right") - 1).astype(np.int64)
+            self.reading_dt = tm - e.t[j]
+            self.reading_tau = tm - self.t_key[self.reading_key]
+            self.reading_C_nf = quat_to_dcm(q)
+            nxt = np.minimum(j + 1, e.n_samples - 1)      # the sample interval holding t_m
+            self.reading_interval = nxt.astype(np.int64)
+            # Inside that interval the rate is taken linear, mean w (the increment over h) and slope
+            # alpha (slope-limited, from the neighbouring means): at the reading it is
+            # w + alpha (dt_m - h/2), and the turn from the sample end to the reading is
+            # w dt_m + alpha dt_m (dt_m - h) / 2.  The mean alone is off by alpha h^2/8 (1.5 arcsec,
+            # 0.75 sigma of a navigation-grade encoder, in a table ramp) when readings are valid in motion.
+            h = self.dt[nxt]
+            self.reading_alpha = self.dw_raw[nxt]
+            self.reading_phi_shape = self.reading_alpha * (0.5 * self.reading_dt * (self.reading_dt - h))[:, None]
+            self.reading_f = self.f_raw[nxt]
+            self.C_fb = quat_to_dcm(tab.q_fb_nominal)
+            # the rate against the level frame at the reading (for the lag) is the calibrated interval
+            # mean plus this: the slope term, minus the Earth rate in b (from the readings' attitude)
+            C_bn = np.swapaxes(self.reading_C_nf @ self.C_fb, 1, 2)
+            self.reading_w_nb_offset = self.reading_alpha * (self.reading_dt - 0.5 * h)[:, None] - C_bn @ self.omega_ie_n
+        if tab is None or not np.any(tab.valid):
+            self.reading_w_nb_offset = empty3
+        self.reading_lo = np.searchsorted(self.reading_sample, self.k0[:-1], side="left").astype(np.int64)
+        # data-only pieces of the encoder factor, formed once: the Earth turn since the keyframe start,
+        # the nominal faceplate-to-level attitude
+        self.reading_E = self.earth_turn(self.reading_tau)
+        self.reading_C_nb_nominal = self.reading_C_nf @ self.C_fb
+
+    def _static_keyframes(self, static_mask):
+        if static_mask is None:
+            self.static_key = np.ones(self.n_keyframes, dtype=bool)
+        else:
+            m = np.asarray(static_mask, dtype=bool)
+            self.static_key = np.logical_and.reduceat(m, self.k0[:-1])
+
+    def earth_turn(self, T):
+        """``E(T) = Exp(-omega_ie_n T)``, shape (..., 3, 3)."""
+        T = np.asarray(T, dtype=float)
+        return exp_so3(-T[..., None] * self.omega_ie_n)
+
+
+__all__ = ["PreparedRecord", "boundary_rate_correction"]
