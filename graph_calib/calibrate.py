@@ -13,11 +13,12 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from graph_calib.alignment import alignment
 from graph_calib.experiment import Result
 from graph_calib.factor_graph import GraphOptions
 from graph_calib.model import CalibrationModel, ModelOptions, gyrocompass_attitude_sigma
 from graph_calib.params import grade
-from graph_calib.strapdown import alignment, detect_static
+from graph_calib.static_detection import detect_static
 
 SOLVERS = ("sqrt-kf", "factor-graph")
 

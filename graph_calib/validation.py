@@ -156,7 +156,7 @@ def static_pose_consistency(experiment, *, poses, layout=None, x=None):
     experiment : graph_calib.experiment.Experiment
     poses : sequence of (start, stop)
         Sample ranges of the static poses, in time order (e.g. from
-        :func:`graph_calib.strapdown.detect_static`).
+        :func:`graph_calib.static_detection.detect_static`).
     layout : graph_calib.params.Layout, optional
     x : ndarray, optional
         Calibration to apply (with ``layout``); None: the raw (nominally scaled) data.

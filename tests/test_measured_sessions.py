@@ -17,7 +17,7 @@ import pytest
 from graph_calib.calibrate import CalibrationOptions, build_problem, compare, run_factor_graph, run_sqrt_kf
 from graph_calib.importers import import_mpu6050, import_xsens, mpu6050_reference_calibration
 from graph_calib.model import ModelOptions
-from graph_calib.strapdown import detect_static
+from graph_calib.static_detection import detect_static
 from graph_calib.validation import static_pose_consistency
 
 from conftest import REAL_DATA
