@@ -6,11 +6,12 @@ import numpy as np
 import pytest
 
 from graph_calib import sensor_model as sm
-from graph_calib.calibration import CALIBRATION_FORMAT, CALIBRATION_VERSION, Calibration
+from graph_calib.calibration import CALIBRATION_FORMAT, CALIBRATION_VERSION, Calibration, triad_errors
 from graph_calib.errors import InputError
 from graph_calib.experiment import Experiment, Result
 from graph_calib.model import CalibrationModel
 from graph_calib.params import SPECS, Layout
+from graph_calib.validation import ResultCalibration, sensor_error_sigmas, sensor_errors
 
 #: Every parameter of the declared model that has a sensor term (mount, lever arm and table lag do not).
 SENSOR_DECLARED = ("gyro.bias", "gyro.bias_tc", "gyro.scale", "gyro.scale_tc", "gyro.misalignment",
@@ -171,3 +172,32 @@ def test_sensor_errors_are_model_md_equations():
     mg = sm.measure(cal.layout, cal.x, "gyro", omega, dT=dT[:, :3], other=f) - omega
     np.testing.assert_allclose(eg, mg, rtol=0, atol=4 * np.finfo(float).eps * np.abs(omega).max())
 
+
+def test_result_calibration_errors_agree_with_its_element_values():
+    """validation: a single result through its Calibration equals its elements evaluated at temperature."""
+    names = ("gyro.bias", "gyro.bias_tc", "gyro.scale", "gyro.scale_tc", "gyro.misalignment",
+             "accel.bias", "accel.bias_tc", "accel.scale", "accel.scale_tc", "accel.misalignment", "mount")
+    cal = random_calibration(np.random.default_rng(6), names)
+    truth = Result(source="t", solver="truth", t_ref_degC=cal.t_ref_degC, temperature_range_degC=(15, 30),
+                   effects=names, values=cal.values(),
+                   extra={"simulation": {"unmodelled": {"gyro.bias_tc2.z": 3e-9, "accel.scale_tc2.x": 2e-7}}})
+    rc = ResultCalibration(truth)
+    assert "mount" not in rc.calibration.layout and "gyro.bias_tc2" in rc.calibration.layout
+    _, omega, f, T = true_motion(200)
+    eg, ea = rc.sensor_errors(T, omega, f)
+    eg_v, ea_v = sensor_errors(rc.evaluate(T), omega, f)
+    np.testing.assert_allclose(eg, eg_v, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(ea, ea_v, rtol=1e-12, atol=0)
+
+
+def test_error_sigmas_from_squared_terms():
+    s = {"gyro.bias.x": 1e-8, "gyro.scale.x": 1e-6, "gyro.misalignment.xz": 2e-6, "accel.misalignment.zy": 5e-6}
+    omega = np.array([[0.3, -0.2, 0.1]])
+    f = np.array([[0.5, 1.0, 9.7]])
+    sg, sa = sensor_error_sigmas(s, omega, f)
+    np.testing.assert_allclose(sg[0], [np.sqrt(1e-16 + (1e-6 * 0.3) ** 2 + (2e-6 * 0.1) ** 2), 0, 0], rtol=1e-14)
+    np.testing.assert_allclose(sa[0], [0, 0, 5e-6 * 1.0], rtol=1e-14)
+    # triad_errors with power=2 is the same sum on one calibration vector
+    lay = Layout(("gyro.bias", "gyro.scale", "gyro.misalignment"))
+    var = triad_errors(lay, np.square(lay.from_dict(s)), "gyro", omega, power=2)
+    np.testing.assert_allclose(np.sqrt(var), sg, rtol=1e-15)
