@@ -18,7 +18,8 @@ import numpy as np
 
 from graph_calib.constants import DEG_TO_RAD
 from graph_calib.experiment import Experiment
-from graph_calib.strapdown import detect_static, integrate_attitude
+from graph_calib.static_detection import detect_static
+from graph_calib.strapdown import integrate_attitude
 
 
 def main():

@@ -13,7 +13,8 @@ import numpy as np
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.options import CalibrationOptions
 from graph_calib.params import grade
-from graph_calib.strapdown import Alignment, alignment, detect_static
+from graph_calib.alignment import Alignment, alignment
+from graph_calib.static_detection import detect_static
 
 
 @dataclass(frozen=True)
@@ -25,7 +26,7 @@ class Problem:
     model : graph_calib.model.CalibrationModel
     q_nb0 : ndarray, shape (4,)
         Attitude ``q_nb`` (scalar first) at the start of the record, from the alignment.
-    alignment : graph_calib.strapdown.Alignment
+    alignment : graph_calib.alignment.Alignment
         How ``q_nb0`` was found.
     """
 

@@ -14,7 +14,12 @@ and the mean temperature of each of the six sensors are formed.  A calibration
     e^c_{g,w} = b_g(T_w) + \mathrm{diag}(s_g(T_w))\,\omega_w + M_g\,\omega_w, \qquad
     e^c_{a,w} = b_a(T_w) + \mathrm{diag}(s_a(T_w))\,f_w + M_a\,f_w,
 
-(model.md's sensor equations; each element at its own sensor's temperature).
+(model.md's sensor equations; each element at its own sensor's temperature),
+computed through the one sensor model (:mod:`graph_calib.calibration`): a
+single result by :meth:`graph_calib.calibration.Calibration.sensor_errors` with
+``dT = T_w - T_ref``, a stitched calibration by the same model terms fed with
+its element values at ``T_w`` (:func:`sensor_errors`).  Further effects are not
+compared.
 The *remaining error* is the difference between the reference calibration's
 error and the stitched one's, ``de_w = e^ref_w - e^stitched_w``: what a navigation
 system would still see after correcting its sensors with the stitched
@@ -49,15 +54,28 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib.stitching import result_points, sensor_columns, sensor_of
+from graph_calib.calibration import Calibration, triad_errors
+from graph_calib.params import SPECS, Layout, split_element_name
+from graph_calib.stitching import family, result_points, sensor_columns, sensor_of
 
 #: The method's published accuracy: gyro drift, rad/s (0.01 deg/h).
 GYRO_ACCURACY_RADPS = 0.01 * c.DH_TO_RS
 #: The method's published accuracy: accelerometer bias, m/s^2.
 ACCEL_ACCURACY_MPS2 = 2e-4
 
-_GYRO_MIS = {"xy": (0, 1), "xz": (0, 2), "yx": (1, 0), "yz": (1, 2), "zx": (2, 0), "zy": (2, 1)}
-_ACCEL_MIS = {"yx": (1, 0), "zx": (2, 0), "zy": (2, 1)}
+#: The parameters whose sensor errors validation compares, at the window temperatures (module docstring).
+ERROR_LAYOUT = Layout(("gyro.bias", "gyro.scale", "gyro.misalignment", "accel.bias", "accel.scale",
+                       "accel.misalignment"))
+#: The same with their temperature coefficients: what a single result contributes.
+RESULT_PARAMETERS = tuple(n for n in SPECS if family(n)[0] in ERROR_LAYOUT.names)
+
+
+def _parameter_of(element):
+    """Parameter name of a flat element name, None when the catalogue does not know it."""
+    try:
+        return split_element_name(element)[0]
+    except KeyError:
+        return None
 
 
 class ResultCalibration:
@@ -72,6 +90,15 @@ class ResultCalibration:
     Parameters
     ----------
     result : graph_calib.experiment.Result
+
+    Attributes
+    ----------
+    result : graph_calib.experiment.Result
+    points : dict
+        ``{flat element: SubrangePoint}``, for :meth:`evaluate` and :meth:`element_sigmas`.
+    calibration : graph_calib.calibration.Calibration
+        The result's :data:`RESULT_PARAMETERS` (with the truth remainder), for :meth:`sensor_errors`.
+    label : str
     """
 
     def __init__(self, result):
@@ -81,6 +108,9 @@ class ResultCalibration:
         for k, v in (sim.get("unmodelled") or {}).items():
             values.setdefault(k, float(v))
         self.points = result_points(result, values=values)
+        own = {k: v for k, v in values.items() if _parameter_of(k) in RESULT_PARAMETERS}
+        self.calibration = Calibration.from_values(own, t_ref_degC=result.t_ref_degC, sigmas=result.sigmas,
+                                                   source=result.source)
         self.label = "truth" if result.solver == "truth" else f"{result.solver} estimate of {result.source}"
 
     def evaluate(self, T_sensors, model=None):
@@ -96,24 +126,51 @@ class ResultCalibration:
             return {}
         return {k: p.predict(sensor_columns(T_sensors, sensor_of(k)))[1] for k, p in self.points.items()}
 
+    def sensor_errors(self, T_sensors, omega_b, f_b):
+        """The result's declared sensor errors at the sensor temperatures ``T_sensors`` (N, 6), shape (N, 3) each.
+
+        :meth:`graph_calib.calibration.Calibration.sensor_errors` of :attr:`calibration`
+        with ``dT = T_sensors - t_ref_degC``; rad/s and m/s^2.
+        """
+        cal = self.calibration
+        return cal.sensor_errors(omega_b, f_b, dT=np.asarray(T_sensors, dtype=float) - cal.t_ref_degC)
+
+
+def _element_rows(values, n):
+    """``values`` (``{flat element: value or (N,)}``) as rows of :data:`ERROR_LAYOUT`, shape (N, P); missing zero."""
+    X = np.zeros((n, ERROR_LAYOUT.size))
+    for i, name in enumerate(ERROR_LAYOUT.element_names()):
+        if name in values:
+            X[:, i] = np.broadcast_to(np.asarray(values[name], dtype=float), (n,))
+    return X
+
 
 def sensor_error_sigmas(sigmas, omega_b, f_b):
     """One sigma of the declared sensor errors from independent element sigmas, shape (N, 3) per triad.
 
-    ``sqrt(s_b^2 + (s_s u_i)^2 + sum_j (s_M,ij u_j)^2)``: correlations between elements are ignored.
+    ``sqrt(sum_r (s_r phi_r)^2)`` over the model's terms (:func:`graph_calib.calibration.triad_errors`
+    with ``power=2``): ``sqrt(s_b^2 + (s_s u_i)^2 + sum_j (s_M,ij u_j)^2)``; correlations between
+    elements are ignored.
     """
-    sq = {k: np.square(v) for k, v in sigmas.items()}
-    eg, ea = sensor_errors(sq, np.square(omega_b), np.square(f_b))
-    return np.sqrt(np.clip(eg, 0.0, None)), np.sqrt(np.clip(ea, 0.0, None))
+    omega_b = np.atleast_2d(np.asarray(omega_b, dtype=float))
+    f_b = np.atleast_2d(np.asarray(f_b, dtype=float))
+    X = np.square(_element_rows(sigmas, omega_b.shape[0]))
+    vg = triad_errors(ERROR_LAYOUT, X, "gyro", omega_b, other=f_b, power=2)
+    va = triad_errors(ERROR_LAYOUT, X, "accel", f_b, other=omega_b, power=2)
+    return np.sqrt(np.clip(vg, 0.0, None)), np.sqrt(np.clip(va, 0.0, None))
 
 
 def sensor_errors(values, omega_b, f_b):
-    """The declared sensor errors of a calibration, per window.
+    """The declared sensor errors of a calibration evaluated at each window's temperatures.
+
+    The sensor model's terms of :data:`ERROR_LAYOUT` (bias, scale, misalignment) with
+    the element values of each row (:func:`graph_calib.calibration.triad_errors`).
 
     Parameters
     ----------
     values : dict
-        ``{flat element: value or values (N,)}``, SI; missing elements count as zero.
+        ``{flat element: value or values (N,)}``, SI; missing elements count as zero,
+        elements outside :data:`ERROR_LAYOUT` are not used.
     omega_b, f_b : ndarray, shape (N, 3)
         Angular rate (rad/s) and specific force (m/s^2).
 
@@ -122,22 +179,19 @@ def sensor_errors(values, omega_b, f_b):
     e_gyro, e_accel : ndarray, shape (N, 3)
         ``b + diag(s) u + M u`` for each triad, rad/s and m/s^2.
     """
-    omega_b = np.atleast_2d(omega_b)
-    f_b = np.atleast_2d(f_b)
-    n = omega_b.shape[0]
+    omega_b = np.atleast_2d(np.asarray(omega_b, dtype=float))
+    f_b = np.atleast_2d(np.asarray(f_b, dtype=float))
+    X = _element_rows(values, omega_b.shape[0])
+    return (triad_errors(ERROR_LAYOUT, X, "gyro", omega_b, other=f_b),
+            triad_errors(ERROR_LAYOUT, X, "accel", f_b, other=omega_b))
 
-    def get(name):
-        return np.broadcast_to(np.asarray(values.get(name, 0.0), dtype=float), (n,))
 
-    out = []
-    for triad, u, mis in (("gyro", omega_b, _GYRO_MIS), ("accel", f_b, _ACCEL_MIS)):
-        e = np.zeros((n, 3))
-        for i, ax in enumerate("xyz"):
-            e[:, i] += get(f"{triad}.bias.{ax}") + get(f"{triad}.scale.{ax}") * u[:, i]
-        for el, (i, j) in mis.items():
-            e[:, i] += get(f"{triad}.misalignment.{el}") * u[:, j]
-        out.append(e)
-    return out[0], out[1]
+def _errors_of(calibration, T_sensors, omega_b, f_b, model=None):
+    """Declared sensor errors of a calibration: its own :meth:`ResultCalibration.sensor_errors`, or
+    :func:`sensor_errors` of its element values (a stitched calibration)."""
+    if hasattr(calibration, "sensor_errors"):
+        return calibration.sensor_errors(T_sensors, omega_b, f_b)
+    return sensor_errors(calibration.evaluate(T_sensors, model), omega_b, f_b)
 
 
 def static_pose_consistency(experiment, *, poses, layout=None, x=None):
@@ -156,7 +210,7 @@ def static_pose_consistency(experiment, *, poses, layout=None, x=None):
     experiment : graph_calib.experiment.Experiment
     poses : sequence of (start, stop)
         Sample ranges of the static poses, in time order (e.g. from
-        :func:`graph_calib.strapdown.detect_static`).
+        :func:`graph_calib.static_detection.detect_static`).
     layout : graph_calib.params.Layout, optional
     x : ndarray, optional
         Calibration to apply (with ``layout``); None: the raw (nominally scaled) data.
@@ -357,7 +411,8 @@ def validate(record, calibration, reference, *, model=None, window_s=1.0, window
     record : graph_calib.experiment.Experiment
         An independent record (not used in the calibration).
     calibration : graph_calib.stitching.Stitched or ResultCalibration
-        Anything with ``evaluate(T_sensors, model) -> {element: values}``.
+        Anything with ``sensor_errors(T_sensors, omega_b, f_b)`` (:class:`ResultCalibration`) or
+        ``evaluate(T_sensors, model) -> {element: values}``.
     reference : ResultCalibration or graph_calib.experiment.Result
         The truth (simulated data) or the record's own calibration.
     model : str, optional
@@ -375,10 +430,8 @@ def validate(record, calibration, reference, *, model=None, window_s=1.0, window
         reference = ResultCalibration(reference)
     w = windows if windows is not None else window_means(record, window_s=window_s)
     T = w["T"]
-    vals_c = calibration.evaluate(T, model)
-    vals_r = reference.evaluate(T)
-    eg_c, ea_c = sensor_errors(vals_c, w["omega"], w["f"])
-    eg_r, ea_r = sensor_errors(vals_r, w["omega"], w["f"])
+    eg_c, ea_c = _errors_of(calibration, T, w["omega"], w["f"], model)
+    eg_r, ea_r = _errors_of(reference, T, w["omega"], w["f"])
     sig_g = sig_a = coverage = None
     inside = np.ones(T.shape, dtype=bool)
     curves = getattr(calibration, "curves", None)
@@ -446,4 +499,5 @@ def simulate_validation_record(simulation, *, hours=2.0, start_degC=None, span_d
 
 
 __all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "sensor_error_sigmas", "window_means",
-           "Validation", "validate", "validation_text", "simulate_validation_record", "STATIC_RATE_TOLERANCE_RADPS"]
+           "Validation", "validate", "validation_text", "simulate_validation_record", "STATIC_RATE_TOLERANCE_RADPS",
+           "ERROR_LAYOUT", "RESULT_PARAMETERS"]

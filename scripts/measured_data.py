@@ -43,7 +43,7 @@ from graph_calib.io import atomic_write_json, atomic_write_text  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
 from graph_calib.reports import diagnosis_report as rep  # noqa: E402
 from graph_calib.rotations import exp_so3  # noqa: E402
-from graph_calib.strapdown import detect_static  # noqa: E402
+from graph_calib.static_detection import detect_static  # noqa: E402
 
 REAL = ROOT.parent / "shared" / "data" / "real"
 DOCS = ROOT / "docs"

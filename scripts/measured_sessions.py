@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem  # noqa: E402
 from graph_calib.importers import import_mpu6050, import_xsens, mpu6050_reference_calibration  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
-from graph_calib.strapdown import detect_static  # noqa: E402
+from graph_calib.static_detection import detect_static  # noqa: E402
 from graph_calib.validation import static_pose_consistency  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]

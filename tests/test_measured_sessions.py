@@ -18,7 +18,7 @@ from graph_calib.calibrate import CalibrationOptions, build_problem, solve_probl
 from graph_calib.solvers.results import compare
 from graph_calib.importers import import_mpu6050, import_xsens, mpu6050_reference_calibration
 from graph_calib.model import ModelOptions
-from graph_calib.strapdown import detect_static
+from graph_calib.static_detection import detect_static
 from graph_calib.validation import static_pose_consistency
 
 from conftest import REAL_DATA
