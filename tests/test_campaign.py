@@ -292,11 +292,51 @@ def test_campaign_cli_prints_a_summary(campaign_run, simulated, capsys):
 
 
 @pytest.mark.skipif(os.environ.get("GRAPH_CALIB_SKIP_DEMO") == "1", reason="demo skipped by environment")
-def test_demo_command_help():
-    from graph_calib.cli import build_parser
+def test_demo_runs_campaign_and_diagnose(tmp_path, capsys):
+    """``graph-calib demo --out DIR`` (cli.md) with 72-s subranges, in process: exit 0 and every file it promises.
 
-    args = build_parser().parse_args(["demo", "--out", "x", "--hours", "0.2"])
-    assert args.hours == 0.2 and args.out == "x"
+    About 25 s on two free cores, most of it the report's figures (the twelve solver runs take a few seconds).
+    """
+    from graph_calib.params import FURTHER_EFFECTS
+
+    out = tmp_path / "demo"
+    rc = main(["demo", "--out", str(out), "--hours", "0.02", "--workers", "0"])
+    stdout = capsys.readouterr().out
+    assert rc == 0, stdout
+    # the simulated campaign: six subranges with their truth, the manifest, an independent validation record
+    data = out / "data"
+    stems = sorted(p.stem for p in data.glob("sub*.h5"))
+    assert len(stems) == 6
+    for stem in stems:
+        truth = io.read_result(data / f"{stem}.truth.json")
+        assert "gyro.bias.x" in truth.values
+    exp = io.read_experiment(data / f"{stems[0]}.h5")
+    assert exp.t[-1] - exp.t[0] + 1.0 / exp.rate_hz == pytest.approx(0.02 * 3600.0, rel=1e-3)  # --hours honoured
+    assert (data / "campaign.toml").is_file() and (data / "validation.h5").is_file()
+    io.read_result(data / "validation.truth.json")
+    # what graph-calib campaign writes
+    doc = json.loads((out / "campaign" / "campaign.json").read_text())
+    assert doc["format"] == "imu-calibration-campaign" and len(doc["experiments"]) == 6
+    assert not doc["failed"] and doc["timing"]["tasks_computed"] == 12
+    for e in doc["experiments"]:
+        folder = out / "campaign" / e["name"]
+        for s in ("sqrt-kf", "factor-graph"):
+            assert io.read_result(folder / f"{s}.json").solver == s
+        assert json.loads((folder / "comparison.json").read_text())["summary"]["agree"], e["name"]
+    assert doc["validation"][0]["reference_kind"] == "truth"
+    html = (out / "campaign" / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 10 and not re.search(r'src="(?!data:)', html)
+    # what graph-calib diagnose writes, on the 20..30 degC subrange by default (cli.md's minimum content)
+    diag = json.loads((out / "diagnosis" / "diagnosis.json").read_text())
+    assert diag["format"] == "imu-calibration-diagnosis" and diag["version"] == 1
+    assert diag["source"] == "sub4_20_30.h5"
+    assert isinstance(diag["added"], list) and set(diag["added"]) <= set(FURTHER_EFFECTS)
+    assert isinstance(diag["unexplained"], bool)
+    for k in ("before", "after"):
+        assert isinstance(diag[k]["residual_rms"], dict) and diag[k]["residual_rms"]
+    assert (out / "diagnosis" / "report.html").is_file()
+    assert "demo finished" in stdout and "diagnose: ->" in stdout
+    assert not list(out.rglob(".*.tmp"))
 
 
 def test_existing_dask_cluster_by_address(simulated, tmp_path):
