@@ -44,13 +44,13 @@ def _context(seed, triad):
     else:
         signal = np.array([0.5, -0.3, 9.8]) + rng.uniform(-3.0, 3.0, (N, 3))   # m/s^2
     signal[:N // 2] *= -1.0
-    ctx = dict(
-        dT=np.array([-4.0, 1.5, 3.0]) + rng.uniform(-1.0, 1.0, (N, 3)),       # degC, per sensor
-        dTdt=np.array([2e-3, -1e-3, 5e-3]) + rng.uniform(-1e-3, 1e-3, (N, 3)),  # degC/s
-        other=rng.uniform(-2.0, 2.0, (N, 3)) + (np.array([0.3, -0.2, 9.8]) if triad == "gyro" else 0.0),
-        domega=rng.uniform(-1.5, 1.5, (N, 3)),                       # rad/s^2
-        dsignal=rng.uniform(-5.0, 5.0, (N, 3)),
-    )
+    ctx = {
+        "dT": np.array([-4.0, 1.5, 3.0]) + rng.uniform(-1.0, 1.0, (N, 3)),        # degC, per sensor
+        "dTdt": np.array([2e-3, -1e-3, 5e-3]) + rng.uniform(-1e-3, 1e-3, (N, 3)),  # degC/s
+        "other": rng.uniform(-2.0, 2.0, (N, 3)) + (np.array([0.3, -0.2, 9.8]) if triad == "gyro" else 0.0),
+        "domega": rng.uniform(-1.5, 1.5, (N, 3)),                                # rad/s^2
+        "dsignal": rng.uniform(-5.0, 5.0, (N, 3)),
+    }
     return signal, ctx
 
 
@@ -62,7 +62,7 @@ def _measure(layout, x, triad, signal, ctx):
 def _declared_by_hand(layout, x, triad, signal, dT):
     """model.md's declared equation for one triad, sample by sample."""
     v = layout.to_dict(x)
-    p = lambda name: np.array([v[f"{triad}.{name}.{a}"] for a in "xyz"])  # noqa: E731
+    p = lambda name: np.array([v[f"{triad}.{name}.{a}"] for a in "xyz"])
     M = np.zeros((3, 3))
     for el, (i, j) in (GYRO_MISALIGNMENT if triad == "gyro" else ACCEL_MISALIGNMENT).items():
         M[i, j] = v[f"{triad}.misalignment.{el}"]
@@ -301,7 +301,7 @@ def test_accel_time_lag_on_a_sine_is_a_delay():
 
 def _everything_by_hand(layout, x, triad, signal, ctx):
     v = layout.to_dict(x)
-    vec = lambda name: np.array([v[f"{name}.{a}"] for a in "xyz"])  # noqa: E731
+    vec = lambda name: np.array([v[f"{name}.{a}"] for a in "xyz"])
     dT, dTdt = ctx["dT"], ctx["dTdt"]
     out = _declared_by_hand(layout, x, triad, signal, dT)
     out += vec(f"{triad}.bias_tc2") * dT**2 + vec(f"{triad}.bias_dtdt") * dTdt
