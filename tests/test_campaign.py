@@ -9,11 +9,7 @@ import json
 import os
 import re
 import shutil
-import signal
-import subprocess
-import sys
 import time
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -176,34 +172,56 @@ def test_interrupted_campaign_resumes_without_redoing_finished_experiments(simul
     assert run.results["sub3_10_20"]["factor-graph"].t_ref_degC == 15.0
 
 
-def test_command_interrupted_by_ctrl_c_keeps_finished_work(simulated, tmp_path):
+def test_command_interrupted_by_ctrl_c_keeps_finished_work(simulated, tmp_path, monkeypatch, capsys):
+    """Ctrl-C in ``graph-calib campaign`` after the first finished task, made deterministic: the campaign's
+    ``on_done`` raises KeyboardInterrupt there (in process, ``--workers 0``).  Exit 130 with one line, the
+    finished result kept, nothing half-written; the rerun reuses it and ends with the results of a run that
+    was never interrupted."""
+    import graph_calib.campaign as campaign_module
+
     manifest = _small_manifest(simulated, tmp_path / "m")
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "graph_calib.cli", "campaign", str(manifest), "--out", str(out), "--workers", "0",
-           "--quiet", "--no-report"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.time() + 240
-        while time.time() < deadline and not list(out.glob("*/factor-graph.json")):
-            time.sleep(0.2)
-        assert list(out.glob("*/factor-graph.json")), "no experiment finished in time"
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    finished = list(out.glob("*/factor-graph.json"))
-    if proc.returncode == 0:  # the last experiment finished before the signal arrived: nothing to resume
-        pytest.skip("the campaign finished before it could be interrupted")
-    assert proc.returncode == 130, err
-    assert "interrupted; finished work is kept" in err
-    for f in finished:
-        io.read_result(f)  # complete, valid files only
-    assert not list(out.rglob(".*.tmp"))
-    rc = main(["campaign", str(manifest), "--out", str(out), "--workers", "0", "--quiet", "--no-report"])
-    assert rc == 0
+    argv = ["campaign", str(manifest), "--out", str(out), "--workers", "0", "--quiet", "--no-report"]
+    done = []
+
+    def interrupted(*args, **kwargs):
+        def ctrl_c_after_first(outcome):
+            done.append(outcome)
+            raise KeyboardInterrupt
+
+        return real_run_campaign(*args, **kwargs, on_done=ctrl_c_after_first)
+
+    real_run_campaign = campaign_module.run_campaign
+    monkeypatch.setattr(campaign_module, "run_campaign", interrupted)
+    rc = main(argv)
+    err = capsys.readouterr().err
+    monkeypatch.undo()
+    assert rc == 130, err
+    assert [ln for ln in err.strip().splitlines() if ln] == ["graph-calib campaign: interrupted; finished work is kept"]
+    assert len(done) == 1 and done[0]["status"] == "computed"
+    finished = sorted(out.glob("*/factor-graph.json"))
+    assert finished == [out / done[0]["name"] / "factor-graph.json"]
+    kept = finished[0].read_bytes()
+    io.read_result(finished[0])  # a complete, valid file
+    assert not list(out.rglob(".*.tmp")) and not (out / "campaign.json").exists()
+
+    # the rerun computes only the two unfinished experiments and leaves the finished one as it was
+    assert main(argv) == 0
     doc = json.loads((out / "campaign.json").read_text())
-    assert doc["timing"]["tasks_cached"] >= len(finished)
+    assert doc["timing"]["tasks_cached"] == 1 and doc["timing"]["tasks_computed"] == 2
+    status = {e["name"]: e["results"]["factor-graph"]["status"] for e in doc["experiments"]}
+    assert status.pop(done[0]["name"]) == "cached" and set(status.values()) == {"computed"}
+    assert finished[0].read_bytes() == kept
+    # ... and its results are those of an uninterrupted run
+    fresh = tmp_path / "fresh"
+    assert main(["campaign", str(manifest), "--out", str(fresh), "--workers", "0", "--quiet", "--no-report"]) == 0
+    for e in doc["experiments"]:
+        a = io.read_result(out / e["name"] / "factor-graph.json")
+        b = io.read_result(fresh / e["name"] / "factor-graph.json")
+        assert a.values.keys() == b.values.keys()
+        for k in a.values:
+            assert a.values[k] == pytest.approx(b.values[k], rel=1e-9, abs=1e-12 * a.sigmas[k]), (e["name"], k)
+            assert a.sigmas[k] == pytest.approx(b.sigmas[k], rel=1e-9), (e["name"], k)
 
 
 # ---------------------------------------------------------------------------
