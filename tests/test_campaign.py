@@ -393,7 +393,10 @@ def test_validation_record_without_truth_is_checked_against_its_own_calibration(
     s = v["results"]["factor-graph"]["cubic"]
     assert "factor-graph estimate of held_out.h5" in s["reference"]
     # the held-out subrange's own estimate and the stitch of its neighbours agree within their uncertainty
-    # (an 18-min subrange's own bias is only good to about 0.01 deg/h at its ends: no verdict on 0.01 here)
-    assert s["largest"]["gyro_radps"] is not None and s["largest"]["accel_mps2"] < 2e-4
+    # (an 18-min subrange's own bias is only good to about 0.01 deg/h at its ends: no verdict on 0.01 here,
+    # but a few times that at most: 0.025 deg/h with this seed, largest_z 1.8; the bound is twice that)
+    assert s["gyro_criterion"] == "static windows"
+    assert s["largest"]["gyro_radps"] * c.RS_TO_DH < 0.05
+    assert s["largest"]["accel_mps2"] < 2e-4
     assert s["largest_z"]["gyro"] < 4.0 and s["largest_z"]["accel"] < 4.0
     assert "held_out.h5" in (tmp_path / "out" / "report.html").read_text()
