@@ -50,9 +50,20 @@ def experiment_factory():
     return make_experiment
 
 
+def require_real(path):
+    """``path`` (under the measured-data folder), failing the test when it is absent.
+
+    The measured recordings are part of the checkout's environment (``../shared``, shared/README.md):
+    a missing file is a broken environment, not a reason to skip.
+    """
+    path = Path(path)
+    if not path.exists():
+        pytest.fail(f"measured data not found: {path} (expected ../shared/data/real beside the repository)",
+                    pytrace=False)
+    return path
+
+
 @pytest.fixture(scope="session")
 def real_data():
-    """Folder of the measured recordings; the test is skipped when it is absent."""
-    if not REAL_DATA.is_dir():
-        pytest.skip(f"measured data not found at {REAL_DATA} (expected ../shared/data/real beside the repository)")
-    return REAL_DATA
+    """Folder of the measured recordings; the test fails when it is absent."""
+    return require_real(REAL_DATA)

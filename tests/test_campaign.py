@@ -9,9 +9,6 @@ import json
 import os
 import re
 import shutil
-import signal
-import subprocess
-import sys
 import time
 
 import numpy as np
@@ -177,34 +174,56 @@ def test_interrupted_campaign_resumes_without_redoing_finished_experiments(simul
     assert run.results["sub3_10_20"]["factor-graph"].t_ref_degC == 15.0
 
 
-def test_command_interrupted_by_ctrl_c_keeps_finished_work(simulated, tmp_path):
+def test_command_interrupted_by_ctrl_c_keeps_finished_work(simulated, tmp_path, monkeypatch, capsys):
+    """Ctrl-C in ``graph-calib campaign`` after the first finished task, made deterministic: the campaign's
+    ``on_done`` raises KeyboardInterrupt there (in process, ``--workers 0``).  Exit 130 with one line, the
+    finished result kept, nothing half-written; the rerun reuses it and ends with the results of a run that
+    was never interrupted."""
+    import graph_calib.campaign as campaign_module
+
     manifest = _small_manifest(simulated, tmp_path / "m")
     out = tmp_path / "out"
-    cmd = [sys.executable, "-m", "graph_calib.cli", "campaign", str(manifest), "--out", str(out), "--workers", "0",
-           "--quiet", "--no-report"]
-    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        deadline = time.time() + 240
-        while time.time() < deadline and not list(out.glob("*/factor-graph.json")):
-            time.sleep(0.2)
-        assert list(out.glob("*/factor-graph.json")), "no experiment finished in time"
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=120)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-    finished = list(out.glob("*/factor-graph.json"))
-    if proc.returncode == 0:  # the last experiment finished before the signal arrived: nothing to resume
-        pytest.skip("the campaign finished before it could be interrupted")
-    assert proc.returncode == 130, err
-    assert "interrupted; finished work is kept" in err
-    for f in finished:
-        io.read_result(f)  # complete, valid files only
-    assert not list(out.rglob(".*.tmp"))
-    rc = main(["campaign", str(manifest), "--out", str(out), "--workers", "0", "--quiet", "--no-report"])
-    assert rc == 0
+    argv = ["campaign", str(manifest), "--out", str(out), "--workers", "0", "--quiet", "--no-report"]
+    done = []
+
+    def interrupted(*args, **kwargs):
+        def ctrl_c_after_first(outcome):
+            done.append(outcome)
+            raise KeyboardInterrupt
+
+        return real_run_campaign(*args, **kwargs, on_done=ctrl_c_after_first)
+
+    real_run_campaign = campaign_module.run_campaign
+    monkeypatch.setattr(campaign_module, "run_campaign", interrupted)
+    rc = main(argv)
+    err = capsys.readouterr().err
+    monkeypatch.undo()
+    assert rc == 130, err
+    assert [ln for ln in err.strip().splitlines() if ln] == ["graph-calib campaign: interrupted; finished work is kept"]
+    assert len(done) == 1 and done[0]["status"] == "computed"
+    finished = sorted(out.glob("*/factor-graph.json"))
+    assert finished == [out / done[0]["name"] / "factor-graph.json"]
+    kept = finished[0].read_bytes()
+    io.read_result(finished[0])  # a complete, valid file
+    assert not list(out.rglob(".*.tmp")) and not (out / "campaign.json").exists()
+
+    # the rerun computes only the two unfinished experiments and leaves the finished one as it was
+    assert main(argv) == 0
     doc = json.loads((out / "campaign.json").read_text())
-    assert doc["timing"]["tasks_cached"] >= len(finished)
+    assert doc["timing"]["tasks_cached"] == 1 and doc["timing"]["tasks_computed"] == 2
+    status = {e["name"]: e["results"]["factor-graph"]["status"] for e in doc["experiments"]}
+    assert status.pop(done[0]["name"]) == "cached" and set(status.values()) == {"computed"}
+    assert finished[0].read_bytes() == kept
+    # ... and its results are those of an uninterrupted run
+    fresh = tmp_path / "fresh"
+    assert main(["campaign", str(manifest), "--out", str(fresh), "--workers", "0", "--quiet", "--no-report"]) == 0
+    for e in doc["experiments"]:
+        a = io.read_result(out / e["name"] / "factor-graph.json")
+        b = io.read_result(fresh / e["name"] / "factor-graph.json")
+        assert a.values.keys() == b.values.keys()
+        for k in a.values:
+            assert a.values[k] == pytest.approx(b.values[k], rel=1e-9, abs=1e-12 * a.sigmas[k]), (e["name"], k)
+            assert a.sigmas[k] == pytest.approx(b.sigmas[k], rel=1e-9), (e["name"], k)
 
 
 # ---------------------------------------------------------------------------
@@ -293,11 +312,51 @@ def test_campaign_cli_prints_a_summary(campaign_run, simulated, capsys):
 
 
 @pytest.mark.skipif(os.environ.get("GRAPH_CALIB_SKIP_DEMO") == "1", reason="demo skipped by environment")
-def test_demo_command_help():
-    from graph_calib.cli import build_parser
+def test_demo_runs_campaign_and_diagnose(tmp_path, capsys):
+    """``graph-calib demo --out DIR`` (cli.md) with 72-s subranges, in process: exit 0 and every file it promises.
 
-    args = build_parser().parse_args(["demo", "--out", "x", "--hours", "0.2"])
-    assert args.hours == 0.2 and args.out == "x"
+    About 25 s on two free cores, most of it the report's figures (the twelve solver runs take a few seconds).
+    """
+    from graph_calib.params import FURTHER_EFFECTS
+
+    out = tmp_path / "demo"
+    rc = main(["demo", "--out", str(out), "--hours", "0.02", "--workers", "0"])
+    stdout = capsys.readouterr().out
+    assert rc == 0, stdout
+    # the simulated campaign: six subranges with their truth, the manifest, an independent validation record
+    data = out / "data"
+    stems = sorted(p.stem for p in data.glob("sub*.h5"))
+    assert len(stems) == 6
+    for stem in stems:
+        truth = io.read_result(data / f"{stem}.truth.json")
+        assert "gyro.bias.x" in truth.values
+    exp = io.read_experiment(data / f"{stems[0]}.h5")
+    assert exp.t[-1] - exp.t[0] + 1.0 / exp.rate_hz == pytest.approx(0.02 * 3600.0, rel=1e-3)  # --hours honoured
+    assert (data / "campaign.toml").is_file() and (data / "validation.h5").is_file()
+    io.read_result(data / "validation.truth.json")
+    # what graph-calib campaign writes
+    doc = json.loads((out / "campaign" / "campaign.json").read_text())
+    assert doc["format"] == "imu-calibration-campaign" and len(doc["experiments"]) == 6
+    assert not doc["failed"] and doc["timing"]["tasks_computed"] == 12
+    for e in doc["experiments"]:
+        folder = out / "campaign" / e["name"]
+        for s in ("sqrt-kf", "factor-graph"):
+            assert io.read_result(folder / f"{s}.json").solver == s
+        assert json.loads((folder / "comparison.json").read_text())["summary"]["agree"], e["name"]
+    assert doc["validation"][0]["reference_kind"] == "truth"
+    html = (out / "campaign" / "report.html").read_text()
+    assert html.count("data:image/png;base64,") >= 10 and not re.search(r'src="(?!data:)', html)
+    # what graph-calib diagnose writes, on the 20..30 degC subrange by default (cli.md's minimum content)
+    diag = json.loads((out / "diagnosis" / "diagnosis.json").read_text())
+    assert diag["format"] == "imu-calibration-diagnosis" and diag["version"] == 1
+    assert diag["source"] == "sub4_20_30.h5"
+    assert isinstance(diag["added"], list) and set(diag["added"]) <= set(FURTHER_EFFECTS)
+    assert isinstance(diag["unexplained"], bool)
+    for k in ("before", "after"):
+        assert isinstance(diag[k]["residual_rms"], dict) and diag[k]["residual_rms"]
+    assert (out / "diagnosis" / "report.html").is_file()
+    assert "demo finished" in stdout and "diagnose: ->" in stdout
+    assert not list(out.rglob(".*.tmp"))
 
 
 def test_existing_dask_cluster_by_address(simulated, tmp_path):
@@ -336,7 +395,10 @@ def test_validation_record_without_truth_is_checked_against_its_own_calibration(
     s = v["results"]["factor-graph"]["cubic"]
     assert "factor-graph estimate of held_out.h5" in s["reference"]
     # the held-out subrange's own estimate and the stitch of its neighbours agree within their uncertainty
-    # (an 18-min subrange's own bias is only good to about 0.01 deg/h at its ends: no verdict on 0.01 here)
-    assert s["largest"]["gyro_radps"] is not None and s["largest"]["accel_mps2"] < 2e-4
+    # (an 18-min subrange's own bias is only good to about 0.01 deg/h at its ends: no verdict on 0.01 here,
+    # but a few times that at most: 0.025 deg/h with this seed, largest_z 1.8; the bound is twice that)
+    assert s["gyro_criterion"] == "static windows"
+    assert s["largest"]["gyro_radps"] * c.RS_TO_DH < 0.05
+    assert s["largest"]["accel_mps2"] < 2e-4
     assert s["largest_z"]["gyro"] < 4.0 and s["largest_z"]["accel"] < 4.0
     assert "held_out.h5" in (tmp_path / "out" / "report.html").read_text()

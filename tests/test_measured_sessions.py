@@ -1,4 +1,5 @@
-"""Both solvers on the measured hand-held sessions of ``../shared/data/real`` (skipped where absent).
+"""Both solvers on the measured hand-held sessions of ``../shared/data/real`` (part of the
+checkout's environment: a missing file fails, it does not skip).
 
 Consumer grade, no table: gravity factors in static keyframes only, heading from the
 Earth rate. What must hold (issues #3 and #4; figures in docs/measured-sessions.md):
@@ -21,7 +22,7 @@ from graph_calib.model import ModelOptions
 from graph_calib.static_detection import detect_static
 from graph_calib.validation import static_pose_consistency
 
-from conftest import REAL_DATA
+from conftest import REAL_DATA, require_real
 
 XSENS = REAL_DATA / "imu_tk_xsens"
 MPU = REAL_DATA / "mpu6050_uncuyo"
@@ -42,16 +43,12 @@ def _session(exp):
 
 @pytest.fixture(scope="module")
 def xsens():
-    if not (XSENS / "xsens_acc.mat").exists():
-        pytest.skip("measured Xsens session not present")
-    return _session(import_xsens(XSENS / "xsens_acc.mat", XSENS / "xsens_gyro.mat"))
+    return _session(import_xsens(require_real(XSENS / "xsens_acc.mat"), require_real(XSENS / "xsens_gyro.mat")))
 
 
 @pytest.fixture(scope="module")
 def mpu():
-    if not (MPU / "example_data_calibration.csv").exists():
-        pytest.skip("measured MPU-6050 session not present")
-    return _session(import_mpu6050(MPU / "example_data_calibration.csv"))
+    return _session(import_mpu6050(require_real(MPU / "example_data_calibration.csv")))
 
 
 def _agree(s):
@@ -96,7 +93,7 @@ def test_xsens_solvers_agree(xsens):
 
 @pytest.mark.slow
 def test_mpu6050_near_the_authors_reference(mpu):
-    ref = mpu6050_reference_calibration(MPU / "reference_params_acc.csv")
+    ref = mpu6050_reference_calibration(require_real(MPU / "reference_params_acc.csv"))
     v = mpu["graph"].values
     for a in "xyz":
         assert abs(v[f"accel.scale.{a}"] - ref[f"accel.scale.{a}"]) < 6e-3, a

@@ -58,12 +58,66 @@ def test_static_at_latitude_keeps_attitude_over_hours():
     err = quat_angle(q[:: 997], q0)
     assert err.max() < 1e-10, err.max()
     assert quat_angle(q[-1], q0) < 1e-10
-    # the same increments integrated as if the Earth did not turn drift by OMEGA_E * 4 h (about 1 rad)
-    q_wrong = sd.integrate_attitude(dtheta[:100_000], t=t[:100_000], rate_hz=rate_hz, q_nb0=q0, latitude_rad=LAT)
-    assert quat_angle(q_wrong[-1], q0) < 1e-10
-    q_wrong_lat = sd.integrate_attitude(dtheta[:100_000], t=t[:100_000], rate_hz=rate_hz, q_nb0=q0,
-                                        latitude_rad=-LAT)
-    assert quat_angle(q_wrong_lat[-1], q0) > 1e-2  # the test can see a wrong Earth rate
+    # the same increments integrated at the wrong latitude: the level frame's turn is taken off about the wrong
+    # axis, C_nb(T) = Exp(-w(-LAT) T) Exp(w(LAT) T) C_nb0 (hand-made), 0.11 rad after 1000 s
+    m = 100_000
+    T = m / rate_hz
+    q_wrong_lat = sd.integrate_attitude(dtheta[:m], t=t[:m], rate_hz=rate_hz, q_nb0=q0, latitude_rad=-LAT)
+    expected = _rodrigues(-_earth_rate_enu(-LAT) * T) @ _rodrigues(_earth_rate_enu(LAT) * T) @ _dcm_by_hand(q0)
+    assert _dcm_angle(_dcm_by_hand(q_wrong_lat[-1]), expected) < 1e-10
+    assert _dcm_angle(expected, _dcm_by_hand(q0)) > 0.1  # the test can see a wrong Earth rate
+
+
+#: model.md: OMEGA_E = 7.292115e-5 rad/s, omega_ie_n = OMEGA_E [0, cos(lat), sin(lat)] in East-North-Up
+def _earth_rate_enu(lat):
+    return 7.292115e-5 * np.array([0.0, np.cos(lat), np.sin(lat)])
+
+
+def _rodrigues(v):
+    """Rotation matrix of the rotation vector ``v`` (by hand, independent of graph_calib.rotations)."""
+    a = np.linalg.norm(v)
+    K = np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]]) / a
+    return np.eye(3) + np.sin(a) * K + (1.0 - np.cos(a)) * K @ K
+
+
+def _dcm_by_hand(q):
+    """C_ab of the scalar-first Hamilton quaternion q_ab (model.md)."""
+    w, x, y, z = np.asarray(q) / np.linalg.norm(q)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _dcm_angle(A, B):
+    """Angle of the rotation between two rotation matrices, rad (accurate for small angles too)."""
+    D = A @ B.T
+    return float(np.arctan2(0.5 * np.linalg.norm([D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]]),
+                            0.5 * (np.trace(D) - 1.0)))
+
+
+@pytest.mark.parametrize("lat", [0.0, LAT, -LAT, np.pi / 2])
+def test_earth_rate_turns_a_body_at_rest_in_inertial_space(lat):
+    """The Earth-rate contribution alone: zero gyro increments (a body not turning against inertial space)
+    must come out as C_nb(t) = Exp(-omega_ie_n t) C_nb0, i.e. drift by exactly OMEGA_E t about -omega_ie_n
+    (at the equator about North, at the pole about Up), against a hand-made expectation."""
+    rng = np.random.default_rng(12)
+    rate_hz = 50.0
+    n = int(3600 * rate_hz)                     # 1 h: OMEGA_E * 1 h = 0.26 rad
+    t = 7.0 + np.arange(n) / rate_hz
+    q0 = random_quat(rng)
+    C0 = _dcm_by_hand(q0)
+    q = sd.integrate_attitude(np.zeros((n, 3)), t=t, rate_hz=rate_hz, q_nb0=q0, latitude_rad=lat)
+    T = sd.attitude_times(t, rate_hz) - (t[0] - 1.0 / rate_hz)
+    w = _earth_rate_enu(lat)
+    for k in (1, n // 3, n // 2 + 17, n):
+        expected = _rodrigues(-w * T[k]) @ C0
+        assert _dcm_angle(_dcm_by_hand(q[k]), expected) < 1e-10, (k, lat)
+    assert T[-1] == pytest.approx(3600.0)
+    assert _dcm_angle(_dcm_by_hand(q[-1]), C0) == pytest.approx(7.292115e-5 * 3600.0, rel=1e-9)
+    # the axis of the drift, in n: -omega_ie_n
+    D = _dcm_by_hand(q[-1]) @ C0.T
+    axis = np.array([D[2, 1] - D[1, 2], D[0, 2] - D[2, 0], D[1, 0] - D[0, 1]])
+    np.testing.assert_allclose(axis / np.linalg.norm(axis), -w / np.linalg.norm(w), atol=1e-9)
 
 
 def _coning_truth(alpha, Omega, t):
