@@ -55,7 +55,8 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib.calibration import Calibration, triad_errors
-from graph_calib.params import SPECS, Layout, split_element_name
+from graph_calib.effects import EFFECTS
+from graph_calib.params import Layout, split_element_name
 from graph_calib.stitching import family, result_points, sensor_columns, sensor_of
 
 #: The method's published accuracy: gyro drift, rad/s (0.01 deg/h).
@@ -67,7 +68,7 @@ ACCEL_ACCURACY_MPS2 = 2e-4
 ERROR_LAYOUT = Layout(("gyro.bias", "gyro.scale", "gyro.misalignment", "accel.bias", "accel.scale",
                        "accel.misalignment"))
 #: The same with their temperature coefficients: what a single result contributes.
-RESULT_PARAMETERS = tuple(n for n in SPECS if family(n)[0] in ERROR_LAYOUT.names)
+RESULT_PARAMETERS = tuple(n for n in EFFECTS if family(n)[0] in ERROR_LAYOUT.names)
 
 
 def _parameter_of(element):

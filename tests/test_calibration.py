@@ -10,7 +10,8 @@ from graph_calib.calibration import CALIBRATION_FORMAT, CALIBRATION_VERSION, Cal
 from graph_calib.errors import InputError
 from graph_calib.experiment import Experiment, Result
 from graph_calib.model import CalibrationModel
-from graph_calib.params import SPECS, Layout
+from graph_calib.effects import EFFECTS
+from graph_calib.params import Layout
 from graph_calib.validation import ResultCalibration, sensor_error_sigmas, sensor_errors
 
 #: Every parameter of the declared model that has a sensor term (mount, lever arm and table lag do not).
@@ -157,10 +158,10 @@ def test_sensor_errors_are_model_md_equations():
         return np.array([v[f"{p}.{a}"] for a in "xyz"])
 
     Mg = np.zeros((3, 3))
-    for el in SPECS["gyro.misalignment"].elements:
+    for el in EFFECTS["gyro.misalignment"].elements:
         Mg["xyz".index(el[0]), "xyz".index(el[1])] = v[f"gyro.misalignment.{el}"]
     Ma = np.zeros((3, 3))
-    for el in SPECS["accel.misalignment"].elements:
+    for el in EFFECTS["accel.misalignment"].elements:
         Ma["xyz".index(el[0]), "xyz".index(el[1])] = v[f"accel.misalignment.{el}"]
     G = np.array([[v[f"gyro.g_sensitivity.{i}{j}"] for j in "xyz"] for i in "xyz"])
     # omega_meas = (I + diag(scale(T)) + M_g) omega + bias(T) + G f,  p(T) = p + p_tc dT
