@@ -51,7 +51,7 @@ def test_calibrate_estimates_match_the_simulated_truth(solver, experiment_file, 
     many elements are prior-bound and the simulated IMU is drawn inside its prior)."""
     import numpy as np
 
-    from graph_calib.params import DECLARED, SPECS
+    from graph_calib.effects import DECLARED, EFFECTS
 
     truth = io.read_result(experiment_file.with_name(experiment_file.stem + ".truth.json"))
     res = io.read_result(calibrated_both / f"{solver}.json")
@@ -62,7 +62,7 @@ def test_calibrate_estimates_match_the_simulated_truth(solver, experiment_file, 
     assert truth.t_ref_degC == pytest.approx(t_ref, abs=1e-9)
     # every declared element is compared, except time_lag.table: the encoders of this scenario are valid only
     # at rest, where a table time lag changes no measurement, so the solvers leave it out (docs/model.md)
-    declared = [e for n in DECLARED for e in SPECS[n].element_names()]
+    declared = [e for n in DECLARED for e in EFFECTS[n].element_names()]
     assert set(truth.values) == set(declared)
     assert set(declared) - set(res.values) == {"time_lag.table"}
     names = [e for e in declared if e in res.values]
