@@ -317,7 +317,7 @@ def test_demo_runs_campaign_and_diagnose(tmp_path, capsys):
 
     About 25 s on two free cores, most of it the report's figures (the twelve solver runs take a few seconds).
     """
-    from graph_calib.params import FURTHER_EFFECTS
+    from graph_calib.effects import FURTHER_EFFECTS
 
     out = tmp_path / "demo"
     rc = main(["demo", "--out", str(out), "--hours", "0.02", "--workers", "0"])

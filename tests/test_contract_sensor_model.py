@@ -20,7 +20,8 @@ accelerometers (``size_effect``); ``domega`` the angular acceleration; ``dsignal
 import numpy as np
 import pytest
 
-from graph_calib.params import DECLARED, FURTHER_EFFECTS, Layout
+from graph_calib.effects import DECLARED, FURTHER_EFFECTS
+from graph_calib.params import Layout
 from graph_calib.sensor_model import measure
 
 N = 64
