@@ -127,8 +127,9 @@ def test_correct_feeds_the_model_as_the_solvers_do(experiment_factory):
                                "accel.nonlinearity", "accel.size_effect", "time_lag.accel")
     cal = random_calibration(rng, names, t_ref_degC=23.0)
     exp = experiment_factory(n=800)
-    m = CalibrationModel(exp, t_ref_degC=cal.t_ref_degC)
-    n_iter = m.options.n_newton
+    model = CalibrationModel(exp, t_ref_degC=cal.t_ref_degC)
+    n_iter = model.options.n_newton
+    m = model.record
     w_ref = sm.correct(cal.layout, cal.x, "gyro", m.w_raw, dT=m.dTg, dTdt=m.dTdtg, other=m.f_raw,
                        domega=m.dw_raw, dsignal=m.dw_raw, n_iter=n_iter)
     f_ref = sm.correct(cal.layout, cal.x, "accel", m.f_raw, dT=m.dTa, dTdt=m.dTdta, other=m.w_raw,
