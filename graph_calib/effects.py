@@ -209,6 +209,13 @@ REGISTRY = (
              view=("specific_force", "gyro"), needs=NEEDS_VALID_READINGS,
              why_needs="needs a turntable: the tilt on the dampers is seen only by the encoders",
              drawn_when_off=True),
+    # cubic temperature terms of the biases: the curvature of a real IMU over a wide subrange
+    _further("gyro.bias_tc3", XYZ, "rad/s/degC^3", "deg/h/degC^3", _DH, triad="gyro", term="bias_tc3",
+             prior=PriorRule("gyro.bias_tc", divisor=2.0), size=(0.02 * DH, 0.03 * DH),
+             view=("temperature", "gyro"), temperature_of="gyro.bias", temperature_order=3),
+    _further("accel.bias_tc3", XYZ, "m/s^2/degC^3", "micro-g/degC^3", _UG, triad="accel", term="bias_tc3",
+             prior=PriorRule("accel.bias_tc", divisor=2.0), size=(20 * UG, 30 * UG),
+             view=("temperature", "accel"), temperature_of="accel.bias", temperature_order=3),
 )
 
 #: ``{name: Effect}``.

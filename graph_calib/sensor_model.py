@@ -16,6 +16,7 @@ code                feature on ``axis`` (``s`` the triad signal)  parameters
 ``BIAS_TC``         ``dT``                                       ``*.bias_tc``
 ``BIAS_TC2``        ``dT**2``                                    ``*.bias_tc2``
 ``BIAS_DTDT``       ``dT/dt``                                    ``*.bias_dtdt``
+``BIAS_TC3``        ``dT**3``                                    ``*.bias_tc3``
 ``SCALE``           ``s[axis]``                                  ``*.scale``
 ``SCALE_TC``        ``s[axis] * dT``                             ``*.scale_tc``
 ``SCALE_TC2``       ``s[axis] * dT**2``                          ``*.scale_tc2``
@@ -51,6 +52,7 @@ import numpy as np
 from graph_calib.effects import EFFECTS, XYZ
 
 BIAS, BIAS_TC, BIAS_TC2, BIAS_DTDT, SCALE, SCALE_TC, SCALE_TC2, SCALE_ASYM, CROSS, GSENS, NONLIN, SIZE, LAG = range(13)
+BIAS_TC3 = 13
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
@@ -58,7 +60,7 @@ _AXIS = {"x": 0, "y": 1, "z": 2}
 TERM_CODES = {
     "bias": BIAS, "bias_tc": BIAS_TC, "bias_tc2": BIAS_TC2, "bias_dtdt": BIAS_DTDT,
     "scale": SCALE, "scale_tc": SCALE_TC, "scale_tc2": SCALE_TC2, "scale_asym": SCALE_ASYM,
-    "cross": CROSS, "gsens": GSENS, "nonlin": NONLIN, "size": SIZE, "lag": LAG,
+    "cross": CROSS, "gsens": GSENS, "nonlin": NONLIN, "size": SIZE, "lag": LAG, "bias_tc3": BIAS_TC3,
 }
 
 
@@ -115,6 +117,8 @@ def _feature(code, axis, aux, s, dT, dTdt, other, domega, dsig):
         return dT[axis] * dT[axis]
     if code == BIAS_DTDT:
         return dTdt[axis]
+    if code == BIAS_TC3:
+        return dT[axis] * dT[axis] * dT[axis]
     if code == SCALE:
         return s[axis]
     if code == SCALE_TC:

@@ -178,10 +178,11 @@ def test_mounting_lever_arm_table_lag_and_damping_are_not_sensor_errors(triad):
 
 
 @pytest.mark.parametrize("triad", ["gyro", "accel"])
-@pytest.mark.parametrize("name", ["bias_tc2", "scale_tc2", "bias_dtdt"])
+@pytest.mark.parametrize("name", ["bias_tc2", "scale_tc2", "bias_dtdt", "bias_tc3"])
 @pytest.mark.parametrize("axis", "xyz")
 def test_temperature_effects(triad, name, axis):
-    """bias_tc2: ``p dT^2``; scale_tc2: scale error ``p dT^2``; bias_dtdt: ``p dT/dt`` (sensor ``a``'s own)."""
+    """bias_tc2: ``p dT^2``; scale_tc2: scale error ``p dT^2``; bias_dtdt: ``p dT/dt`` (sensor ``a``'s own);
+    bias_tc3 (the project's cubic term, docs/model.md): ``p dT^3``."""
     layout = Layout.declared(extra=(f"{triad}.{name}",))
     i = AXIS[axis]
     signal, ctx = _context(600 + i, triad)
@@ -189,7 +190,8 @@ def test_temperature_effects(triad, name, axis):
     x = layout.zeros()
     x[layout.index(f"{triad}.{name}.{axis}")] = p
     dT, dTdt = ctx["dT"][:, i], ctx["dTdt"][:, i]
-    extra = {"bias_tc2": p * dT**2, "scale_tc2": p * dT**2 * signal[:, i], "bias_dtdt": p * dTdt}[name]
+    extra = {"bias_tc2": p * dT**2, "scale_tc2": p * dT**2 * signal[:, i], "bias_dtdt": p * dTdt,
+             "bias_tc3": p * dT**3}[name]
     expected = signal.copy()
     expected[:, i] += extra
     _check(_measure(layout, x, triad, signal, ctx), expected)
@@ -305,7 +307,7 @@ def _everything_by_hand(layout, x, triad, signal, ctx):
     vec = lambda name: np.array([v[f"{name}.{a}"] for a in "xyz"])
     dT, dTdt = ctx["dT"], ctx["dTdt"]
     out = _declared_by_hand(layout, x, triad, signal, dT)
-    out += vec(f"{triad}.bias_tc2") * dT**2 + vec(f"{triad}.bias_dtdt") * dTdt
+    out += vec(f"{triad}.bias_tc2") * dT**2 + vec(f"{triad}.bias_dtdt") * dTdt + vec(f"{triad}.bias_tc3") * dT**3
     out += vec(f"{triad}.scale_tc2") * dT**2 * signal
     if triad == "gyro":
         out += vec("gyro.scale_asym") * np.sign(signal) * signal
