@@ -26,7 +26,8 @@ from typing import Callable
 
 import numpy as np
 
-from graph_calib import effects, params
+from graph_calib import params
+from graph_calib.effects import FURTHER_EFFECTS
 from graph_calib.errors import InputError
 from graph_calib.experiment import Experiment, Result, Table
 from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
@@ -489,8 +490,8 @@ def _check_common(hours, rate_hz, effect_scale, effects):
     if not (np.isfinite(effect_scale) and effect_scale >= 0):
         raise InputError(f"--effect-scale must be a non-negative number, got {effect_scale!r}")
     for e in effects:
-        if e not in effects.FURTHER_EFFECTS:
-            raise InputError(f"unknown effect {e!r}; known: {', '.join(effects.FURTHER_EFFECTS)}")
+        if e not in FURTHER_EFFECTS:
+            raise InputError(f"unknown effect {e!r}; known: {', '.join(FURTHER_EFFECTS)}")
 
 
 def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, noise, errors, rate_hz, effects,
@@ -649,7 +650,7 @@ def _registry():
         "consumer-handheld": Scenario("consumer-handheld", "consumer MEMS turned by hand, no table, ~5 min",
                                       consumer_handheld),
     }
-    for e in effects.FURTHER_EFFECTS:
+    for e in FURTHER_EFFECTS:
         name = f"effect-{e}"
         build = partial(effect_scenario, e)
         build.__doc__ = effect_scenario.__doc__
