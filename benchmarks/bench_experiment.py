@@ -13,7 +13,7 @@ import numpy as np
 
 from graph_calib import io
 from graph_calib.calibrate import build_problem, compare, run_factor_graph, run_sqrt_kf
-from graph_calib.simulate import simulate
+from graph_calib.simulation import simulate
 from graph_calib.strapdown import integrate_attitude
 
 

@@ -16,7 +16,7 @@ import time
 import numpy as np
 
 from graph_calib.calibrate import CalibrationOptions, build_problem
-from graph_calib.simulate import simulate
+from graph_calib.simulation import simulate
 from kf_reference import calibrate
 
 

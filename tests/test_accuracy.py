@@ -26,7 +26,7 @@ from graph_calib.calibrate import (
     run_sqrt_kf,
 )
 from graph_calib.model import ModelOptions
-from graph_calib.simulate import simulate
+from graph_calib.simulation import simulate
 from graph_calib.validation import ResultCalibration, validate
 
 SOLVERS = {"sqrt-kf": run_sqrt_kf, "factor-graph": run_factor_graph}
