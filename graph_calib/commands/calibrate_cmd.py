@@ -14,7 +14,7 @@ def add_arguments(p):
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default="both")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
-                   help="IMU grade for priors and noise (default: navigation, or the grade in --manifest)")
+                   help="IMU grade for priors and noise (default: navigation)")
     p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="model a further effect of model.md (repeatable)")
