@@ -29,7 +29,7 @@ import numpy as np
 from graph_calib import params
 from graph_calib.errors import InputError
 from graph_calib.experiment import Experiment, Result, Table
-from graph_calib.rotations import dcm_to_quat, exp_so3, log_so3, quat_to_dcm
+from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
 from graph_calib.simulation.handheld import HandheldMotion
 from graph_calib.simulation.imu import SignalModel, simulate_increments
 from graph_calib.simulation.thermal import ThermalModel, ramp_chamber
@@ -100,12 +100,6 @@ class Design:
 
 NAV_DESIGN = Design()
 SHORT_DESIGN = Design(alignment_s=180.0, dwell_s=(15.0, 25.0))
-
-
-def _wrap_quarters(q):
-    """A quarter-turn count reduced to -1, 0, 1, 2."""
-    q = q % 4
-    return q - 4 if q == 3 else q
 
 
 def rotation_program(rate_hz, duration_s, *, rng, design=NAV_DESIGN):
@@ -530,17 +524,6 @@ def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, n
     return Simulation(scenario=name, imu_id=imu_id, grade="navigation", plans=tuple(plans), imu=imu, info=info)
 
 
-_COMMON_DOC = """
-    Common options: ``noise`` (False: no sensor, encoder or temperature noise),
-    ``errors`` (False: every truth parameter zero), ``hours`` (length of each
-    experiment), ``rate_hz``, ``effects`` (further effects of model.md switched
-    on), ``effect_scale`` (multiplies their sizes), ``curvature`` (False: exactly
-    linear temperature curves), ``latitude_deg``, ``gravity_mps2``,
-    ``table_valid`` (``"static"`` or ``"all"``), ``encoder_rate_hz``, ``tag``
-    (free text for the description and the truth file).
-"""
-
-
 def nav_subrange(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                  curvature=True, subrange=(20.0, 30.0), span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG,
                  gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag=""):
@@ -684,6 +667,14 @@ def simulate(name, *, rng, **options):
         The only source of randomness.
     **options
         Options of the scenario; ``None`` values take the scenario's default.
+        Common ones: ``noise`` (False: no sensor, encoder or temperature noise),
+        ``errors`` (False: every truth parameter zero), ``hours`` (length of each
+        experiment), ``rate_hz``, ``effects`` (further effects of model.md switched
+        on), ``effect_scale`` (multiplies their sizes), ``latitude_deg``,
+        ``gravity_mps2``, ``tag`` (free text for the description and the truth
+        file); the table scenarios also ``curvature`` (False: exactly linear
+        temperature curves), ``table_valid`` (``"static"`` or ``"all"``) and
+        ``encoder_rate_hz``.
 
     Returns
     -------
