@@ -5,7 +5,7 @@
 Each benchmark runs in its own process with this interpreter, from the repository root and with
 the repository root first on ``PYTHONPATH`` (so the checkout this script is in is measured, not
 another editable install), at its documented sizes; ``--quick`` passes the small sizes of
-:data:`QUICK` instead (minutes in all, figures not comparable with docs/performance.md).  A
+:data:`QUICK` instead (about a minute, figures not comparable with docs/performance.md).  A
 benchmark's human output is passed through; its headline figures are its ``BENCH {...}`` lines
 (``benchmarks/_report.py``), gathered into one table: benchmark, what, figure, unit, and the
 benchmark's wall time in seconds.  Exit code 0 when every benchmark ran, 1 when one failed.
