@@ -21,6 +21,8 @@ import threading
 import time
 from pathlib import Path
 
+from _report import report
+
 
 class MemoryMonitor:
     """Peak summed RSS of this process and all its children, sampled in a thread."""
@@ -112,6 +114,11 @@ def main(argv=None):
     print("  per task (build + solve, on its worker):")
     for name, s, sec in per:
         print(f"    {name:12s} {s:13s} {sec:7.1f} s" if sec is not None else f"    {name:12s} {s:13s}       -")
+    report("end_to_end_s", wall, "s", f"campaign 6 x {args.hours:g} h, {args.solvers}, {args.workers} workers")
+    report("tasks_s", tim["tasks_seconds"], "s", "calibration tasks (Dask)")
+    if not args.no_report:
+        report("report_s", tim.get("report_seconds", 0.0), "s", "report.html")
+    report("peak_memory_gb", mem.peak_total / 2**30, "GB", "peak memory, all processes")
     if run.failed:
         print("FAILED:", run.failed)
         return 1

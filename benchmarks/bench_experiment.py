@@ -1,33 +1,48 @@
 """Time one navigation-grade 1.5 h, 100 Hz experiment end to end (run by hand).
 
 Simulate (nav-subrange), write, read, integrate attitude, then both solvers.
-    .venv/bin/python benchmarks/bench_experiment.py
+    .venv/bin/python benchmarks/bench_experiment.py [--hours H]
+
+``--hours`` shortens the record (default: the scenario's 1.5 h).
 """
 
+import argparse
 import os
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+from _report import report
 
 from graph_calib import io
 from graph_calib.calibrate import build_problem, compare, run_factor_graph, run_sqrt_kf
-from graph_calib.simulate import simulate
+from graph_calib.simulation import simulate
 from graph_calib.strapdown import integrate_attitude
 
 
-def timed(label, fn):
+SECONDS = {}
+
+
+def timed(label, fn, key=None):
     t = time.perf_counter()
     out = fn()
-    print(f"{label:34s} {time.perf_counter() - t:7.2f} s")
+    el = time.perf_counter() - t
+    print(f"{label:34s} {el:7.2f} s")
+    if key:
+        SECONDS[key] = (label, el)
     return out
 
 
 def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--hours", type=float, default=None, help="record length, h (default: the scenario's 1.5)")
+    args = parser.parse_args()
+
     print(f"load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} cores")
-    sim = simulate("nav-subrange", rng=np.random.default_rng(0))
-    (exp, truth), = timed("simulate 1.5 h at 100 Hz", sim.pairs)
+    options = {} if args.hours is None else {"hours": args.hours}
+    sim = simulate("nav-subrange", rng=np.random.default_rng(0), **options)
+    (exp, truth), = timed(f"simulate {args.hours or 1.5:g} h at 100 Hz", sim.pairs, "simulate_s")
     with tempfile.TemporaryDirectory() as d:
         path = Path(d) / "exp.h5"
         timed("write experiment", lambda: io.write_experiment(exp, path))
@@ -37,12 +52,16 @@ def main():
     timed("integrate attitude", lambda: integrate_attitude(exp.dtheta, t=exp.t, rate_hz=exp.rate_hz,
                                                            q_nb0=np.array([1.0, 0, 0, 0]),
                                                            latitude_rad=exp.latitude_rad))
-    problem = timed("set up model + alignment", lambda: build_problem(exp))
+    problem = timed("set up model + alignment", lambda: build_problem(exp), "setup_s")
     timed("preintegrate (first call compiles or loads)", lambda: problem.model.preintegrate(problem.model.prior()[0]))
-    graph, gr = timed("factor graph solve", lambda: run_factor_graph(problem))
-    kf, fr = timed("square-root filter solve", lambda: run_sqrt_kf(problem))
+    graph, gr = timed("factor graph solve", lambda: run_factor_graph(problem), "graph_s")
+    kf, fr = timed("square-root filter solve", lambda: run_sqrt_kf(problem), "filter_s")
     print(f"  factor graph iterations {gr.iterations}, filter passes {len(fr.passes)}")
-    print("  agreement:", compare(kf, graph)["summary"])
+    summary = compare(kf, graph)["summary"]
+    print("  agreement:", summary)
+    for key, (label, seconds) in SECONDS.items():
+        report(key, seconds, "s", label)
+    report("agreement_sigma", summary["max_abs_difference_in_sigma"], "sigma", "filter vs graph, max |difference|")
 
 
 if __name__ == "__main__":

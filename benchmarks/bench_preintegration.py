@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+from _report import report
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
@@ -50,7 +51,7 @@ def main():
           f"threading layer {numba.config.THREADING_LAYER}")
     print(f"record: {n} samples ({n / exp.rate_hz / 3600:.2f} h at {exp.rate_hz:g} Hz)")
     threads = sorted({1, min(2, numba.config.NUMBA_NUM_THREADS), numba.config.NUMBA_NUM_THREADS})
-    for label, extra in (("declared", ()), ("all further effects", FURTHER_EFFECTS)):
+    for key, label, extra in (("declared", "declared", ()), ("further", "all further effects", FURTHER_EFFECTS)):
         model = CalibrationModel(exp, options=ModelOptions(extra_effects=extra))
         x = model.prior()[0] + rng.normal(size=model.layout.size) * model.prior()[1] * 0.1
         t0 = time.perf_counter()
@@ -69,6 +70,8 @@ def main():
                 best = min(best, time.perf_counter() - t0)
             print(f"  {nt} thread{'s' if nt > 1 else ' '}: {best * 1e6 / n:6.3f} us/sample "
                   f"({best:.3f} s per call)")
+            report(f"{key}_{nt}t", best * 1e6 / n, "us/sample",
+                   f"preintegrate, {label}, {nt} thread{'s' if nt > 1 else ''}, best of {args.repeat}")
         numba.set_num_threads(numba.config.NUMBA_NUM_THREADS)
 
 

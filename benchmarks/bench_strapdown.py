@@ -15,6 +15,7 @@ import platform
 import time
 
 import numpy as np
+from _report import report
 
 from graph_calib.constants import DEG_TO_RAD
 from graph_calib.experiment import Experiment
@@ -63,6 +64,9 @@ def main():
     found = detect_static(exp)
     el = time.perf_counter() - t0
     print(f"detect_static, {n:,} samples: {el:.3f} s ({found.shape[0]} interval(s))")
+    report("integrate_s", best, "s", f"integrate_attitude, {n:,} samples, best of {args.repeat}")
+    report("integrate_rate", n / best / 1e6, "M samples/s", "integrate_attitude rate")
+    report("detect_static_s", el, "s", f"detect_static, {n:,} samples")
 
 
 if __name__ == "__main__":

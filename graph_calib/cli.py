@@ -3,13 +3,16 @@
 Each command lives in its own module under :mod:`graph_calib.commands` with two
 functions, ``add_arguments(parser)`` and ``run(args) -> int``.  Exit codes
 (``cli.md``): 0 success, 2 bad input or arguments (one line, no traceback),
-1 internal failure.
+1 internal failure (one line naming the command and the exception; with the
+environment variable ``GRAPH_CALIB_DEBUG=1`` the exception is re-raised, traceback
+included), 130 when interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 from graph_calib.errors import InputError
@@ -39,37 +42,44 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, help_text in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
-        module = _module(name)
-        if module is not None:
-            module.add_arguments(p)
-        p.set_defaults(_module=name)
+        _module(name).add_arguments(p)
     return parser
 
 
 def _module(name):
-    try:
-        return importlib.import_module(f"graph_calib.commands.{name.replace('-', '_')}_cmd")
-    except ModuleNotFoundError as exc:
-        if exc.name and exc.name.startswith("graph_calib.commands"):
-            return None
-        raise
+    """The module of command ``name``: ``graph_calib.commands.<name>_cmd``."""
+    return importlib.import_module(f"graph_calib.commands.{name.replace('-', '_')}_cmd")
+
+
+def _debug():
+    return os.environ.get("GRAPH_CALIB_DEBUG", "") not in ("", "0")
 
 
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    module = _module(args._module)
-    if module is None:
-        print(f"graph-calib {args.command}: not available in this version", file=sys.stderr)
-        return 1
     try:
-        return int(module.run(args) or 0)
+        return int(_module(args.command).run(args) or 0)
     except InputError as exc:
         print(f"graph-calib {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"graph-calib {args.command}: interrupted; finished work is kept", file=sys.stderr)
         return 130
+    except Exception as exc:
+        if _debug():
+            raise
+        print(f"graph-calib {args.command}: internal error: {_one_line(exc)} "
+              "(GRAPH_CALIB_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
+
+
+def _one_line(exc):
+    """``RuntimeError: boom``: the exception's type and the first line of its message."""
+    lines = str(exc).strip().splitlines()
+    if not lines:
+        return type(exc).__name__
+    return f"{type(exc).__name__}: {lines[0]}" + (" ..." if len(lines) > 1 else "")
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -20,7 +20,7 @@ import pytest
 from graph_calib import constants as c
 from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
 from graph_calib.model import ModelOptions
-from graph_calib.simulate import simulate
+from graph_calib.simulation import simulate
 from graph_calib.validation import ResultCalibration, validate
 
 from graph_calib.solvers.registry import DEFAULT_SOLVERS as SOLVERS

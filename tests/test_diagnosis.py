@@ -27,7 +27,7 @@ from graph_calib.diagnosis import (
     score_test,
     time_basis,
 )
-from graph_calib.simulate import simulate
+from graph_calib.simulation import simulate
 
 FG_ONLY = DiagnosisOptions(solvers=("factor-graph",))
 REPO = Path(__file__).resolve().parents[1]
@@ -107,7 +107,7 @@ def test_score_statistic_is_one_gauss_newton_step_of_the_extended_graph():
 def test_diagnose_command_writes_the_files_of_cli_md(tmp_path):
     """CLI end to end on a 3-minute record with both solvers; the truth file beside it is picked up."""
     from graph_calib import io
-    from graph_calib.simulate import write_simulation
+    from graph_calib.simulation import write_simulation
 
     sim = simulate("effect-time_lag.accel", rng=np.random.default_rng(2), hours=0.05)
     write_simulation(sim, tmp_path / "sim")

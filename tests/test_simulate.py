@@ -9,7 +9,7 @@ from graph_calib.cli import main
 from graph_calib.constants import ARCSEC_TO_RAD, DH_TO_RS, RAD_TO_ARCSEC, omega_ie_n
 from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
 from graph_calib.sensor_model import correct
-from graph_calib.simulate import SCENARIOS, scenario_names, simulate, write_simulation
+from graph_calib.simulation import SCENARIOS, scenario_names, simulate, write_simulation
 from graph_calib.simulation.handheld import HandheldMotion
 from graph_calib.simulation.imu import SignalModel, simulate_increments
 from graph_calib.simulation.thermal import ThermalModel
@@ -449,7 +449,7 @@ def test_cli_simulate(tmp_path, capsys):
 
 
 def test_further_experiment_of_the_same_imu_and_its_refusal_without_a_table():
-    from graph_calib.simulate import simulate as _simulate
+    from graph_calib.simulation import simulate as _simulate
 
     sim = _simulate("nav-campaign", rng=np.random.default_rng(2), hours=0.05, rate_hz=20.0)
     assert sim.temperature_range() == (-10.0, 50.0)

@@ -12,8 +12,9 @@ def add_arguments(p):
     p.add_argument("manifest", help="campaign manifest (TOML, data-format.md)")
     p.add_argument("--out", required=True, help="output folder (one sub-folder per experiment)")
     p.add_argument("--workers", type=int, default=None,
-                   help="Dask worker processes of the local cluster, one thread each (default: one per CPU core, "
-                        "at most one per task); 0: no Dask, one task after the other in this process")
+                   help="Dask worker processes of the local cluster, one thread each (default: one per CPU core; "
+                        "never more than one per experiment); 0: no Dask, one task after the other in this "
+                        "process")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="use an existing Dask cluster (e.g. tcp://host:8786); its workers must see --out")
     p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default=None,

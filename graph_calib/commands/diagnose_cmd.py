@@ -23,7 +23,7 @@ def add_arguments(p):
                    help="IMU grade for priors and noise (default: navigation)")
     p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
-                   help="a further effect already in the declared model (repeatable)")
+                   help="a further effect of model.md in the model from the start, not tested (repeatable)")
     p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
     p.add_argument("--alpha", type=float, default=0.01,
                    help="false-alarm probability of each decision (default 0.01, Bonferroni over the tests)")

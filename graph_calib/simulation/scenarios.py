@@ -103,12 +103,6 @@ NAV_DESIGN = Design()
 SHORT_DESIGN = Design(alignment_s=180.0, dwell_s=(15.0, 25.0))
 
 
-def _wrap_quarters(q):
-    """A quarter-turn count reduced to -1, 0, 1, 2."""
-    q = q % 4
-    return q - 4 if q == 3 else q
-
-
 def rotation_program(rate_hz, duration_s, *, rng, design=NAV_DESIGN):
     """Turntable programme: alignment, then rotations about each instrument axis held horizontal.
 
@@ -531,17 +525,6 @@ def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, n
     return Simulation(scenario=name, imu_id=imu_id, grade="navigation", plans=tuple(plans), imu=imu, info=info)
 
 
-_COMMON_DOC = """
-    Common options: ``noise`` (False: no sensor, encoder or temperature noise),
-    ``errors`` (False: every truth parameter zero), ``hours`` (length of each
-    experiment), ``rate_hz``, ``effects`` (further effects of model.md switched
-    on), ``effect_scale`` (multiplies their sizes), ``curvature`` (False: exactly
-    linear temperature curves), ``latitude_deg``, ``gravity_mps2``,
-    ``table_valid`` (``"static"`` or ``"all"``), ``encoder_rate_hz``, ``tag``
-    (free text for the description and the truth file).
-"""
-
-
 def nav_subrange(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                  curvature=True, subrange=(20.0, 30.0), span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG,
                  gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag=""):
@@ -685,6 +668,14 @@ def simulate(name, *, rng, **options):
         The only source of randomness.
     **options
         Options of the scenario; ``None`` values take the scenario's default.
+        Common ones: ``noise`` (False: no sensor, encoder or temperature noise),
+        ``errors`` (False: every truth parameter zero), ``hours`` (length of each
+        experiment), ``rate_hz``, ``effects`` (further effects of model.md switched
+        on), ``effect_scale`` (multiplies their sizes), ``latitude_deg``,
+        ``gravity_mps2``, ``tag`` (free text for the description and the truth
+        file); the table scenarios also ``curvature`` (False: exactly linear
+        temperature curves), ``table_valid`` (``"static"`` or ``"all"``) and
+        ``encoder_rate_hz``.
 
     Returns
     -------
