@@ -481,14 +481,14 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
 # ---------------------------------------------------------------------------
 
 
-def _check_common(hours, rate_hz, effect_scale, effects):
+def _check_common(hours, rate_hz, effect_scale, effect_names):
     if hours is not None and not (np.isfinite(hours) and hours > 0):
         raise InputError(f"--hours must be a positive number, got {hours!r}")
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f"rate_hz must be positive, got {rate_hz!r}")
     if not (np.isfinite(effect_scale) and effect_scale >= 0):
         raise InputError(f"--effect-scale must be a non-negative number, got {effect_scale!r}")
-    for e in effects:
+    for e in effect_names:
         if e not in effects.FURTHER_EFFECTS:
             raise InputError(f"unknown effect {e!r}; known: {', '.join(effects.FURTHER_EFFECTS)}")
 
