@@ -16,8 +16,14 @@ Modules
 :mod:`~graph_calib.simulation.imu`
     True rates and specific force, sensor errors through
     :func:`graph_calib.sensor_model.measure`, Gauss-Legendre increments.
+:mod:`~graph_calib.simulation.design`
+    The rotation design of a table experiment and its turntable programme.
+:mod:`~graph_calib.simulation.experiments`
+    The turntable and hand-held experiment builders and their truth.
 :mod:`~graph_calib.simulation.scenarios`
-    The scenario registry, :func:`simulate` and :func:`write_simulation`.
+    The scenario catalogue, its registry and :func:`simulate`.
+:mod:`~graph_calib.simulation.writing`
+    :func:`write_simulation`: experiment files, truth files and the manifest.
 
 ``docs/simulator.md`` describes the whole and its accuracy.
 
@@ -29,21 +35,20 @@ Examples
 [7200]
 """
 
+from graph_calib.simulation.experiments import SimulatedExperiment
 from graph_calib.simulation.imu import SignalModel, simulate_increments
 from graph_calib.simulation.scenarios import (
     SCENARIOS,
     ExperimentPlan,
     Scenario,
-    SimulatedExperiment,
     Simulation,
     get_scenario,
-    manifest_text,
     scenario_names,
     simulate,
-    write_simulation,
 )
 from graph_calib.simulation.thermal import ThermalModel
 from graph_calib.simulation.truth import EFFECT_SIZES, TRUTH_RANGES, ImuTruth, draw_imu
+from graph_calib.simulation.writing import manifest_text, write_simulation
 
 __all__ = [
     "SCENARIOS", "Scenario", "Simulation", "SimulatedExperiment", "ExperimentPlan", "get_scenario",

@@ -1,0 +1,222 @@
+r"""Any delimited text log, described by a column mapping and units (:func:`import_csv`)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graph_calib import constants as c
+from graph_calib.errors import InputError
+from graph_calib.importers.build import (
+    ASSUMED_TEMPERATURE_NAME,
+    _build,
+    _constant_temperature,
+    _intervals,
+)
+from graph_calib.importers.text import (
+    _check_time_column,
+    _nominal_rate,
+    _positive,
+    _require_file,
+    _show,
+    _split,
+    read_numeric_table,
+)
+
+#: Units of :func:`import_csv`: name -> (factor to SI, True for a rate, False for an increment).
+GYRO_UNITS = {"rad/s": (1.0, True), "deg/s": (c.DEG_TO_RAD, True), "rad": (1.0, False), "deg": (c.DEG_TO_RAD, False)}
+ACCEL_UNITS = {"m/s^2": (1.0, True), "g": (c.G0, True), "m/s": (1.0, False)}
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+CSV_SENSOR_COLUMNS = ("gx", "gy", "gz", "ax", "ay", "az")
+
+
+def _resolve_columns(columns, *, path, delimiter, header_lines):
+    """Check a column mapping; return ({key: 0-based index}, [temperature keys], {key: channel name})."""
+    if not isinstance(columns, dict) or not columns:
+        raise InputError("columns must map names (t, gx, gy, gz, ax, ay, az, temp or temp:NAME) to columns",
+                         dataset="columns")
+    known = ("t",) + CSV_SENSOR_COLUMNS
+    temp_keys, channel = [], {}
+    for key in columns:
+        if key == "temp" or key.startswith("temp:"):
+            name = key.split(":", 1)[1] if ":" in key else "temp"
+            if not name:
+                raise InputError(f"empty channel name in {_show(key)}", dataset="columns")
+            temp_keys.append(key)
+            channel[key] = name
+        elif key not in known:
+            raise InputError(f"unknown column name {_show(key)}; known: {', '.join(known)}, temp, temp:NAME",
+                             dataset="columns")
+    missing = [k for k in CSV_SENSOR_COLUMNS if k not in columns]
+    if missing:
+        raise InputError(f"no column given for {', '.join(missing)}", dataset="columns")
+    header = None
+    index = {}
+    for key, col in columns.items():
+        if isinstance(col, str) and not col.isdigit():
+            if header is None:
+                if header_lines < 1:
+                    raise InputError(f"column {key}={_show(col)} names a header column, but header_lines is 0",
+                                     dataset="columns")
+                with open(path, encoding="utf-8") as fh:
+                    lines = [fh.readline() for _ in range(header_lines)]
+                header = _split(lines[-1].strip(), delimiter)
+            if col not in header:
+                raise InputError(f"column {_show(col)} not in the header line {header_lines} ({', '.join(header)})",
+                                 path=path, dataset="columns")
+            index[key] = header.index(col)
+        else:
+            try:
+                idx = int(col)
+            except (TypeError, ValueError):
+                raise InputError(f"column of {key} must be an index or a header name, got {_show(col)}",
+                                 dataset="columns") from None
+            if idx < 0 or isinstance(col, bool):
+                raise InputError(f"column of {key} must be a 0-based index >= 0, got {_show(col)}", dataset="columns")
+            index[key] = idx
+    seen = {}
+    for key, idx in index.items():
+        if idx in seen:
+            raise InputError(f"column {idx} given for both {seen[idx]} and {key}", dataset="columns")
+        seen[idx] = key
+    return index, temp_keys, channel
+
+
+def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_units="s",
+               gyro_units="rad/s", accel_units="m/s^2", gyro_counts_per_unit=None, gyro_offset_counts=0.0,
+               accel_counts_per_unit=None, accel_offset_counts=0.0, temperature_degC=None,
+               temperature_map=None, delimiter=",", header_lines=0, imu_id="", description=None):
+    """Import a delimited text log described by a column mapping and units.
+
+    Parameters
+    ----------
+    path : str or Path
+    columns : dict
+        ``{key: column}`` with keys ``gx gy gz ax ay az`` (required), ``t``
+        (optional) and ``temp`` or ``temp:NAME`` (one per temperature channel,
+        degC, in the order given).  A column is a 0-based index, or a name from
+        the last header line.  Further columns of the file are ignored.
+    latitude_rad : float
+        Bench latitude, rad.
+    gravity_mps2 : float
+        Local gravity magnitude, m/s^2.
+    rate_hz : float or None
+        Nominal sample rate, Hz.  Without a time column it is required and
+        ``t[k] = k / rate_hz``; with one it defaults to ``1 / median(diff(t))``
+        rounded to 6 significant digits.
+    time_units : {'s', 'ms', 'us', 'ns'}
+    gyro_units : {'rad/s', 'deg/s', 'rad', 'deg'}
+        Rates (multiplied by the sample interval) or increments.
+    accel_units : {'m/s^2', 'g', 'm/s'}
+        Specific force (multiplied by the sample interval) or velocity
+        increments; ``g`` is standard gravity ``9.80665`` m/s^2.
+    gyro_counts_per_unit, accel_counts_per_unit : float or None
+        For raw counts: nominal scale, counts per ``gyro_units`` (``accel_units``);
+        the value is ``(raw - offset) / counts_per_unit``.  None: the column
+        already holds the unit.
+    gyro_offset_counts, accel_offset_counts : float
+        Zero of the counts.
+    temperature_degC : float or None
+        Assumed constant temperature when no ``temp`` column is given (then required).
+    temperature_map : sequence of 6 int or None
+        Channel of gyro x, y, z and accel x, y, z (default all 0).
+    delimiter : str or None
+        Column separator; None for whitespace.
+    header_lines : int
+        Lines before the data; the last one may name the columns.
+    imu_id : str
+    description : str or None
+        Default: what was converted and how.
+
+    Returns
+    -------
+    Experiment
+
+    Raises
+    ------
+    InputError
+        Bad options (naming the option), or a malformed file (naming the line).
+    """
+    path = _require_file(path)
+    if gyro_units not in GYRO_UNITS:
+        raise InputError(f"unknown gyro units {_show(gyro_units)}; known: {', '.join(GYRO_UNITS)}", dataset="gyro_units")
+    if accel_units not in ACCEL_UNITS:
+        raise InputError(f"unknown accel units {_show(accel_units)}; known: {', '.join(ACCEL_UNITS)}",
+                         dataset="accel_units")
+    if time_units not in TIME_UNITS:
+        raise InputError(f"unknown time units {_show(time_units)}; known: {', '.join(TIME_UNITS)}", dataset="time_units")
+    if not isinstance(header_lines, int) or header_lines < 0:
+        raise InputError(f"must be a non-negative integer, got {_show(header_lines)}", dataset="header_lines")
+    index, temp_keys, channel = _resolve_columns(columns, path=path, delimiter=delimiter, header_lines=header_lines)
+    data = read_numeric_table(path, delimiter=delimiter, skip_lines=header_lines)
+    n, n_cols = data.shape
+    too_far = {k: i for k, i in index.items() if i >= n_cols}
+    if too_far:
+        key, idx = next(iter(too_far.items()))
+        raise InputError(f"column {idx} of {key} is beyond the {n_cols} columns of the file", path=path,
+                         dataset="columns")
+
+    if "t" in index:
+        t = data[:, index["t"]] * TIME_UNITS[time_units]
+        _check_time_column(t, path=path, skip_lines=header_lines)
+        if rate_hz is None:
+            if n < 2:
+                raise InputError("one sample: give rate_hz", path=path, dataset="rate_hz")
+            rate_hz = _nominal_rate(t)
+        rate_hz = _positive(rate_hz, "rate_hz")
+    else:
+        if rate_hz is None:
+            raise InputError("no time column: give the sample rate", dataset="rate_hz")
+        rate_hz = _positive(rate_hz, "rate_hz")
+        t = np.arange(n, dtype=np.float64) / rate_hz
+    dt = _intervals(t, rate_hz)[:, None]
+
+    def triad(keys, units_table, units, counts_per_unit, offset, label):
+        raw = data[:, [index[k] for k in keys]]
+        if counts_per_unit is not None:
+            raw = (raw - float(offset)) / _positive(counts_per_unit, f"{label}_counts_per_unit")
+        factor, is_rate = units_table[units]
+        value = raw * factor
+        return value * dt if is_rate else value
+
+    dtheta = triad(("gx", "gy", "gz"), GYRO_UNITS, gyro_units, gyro_counts_per_unit, gyro_offset_counts, "gyro")
+    dv = triad(("ax", "ay", "az"), ACCEL_UNITS, accel_units, accel_counts_per_unit, accel_offset_counts, "accel")
+
+    if temp_keys:
+        if temperature_degC is not None:
+            raise InputError("temperature columns are given: an assumed temperature would be ignored",
+                             dataset="temperature_degC")
+        temperature = data[:, [index[k] for k in temp_keys]]
+        names = tuple(channel[k] for k in temp_keys)
+        temp_text = f"temperature channels {', '.join(names)} from the log"
+    else:
+        if temperature_degC is None:
+            raise InputError("no temperature column: give one (temp=COLUMN) or an assumed constant temperature",
+                             dataset="temperature_degC")
+        temperature, names = _constant_temperature(n, temperature_degC)
+        temp_text = (f"no temperature was recorded: channel '{ASSUMED_TEMPERATURE_NAME}' holds an assumed "
+                     f"{float(temperature_degC):g} degC")
+    if temperature_map is None:
+        temperature_map = np.zeros(6, dtype=np.int64)
+    else:
+        tm = np.asarray(temperature_map)
+        if tm.shape != (6,) or tm.dtype.kind not in "iu":
+            raise InputError(f"must be six integer channel indices, got {_show(temperature_map)}",
+                             dataset="temperature_map")
+        temperature_map = tm
+
+    if description is None:
+        def units_text(units, counts, offset):
+            return f"counts ({counts:g} per {units}, offset {float(offset):g})" if counts is not None else units
+        description = (
+            f"Imported from {path.name}: gyro in {units_text(gyro_units, gyro_counts_per_unit, gyro_offset_counts)}, "
+            f"accel in {units_text(accel_units, accel_counts_per_unit, accel_offset_counts)}, "
+            + (f"time column in {time_units}" if "t" in index else f"t = k / {rate_hz:g} Hz")
+            + f"; {temp_text}."
+        )
+    return _build(t=t, dtheta=dtheta, dv=dv, temperature=temperature, names=names,
+                  temperature_map=temperature_map, rate_hz=rate_hz, latitude_rad=latitude_rad,
+                  gravity_mps2=gravity_mps2, imu_id=imu_id, description=description, source=path,
+                  skip_lines=header_lines)
+
+
+__all__ = ["import_csv", "GYRO_UNITS", "ACCEL_UNITS", "TIME_UNITS", "CSV_SENSOR_COLUMNS"]

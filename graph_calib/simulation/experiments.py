@@ -1,0 +1,261 @@
+r"""Simulated experiments: the turntable and hand-held builders and their truth.
+
+:func:`_make_table_experiment` makes a navigation-grade experiment on the
+two-axis table (rotation programme, chamber and temperature lags, increments,
+encoder readings); :func:`_make_handheld_experiment` a consumer IMU turned by
+hand (no table).  Each returns a :class:`SimulatedExperiment`: the
+:class:`~graph_calib.experiment.Experiment`, its truth
+:class:`~graph_calib.experiment.Result` (``solver = "truth"``) and the true
+signals, temperatures and parameters behind them.
+
+Both builders draw everything from the ``seed`` they are given: independent
+generators (drawn from it) serve the programme, the thermal set-up and the
+noise, so switching the noise off changes nothing else, bit for bit.  The
+scenarios (:mod:`graph_calib.simulation.scenarios`) bind their arguments.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from graph_calib import params
+from graph_calib.experiment import Experiment, Result, Table
+from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
+from graph_calib.simulation.design import rotation_program
+from graph_calib.simulation.handheld import HandheldMotion
+from graph_calib.simulation.imu import SignalModel, simulate_increments
+from graph_calib.simulation.thermal import ThermalModel, ramp_chamber
+from graph_calib.simulation.truth import TEMPERATURE_TRIPLES, curvature_fit_offsets
+from graph_calib.simulation.turntable import TurntableMotion, encoder_readings, rot_z
+
+#: Temperature channels of the navigation-grade IMU: name, time constant (min),
+#: offset above the chamber (degC, self-heating).  ``chamber`` is the chamber's own
+#: sensor (no lag).  The six sensors map to channels 0, 1, 2, 3, 3, 3.
+NAV_CHANNELS = (
+    ("gyro_x", 20.0, 0.8),
+    ("gyro_y", 28.0, 0.6),
+    ("gyro_z", 35.0, 1.0),
+    ("accel", 15.0, 0.4),
+    ("chamber", 0.0, 0.0),
+)
+NAV_TEMPERATURE_MAP = (0, 1, 2, 3, 3, 3)
+
+#: One-sigma noise of a recorded temperature, degC (when noise is on).
+TEMPERATURE_NOISE = {"navigation": 0.005, "tactical": 0.01, "consumer": 0.02}
+
+
+@dataclass(frozen=True)
+class SimulatedExperiment:
+    """One simulated experiment with everything needed to check a solver against it.
+
+    Attributes
+    ----------
+    file_name : str
+        Experiment file name (``<stem>.h5``); the truth goes to ``<stem>.truth.json``.
+    experiment : Experiment
+    truth : Result
+        ``solver = "truth"``; what the truth file holds.
+    signals : SignalModel
+        The true motion and signals at any time (``signals.attitude(t)`` is the
+        true ``C_nb``; ``signals.motion`` the table or hand motion).
+    thermal : ThermalModel
+        The true (noise-free) temperatures at any time.
+    layout : Layout
+        Every parameter the data were made with (the truth layout plus the curvature terms).
+    x : ndarray
+        Their values at ``truth.t_ref_degC``.
+    """
+
+    file_name: str
+    experiment: Experiment
+    truth: Result
+    signals: SignalModel
+    thermal: ThermalModel
+    layout: params.Layout
+    x: np.ndarray
+
+    @property
+    def stem(self):
+        return self.file_name[:-3] if self.file_name.endswith(".h5") else self.file_name
+
+    @property
+    def truth_name(self):
+        return f"{self.stem}.truth.json"
+
+    @property
+    def motion(self):
+        return self.signals.motion
+
+    def attitude(self, t):
+        """True ``C_nb`` at times ``t``, shape (N, 3, 3)."""
+        return self.signals.attitude(t)
+
+
+def _child_rngs(seed, k):
+    rng = np.random.default_rng(seed)
+    return [np.random.default_rng(int(s)) for s in rng.integers(0, 2**62, size=k)]
+
+
+def _as_list(a):
+    return [float(v) for v in np.ravel(a)]
+
+
+def _truth_result(*, file_name, imu, t_ref, T_rec_sensors, tl, x_truth, unmodelled, info):
+    sensor_dT = T_rec_sensors - t_ref
+    curves = {"t_center_degC": imu.t_center}
+    for p, _, _ in TEMPERATURE_TRIPLES:
+        c0, c1, c2 = imu.curves[p]
+        for i, ax in enumerate("xyz"):
+            curves[f"{p}.{ax}"] = [float(c0[i]), float(c1[i]), float(c2[i])]
+    sim = dict(info)
+    sim["unmodelled"] = unmodelled
+    sim["curvature_fit_offsets"] = curvature_fit_offsets(imu, sensor_dT)
+    sim["temperature_curves"] = curves
+    return Result(
+        source=file_name, solver="truth", t_ref_degC=float(t_ref),
+        temperature_range_degC=(float(T_rec_sensors.min()), float(T_rec_sensors.max())),
+        effects=tuple(tl.names), values=tl.to_dict(x_truth), sigmas=None, extra={"simulation": sim},
+    )
+
+
+def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, start_degC, span_degC,
+                           design, latitude_rad, gravity_mps2, noise, valid, encoder_rate_hz, azimuth_rad,
+                           description, tag):
+    g = params.grade(imu.grade)
+    r_prog, r_therm, r_noise = _child_rngs(seed, 3)
+    program = rotation_program(rate_hz, duration_s, rng=r_prog, design=design)
+
+    names = tuple(c[0] for c in NAV_CHANNELS)
+    tau = np.array([c[1] for c in NAV_CHANNELS]) * 60.0 * r_therm.uniform(0.9, 1.1, len(names))
+    offset = np.array([c[2] for c in NAV_CHANNELS]) + np.where(tau > 0, r_therm.normal(0.0, 0.1, len(names)), 0.0)
+    pattern = np.array([1.0, 0.55, 1.4]) * r_therm.uniform(0.85, 1.15, 3)
+    thermal = ramp_chamber(duration=program.duration, start_degC=start_degC, span_degC=span_degC, names=names,
+                           tau=tau, offset=offset, temperature_map=NAV_TEMPERATURE_MAP, pattern=tuple(pattern))
+
+    n = program.n_ticks
+    t = np.arange(1, n + 1) / rate_hz
+    tmap = np.array(NAV_TEMPERATURE_MAP)
+    sig_T = TEMPERATURE_NOISE[imu.grade] if noise else 0.0
+    T_rec = thermal.temperature(t)
+    if sig_T > 0:
+        T_rec = T_rec + sig_T * r_noise.standard_normal(T_rec.shape)
+    t_ref = float(np.mean(T_rec[:, tmap]))
+    tl, x_truth, sl, x_sim, unmodelled = imu.at(t_ref)
+
+    mount = sl.get(x_sim, "mount", np.zeros(3))
+    q_fb_nominal = np.array([1.0, 0.0, 0.0, 0.0])
+    C_fb = quat_to_dcm(q_fb_nominal) @ exp_so3(mount)
+    motion = TurntableMotion(program, C_n0=rot_z(azimuth_rad), C_fb=C_fb)
+    K = sl.get(x_sim, "damping.stiffness")
+    signals = SignalModel(motion, latitude_rad=latitude_rad, gravity_mps2=gravity_mps2,
+                          lever_arm=sl.get(x_sim, "lever_arm"), stiffness=None if K is None else K.reshape(3, 3),
+                          rate_hz=rate_hz)
+    t, dtheta, dv = simulate_increments(signals, thermal, rate_hz=rate_hz, n_samples=n, layout=sl, x=x_sim,
+                                        t_ref=t_ref, temperature_map=tmap)
+    dt = 1.0 / rate_hz
+    if noise:
+        dtheta += g.gyro_noise * np.sqrt(dt) * r_noise.standard_normal(dtheta.shape)
+        dv += g.accel_noise * np.sqrt(dt) * r_noise.standard_normal(dv.shape)
+    lag = float(sl.get(x_sim, "time_lag.table", np.zeros(1))[0])
+    tt, q_nf, ok = encoder_readings(motion, t_end=t[-1], rate_hz=encoder_rate_hz, time_lag=lag,
+                                    noise_rad=g.encoder_noise if noise else 0.0, rng=r_noise, valid=valid)
+    experiment = Experiment(
+        t=t, dtheta=dtheta, dv=dv, temperature=T_rec, temperature_names=names,
+        temperature_map=tmap.copy(), rate_hz=float(rate_hz), latitude_rad=float(latitude_rad),
+        gravity_mps2=float(gravity_mps2), imu_id=imu_id, description=description,
+        table=Table(t=tt, q_nf=q_nf, valid=ok, q_fb_nominal=q_fb_nominal), source=file_name,
+    )
+    info = {
+        "scenario": scenario, "tag": tag, "grade": imu.grade, "effects_on": list(imu.effects),
+        "noise": {"gyro_noise": g.gyro_noise if noise else 0.0, "accel_noise": g.accel_noise if noise else 0.0,
+                  "encoder_noise_rad": g.encoder_noise if noise else 0.0, "temperature_noise_degC": sig_T},
+        "table": {"outer_axis": "horizontal, base x (azimuth from East)", "azimuth_rad": float(azimuth_rad),
+                  "encoder_rate_hz": float(encoder_rate_hz), "valid": valid},
+        "chamber": {"t_s": _as_list(thermal.chamber_t), "T_degC": _as_list(thermal.chamber_T)},
+        "channels": {"names": list(names), "tau_s": _as_list(tau), "offset_degC": _as_list(offset)},
+    }
+    truth = _truth_result(file_name=file_name, imu=imu, t_ref=t_ref, T_rec_sensors=T_rec[:, tmap], tl=tl,
+                          x_truth=x_truth, unmodelled=unmodelled, info=info)
+    return SimulatedExperiment(file_name=file_name, experiment=experiment, truth=truth, signals=signals,
+                               thermal=thermal, layout=sl, x=x_sim)
+
+
+def _random_rotation(rng):
+    q = rng.standard_normal(4)
+    return quat_to_dcm(q / np.linalg.norm(q))
+
+
+def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, n_poses,
+                              initial_static_s, hold_s, turn_s, translation_m, latitude_rad, gravity_mps2,
+                              noise, description, tag):
+    g = params.grade(imu.grade)
+    r_prog, r_therm, r_noise = _child_rngs(seed, 3)
+    motion = HandheldMotion(rate_hz, rot_z(r_prog.uniform(0.0, 2.0 * np.pi)))
+    motion.hold(initial_static_s)
+    k = 0
+    while True:
+        C_now = motion.attitude_now
+        for _ in range(100):
+            phi = log_so3(C_now.T @ _random_rotation(r_prog))
+            if np.linalg.norm(phi) > np.radians(40.0):
+                break
+        T_turn = r_prog.uniform(*turn_s)
+        hold = r_prog.uniform(*hold_s)
+        d = r_prog.normal(0.0, translation_m, 3) if translation_m > 0 else np.zeros(3)
+        if duration_s is None:
+            if k >= n_poses:
+                break
+        elif motion.duration + T_turn + hold > duration_s and k > 0:
+            break
+        motion.turn(phi, T_turn, d)
+        motion.hold(hold)
+        k += 1
+    if duration_s is not None:
+        rest = int(round(duration_s * rate_hz)) - int(round(motion.duration * rate_hz))
+        if rest > 0:
+            motion.hold(rest / rate_hz)
+    n = int(round(motion.duration * rate_hz))
+
+    room0 = r_therm.uniform(21.0, 25.0)
+    drift = r_therm.uniform(-1.0, 1.0) / 3600.0
+    dur = n / rate_hz
+    thermal = ThermalModel(chamber_t=np.array([0.0, dur]), chamber_T=np.array([room0, room0 + drift * dur]),
+                           names=("imu",), tau=np.array([r_therm.uniform(180.0, 420.0)]),
+                           offset=np.array([r_therm.uniform(2.0, 4.0)]), initial=np.array([room0]))
+    t = np.arange(1, n + 1) / rate_hz
+    tmap = np.zeros(6, dtype=np.int64)
+    sig_T = TEMPERATURE_NOISE[imu.grade] if noise else 0.0
+    T_rec = thermal.temperature(t)
+    if sig_T > 0:
+        T_rec = T_rec + sig_T * r_noise.standard_normal(T_rec.shape)
+    t_ref = float(np.mean(T_rec[:, tmap]))
+    tl, x_truth, sl, x_sim, unmodelled = imu.at(t_ref)
+    signals = SignalModel(motion, latitude_rad=latitude_rad, gravity_mps2=gravity_mps2, rate_hz=rate_hz)
+    t, dtheta, dv = simulate_increments(signals, thermal, rate_hz=rate_hz, n_samples=n, layout=sl, x=x_sim,
+                                        t_ref=t_ref, temperature_map=tmap)
+    dt = 1.0 / rate_hz
+    if noise:
+        dtheta += g.gyro_noise * np.sqrt(dt) * r_noise.standard_normal(dtheta.shape)
+        dv += g.accel_noise * np.sqrt(dt) * r_noise.standard_normal(dv.shape)
+    experiment = Experiment(
+        t=t, dtheta=dtheta, dv=dv, temperature=T_rec, temperature_names=("imu",), temperature_map=tmap,
+        rate_hz=float(rate_hz), latitude_rad=float(latitude_rad), gravity_mps2=float(gravity_mps2),
+        imu_id=imu_id, description=description, table=None, source=file_name,
+    )
+    info = {
+        "scenario": scenario, "tag": tag, "grade": imu.grade, "effects_on": list(imu.effects),
+        "noise": {"gyro_noise": g.gyro_noise if noise else 0.0, "accel_noise": g.accel_noise if noise else 0.0,
+                  "temperature_noise_degC": sig_T},
+        "poses": k, "translation_m": float(translation_m),
+        "chamber": {"t_s": _as_list(thermal.chamber_t), "T_degC": _as_list(thermal.chamber_T)},
+        "channels": {"names": ["imu"], "tau_s": _as_list(thermal.tau), "offset_degC": _as_list(thermal.offset)},
+    }
+    truth = _truth_result(file_name=file_name, imu=imu, t_ref=t_ref, T_rec_sensors=T_rec[:, tmap], tl=tl,
+                          x_truth=x_truth, unmodelled=unmodelled, info=info)
+    return SimulatedExperiment(file_name=file_name, experiment=experiment, truth=truth, signals=signals,
+                               thermal=thermal, layout=sl, x=x_sim)
+
+
+__all__ = ["SimulatedExperiment", "NAV_CHANNELS", "NAV_TEMPERATURE_MAP", "TEMPERATURE_NOISE"]
