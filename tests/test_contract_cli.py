@@ -2,7 +2,7 @@
 
 cli.md: 0 success, 2 bad input or arguments (one line, no traceback), 1 on an internal failure,
 3 when the work finished but its verdict failed.  Exit 2 is covered command by command in the other
-modules; here exit 1, the verdict line and exit 3 (each xfail while the code lacks it).
+modules; here exit 1, the verdict line and exit 3.
 """
 
 import importlib
@@ -12,10 +12,6 @@ import pytest
 from graph_calib.cli import main
 
 
-@pytest.mark.xfail(strict=True, raises=RuntimeError,
-                   reason="cli.md: exit 1 on an internal failure; graph_calib.cli.main catches only InputError and "
-                          "KeyboardInterrupt, so an unexpected exception escapes with its traceback instead of "
-                          "returning 1")
 @pytest.mark.parametrize("command, argv", [
     ("calibrate", ["calibrate", "exp.h5", "--out", "out"]),
     ("simulate", ["simulate", "nav-subrange-short", "--out", "out"]),
