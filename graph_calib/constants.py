@@ -20,8 +20,6 @@ DH_TO_RS = DEG_TO_RAD / 3600.0
 RS_TO_DH = 1.0 / DH_TO_RS
 #: deg/sqrt(h) to rad/sqrt(s) (angle random walk).
 DSH_TO_RSS = DEG_TO_RAD / 60.0
-#: (m/s)/sqrt(h) to (m/s)/sqrt(s) (velocity random walk).
-MPSSH_TO_MPSSS = 1.0 / 60.0
 #: m/s^2 to micro-g.
 MPS2_TO_UG = 1e6 / G0
 UG_TO_MPS2 = 1.0 / MPS2_TO_UG

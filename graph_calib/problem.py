@@ -54,18 +54,18 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     -------
     Problem
     """
-    mopt = options.model
+    model_options = options.model
     static = detect_static(experiment)
     static_mask = None
     if experiment.table is None:
         static_mask = np.zeros(experiment.n_samples, dtype=bool)
         for a, b in static:
             static_mask[a:b] = True
-        if mopt.moving_sigma is None:
-            mopt = replace(mopt, moving_sigma=1.0)
+        if model_options.moving_sigma is None:
+            model_options = replace(model_options, moving_sigma=1.0)
     interval = tuple(static[0]) if len(static) else None
     if interval is not None:
-        mopt = _noise_from_static(experiment, interval, mopt)
+        model_options = _noise_from_static(experiment, interval, model_options)
     method = "table" if (experiment.table is not None and np.any(experiment.table.valid)) else "gyrocompass"
     try:
         al = alignment(experiment, interval=interval, method=method)
@@ -73,15 +73,15 @@ def build_problem(experiment, *, options=CalibrationOptions()):
         if method != "table":
             raise
         al = alignment(experiment, interval=interval, method="gyrocompass")
-        if mopt.initial_attitude_sigma is None:
+        if model_options.initial_attitude_sigma is None:
             # the table could not give the attitude: the prior is as loose as gyrocompassing is
-            mopt = replace(mopt, initial_attitude_sigma=gyrocompass_attitude_sigma(
-                mopt, latitude_rad=experiment.latitude_rad))
-    model = CalibrationModel(experiment, options=mopt, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
+            model_options = replace(model_options, initial_attitude_sigma=gyrocompass_attitude_sigma(
+                model_options, latitude_rad=experiment.latitude_rad))
+    model = CalibrationModel(experiment, options=model_options, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
     return Problem(model=model, q_nb0=al.q_nb0, alignment=al)
 
 
-def _noise_from_static(experiment, interval, mopt):
+def _noise_from_static(experiment, interval, model_options):
     """White-noise densities: the grade's, raised to what the first static interval shows.
 
     The density is the per-sample standard deviation of the rate (force) times
@@ -90,8 +90,8 @@ def _noise_from_static(experiment, interval, mopt):
     """
     a, b = int(interval[0]), int(interval[1])
     if b - a < 50:
-        return mopt
-    g = grade(mopt.grade)
+        return model_options
+    g = grade(model_options.grade)
     dt = experiment.dt[a:b, None]
     w = experiment.dtheta[a:b] / dt
     f = experiment.dv[a:b] / dt
@@ -99,9 +99,9 @@ def _noise_from_static(experiment, interval, mopt):
     est_g = float(np.sqrt(np.mean(np.var(w, axis=0)) * h))
     est_a = float(np.sqrt(np.mean(np.var(f, axis=0)) * h))
     return replace(
-        mopt,
-        gyro_noise=mopt.gyro_noise if mopt.gyro_noise is not None else max(g.gyro_noise, est_g),
-        accel_noise=mopt.accel_noise if mopt.accel_noise is not None else max(g.accel_noise, est_a),
+        model_options,
+        gyro_noise=model_options.gyro_noise if model_options.gyro_noise is not None else max(g.gyro_noise, est_g),
+        accel_noise=model_options.accel_noise if model_options.accel_noise is not None else max(g.accel_noise, est_a),
     )
 
 

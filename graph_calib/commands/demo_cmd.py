@@ -8,8 +8,7 @@ Writes
   (``validation.h5`` with its truth);
 - ``DIR/campaign/``: what ``graph-calib campaign`` writes (``report.html``,
   ``campaign.json``, one folder per experiment);
-- ``DIR/diagnosis/``: what ``graph-calib diagnose`` writes for one experiment
-  (skipped with a note when this version has no ``diagnose`` command).
+- ``DIR/diagnosis/``: what ``graph-calib diagnose`` writes for one experiment.
 
 Everything already made is reused when the demo runs again into the same folder.
 """
@@ -85,15 +84,7 @@ def simulate_demo(out, *, hours, seed, validation_hours=VALIDATION_HOURS):
 
 
 def run_diagnosis(experiment_file, out):
-    """``graph-calib diagnose EXPERIMENT --out DIR`` when this version has it; exit code or None (not available)."""
-    import importlib
-
-    try:
-        importlib.import_module("graph_calib.commands.diagnose_cmd")
-    except ModuleNotFoundError as exc:
-        if exc.name and exc.name.startswith("graph_calib.commands"):
-            return None
-        raise
+    """``graph-calib diagnose EXPERIMENT --out DIR``; its exit code."""
     from graph_calib.cli import main
 
     return main(["diagnose", str(experiment_file), "--out", str(out)])
@@ -125,9 +116,7 @@ def run(args):
         file = next(e["file"] for e in result.document["experiments"] if e["name"] == name)
         _say(f"diagnosing {name} ...")
         drc = run_diagnosis(file, out / "diagnosis")
-        if drc is None:
-            print("  diagnose: not available in this version of graph-calib; skipped")
-        elif drc != 0:
+        if drc != 0:
             print(f"  diagnose: exited with code {drc}")
             rc = rc or 1
         else:

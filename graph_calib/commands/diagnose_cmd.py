@@ -59,11 +59,11 @@ def _options(args):
         if args.max_iterations < 1:
             raise InputError("must be at least 1", dataset="--max-iterations")
         graph = GraphOptions(max_iterations=args.max_iterations)
-    copt = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade,
+    calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade,
                                                  extra_effects=tuple(args.effect)), graph=graph, t_ref_degC=args.t_ref)
     solvers = ("factor-graph", "sqrt-kf") if args.solver == "both" else ("factor-graph",)
-    dopt = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers)
-    return copt, dopt
+    diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers)
+    return calibration_options, diagnosis_options
 
 
 def _truth(args, path):
@@ -88,7 +88,7 @@ def run(args):
     path = Path(args.experiment)
     if not path.exists():
         raise InputError("no such file", path=path)
-    copt, dopt = _options(args)
+    calibration_options, diagnosis_options = _options(args)
     exp = io.read_experiment(path)
     truth, tp = _truth(args, path)
     out = Path(args.out)
@@ -102,7 +102,7 @@ def run(args):
 
     print(f"{path.name}: {exp.n_samples} samples, {exp.t[-1] - exp.t[0] + 1 / exp.rate_hz:.0f} s"
           + (f"; truth {tp.name}" if tp else ""), file=sys.stderr)
-    diag = diagnose(exp, options=copt, diagnosis=dopt, truth=truth, progress=say)
+    diag = diagnose(exp, options=calibration_options, diagnosis=diagnosis_options, truth=truth, progress=say)
     js = diag.to_json()
     js["source"] = path.name
     io.atomic_write_json(out / "diagnosis.json", js)

@@ -94,12 +94,6 @@ class ThermalModel:
         j, dt, b = self._segment(t)
         return np.asarray(self.chamber_T, dtype=float)[j] + b * dt
 
-    def chamber_rate(self, t):
-        """Chamber temperature rate at ``t``, degC/s, shape (N,)."""
-        j, dt, b = self._segment(t)
-        t = np.atleast_1d(np.asarray(t, dtype=float))
-        return np.where(t < self.chamber_t[0], 0.0, b)
-
     def temperature(self, t, channels=None):
         """Channel temperatures at ``t``, degC, shape (N, K) (or (N, len(channels)))."""
         j, dt, b = self._segment(t)

@@ -61,19 +61,6 @@ OUTER, INNER = 0, 1
 _DWELL = -1
 
 
-def rot_x(a):
-    """``R_x(a)``, shape (..., 3, 3)."""
-    a = np.asarray(a, dtype=float)
-    c, s = np.cos(a), np.sin(a)
-    R = np.zeros(a.shape + (3, 3))
-    R[..., 0, 0] = 1.0
-    R[..., 1, 1] = c
-    R[..., 1, 2] = -s
-    R[..., 2, 1] = s
-    R[..., 2, 2] = c
-    return R
-
-
 def rot_z(a):
     """``R_z(a)``, shape (..., 3, 3)."""
     a = np.asarray(a, dtype=float)
@@ -239,11 +226,6 @@ class ProgramBuilder:
     def time(self):
         """Current length, s."""
         return self._tick / self.rate_hz
-
-    @property
-    def angles_now(self):
-        """``(alpha, beta)`` at the current end, rad (a copy)."""
-        return self._angles.copy()
 
     def dwell(self, seconds):
         """Rest for ``seconds`` (rounded to whole sample periods, at least one)."""
@@ -459,5 +441,5 @@ def encoder_readings(motion, *, t_end, rate_hz=10.0, time_lag=0.0, noise_rad=0.0
     return t, q, ok
 
 
-__all__ = ["OUTER", "INNER", "rot_x", "rot_z", "TableProgram", "ProgramBuilder", "Kinematics",
+__all__ = ["OUTER", "INNER", "rot_z", "TableProgram", "ProgramBuilder", "Kinematics",
            "TurntableMotion", "encoder_readings"]
