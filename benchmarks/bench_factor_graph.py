@@ -44,7 +44,7 @@ def main():
     t2 = time.perf_counter()
     problem.model.preintegrate(problem.model.prior()[0])      # warm (numba compiled and cached)
     t3 = time.perf_counter()
-    pre = problem.model.preintegrate(problem.model.prior()[0])
+    preint = problem.model.preintegrate(problem.model.prior()[0])
     t4 = time.perf_counter()
     print(f"setup {t2 - t1:.2f} s, preintegration {t4 - t3:.3f} s")
     _, gr = run_factor_graph(problem)

@@ -55,9 +55,9 @@ def main():
         model = CalibrationModel(exp, options=ModelOptions(extra_effects=extra))
         x = model.prior()[0] + rng.normal(size=model.layout.size) * model.prior()[1] * 0.1
         t0 = time.perf_counter()
-        pre = model.preintegrate(x)
+        preint = model.preintegrate(x)
         warm = time.perf_counter() - t0
-        assert np.all(np.isfinite(pre.J_S)) and np.all(np.isfinite(pre.reading_J))
+        assert np.all(np.isfinite(preint.J_S)) and np.all(np.isfinite(preint.reading_J))
         cols = model.terms.columns.size
         print(f"{label}: {model.layout.size} parameters, {cols} kernel columns, {model.n_keyframes} keyframes, "
               f"{model.record.reading_sample.size} encoder readings; first call {warm:.2f} s")

@@ -73,9 +73,9 @@ class GraphResult:
 class _Cache:
     """Vectorised evaluation of every factor at one set of values."""
 
-    def __init__(self, model, pre):
+    def __init__(self, model, preint):
         self.model = model
-        self.pre = pre
+        self.preint = preint
         self.K = model.n_keyframes
         self.R = None
         self.x = None
@@ -101,9 +101,9 @@ class _Cache:
     def evaluate(self, R, x):
         m = self.model
         self.R, self.x = R, x
-        self.rot = m.rotation_factors(R, self.pre, x)
-        self.grav = m.gravity_factors(R, self.pre, x)
-        self.enc = m.encoder_factors(R, self.pre, x)
+        self.rot = m.rotation_factors(R, self.preint, x)
+        self.grav = m.gravity_factors(R, self.preint, x)
+        self.enc = m.encoder_factors(R, self.preint, x)
         self.evaluations += 1
 
 
@@ -241,13 +241,13 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     R_prior = quat_to_dcm(q_nb0)
     if initial is None:
         x = x_prior.copy()
-        pre = model.preintegrate(x)
-        R = model.propagate(R_prior, pre, x)
+        preint = model.preintegrate(x)
+        R = model.propagate(R_prior, preint, x)
     else:
         R = np.asarray(initial[0], dtype=float)
         x = np.asarray(initial[1], dtype=float).copy()
-        pre = model.preintegrate(x)
-    cache = _Cache(model, pre)
+        preint = model.preintegrate(x)
+    cache = _Cache(model, preint)
     cache.evaluate(R, x)
     graph = build_graph(model, cache, R_prior=R_prior,
                         robust=options.robust, robust_k=options.robust_k)
@@ -262,9 +262,9 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     lam = options.lambda_initial
     it = 0
     converged = False
-    pre_current = cache.pre          # preintegrated at the current calibration: its cost is exact
+    preint_current = cache.preint          # preintegrated at the current calibration: its cost is exact
     for it in range(1, options.max_iterations + 1):
-        cache.pre = pre_current
+        cache.preint = preint_current
         cache.R = None
         gfg = graph.linearize(values)
         while True:
@@ -278,10 +278,10 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
             trial = values.retract(delta)
             x_trial = np.asarray(trial.atVector(C(0)))
             # a trial far from the preintegration point is judged by an exact preintegration
-            if pre_current.needs_repreintegration(x_trial, tol=options.repreintegrate_tol):
-                cache.pre = model.preintegrate(x_trial)
+            if preint_current.needs_repreintegration(x_trial, tol=options.repreintegrate_tol):
+                cache.preint = model.preintegrate(x_trial)
             else:
-                cache.pre = pre_current
+                cache.preint = preint_current
             cache.R = None
             new_cost = graph.error(trial)
             # at convergence a step may change the cost only by rounding: stop damping then
@@ -292,7 +292,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         accepted = new_cost <= cost
         if accepted:
             values = trial
-            pre_current = cache.pre
+            preint_current = cache.preint
             lam = max(lam / 10.0, 1e-9)
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
@@ -308,7 +308,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
             break
     # covariance: re-preintegrate at the solution so the Jacobians are exact there
     x = np.asarray(values.atVector(C(0)), dtype=float)
-    cache.pre = model.preintegrate(x)
+    cache.preint = model.preintegrate(x)
     cache.R = None
     marginals = gtsam.Marginals(graph, values)
     cov = np.asarray(marginals.marginalCovariance(C(0)))

@@ -237,11 +237,11 @@ def _prior_state(prior):
     return -H_inv @ prior.r, L[::-1, ::-1].T
 
 
-def _linearise(model, pre, R_lin, x_lin, *, R_prior):
-    """Every factor at ``(R_lin, x_lin)`` (``pre`` preintegrated at ``x_lin``), as a :class:`_Linearised`."""
-    rot = model.rotation_factors(R_lin, pre, x_lin)
-    grav = model.gravity_factors(R_lin, pre, x_lin)
-    enc = model.encoder_factors(R_lin, pre, x_lin)
+def _linearise(model, preint, R_lin, x_lin, *, R_prior):
+    """Every factor at ``(R_lin, x_lin)`` (``preint`` preintegrated at ``x_lin``), as a :class:`_Linearised`."""
+    rot = model.rotation_factors(R_lin, preint, x_lin)
+    grav = model.gravity_factors(R_lin, preint, x_lin)
+    enc = model.encoder_factors(R_lin, preint, x_lin)
     B, A, G, c = _transition(rot)
     key, H, z, sig, t, kind, axis = _measurements(model, grav, enc)
     lo = np.searchsorted(key, np.arange(model.n_keyframes + 2)).astype(np.int64)
@@ -289,7 +289,7 @@ class _Pass:
     cost: float = 0.0
 
 
-def filter_pass(model, R_lin, x_lin, *, R_prior, pre=None):
+def filter_pass(model, R_lin, x_lin, *, R_prior, preint=None):
     """One linearised pass at ``(R_lin, x_lin)``: the filter, then the attitude smoother.
 
     Parameters
@@ -302,7 +302,7 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, pre=None):
     R_prior : ndarray, shape (3, 3)
         Prior attitude at the first boundary (the model's attitude prior residual is centred there;
         the calibration prior is the model's too).
-    pre : graph_calib.model.Preintegrated, optional
+    preint : graph_calib.model.Preintegrated, optional
         The preintegration at ``x_lin``; computed here when not given.
 
     Returns
@@ -314,9 +314,9 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, pre=None):
         and their sigmas (given ``dx``); the normalised innovations.
     """
     t0 = time.perf_counter()
-    if pre is None:
-        pre = model.preintegrate(x_lin)
-    lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior)
+    if preint is None:
+        preint = model.preintegrate(x_lin)
+    lin = _linearise(model, preint, R_lin, x_lin, R_prior=R_prior)
     return _run_filter(model, lin, x_lin, seconds_model=time.perf_counter() - t0)
 
 
@@ -339,7 +339,7 @@ def _run_filter(model, lin, x_lin, *, seconds_model):
                  cost=lin.cost)
 
 
-def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2):
+def initial_attitudes(model, *, q_nb0, preint=None, max_iterations=10, tol_rad=1e-2):
     """Keyframe attitudes that fit the measurements at the prior calibration: the first linearisation point.
 
     Dead reckoning from ``q_nb0`` with the prior calibration (zero) drifts with the
@@ -354,7 +354,7 @@ def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2
     model : graph_calib.model.CalibrationModel
     q_nb0 : array_like, shape (4,)
         Prior attitude ``q_nb`` (scalar first) at the start of the record.
-    pre : graph_calib.model.Preintegrated, optional
+    preint : graph_calib.model.Preintegrated, optional
         The preintegration at the prior calibration; computed here when not given.
     max_iterations : int
     tol_rad : float
@@ -367,11 +367,11 @@ def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2
     """
     R_prior = quat_to_dcm(np.asarray(q_nb0, dtype=float))
     x_prior, x_sigma = model.prior()
-    if pre is None:
-        pre = model.preintegrate(x_prior)
-    R = model.propagate(R_prior, pre, x_prior)
+    if preint is None:
+        preint = model.preintegrate(x_prior)
+    R = model.propagate(R_prior, preint, x_prior)
     for it in range(1, max_iterations + 1):
-        lin = _linearise(model, pre, R, x_prior, R_prior=R_prior)
+        lin = _linearise(model, preint, R, x_prior, R_prior=R_prior)
         delta, _ = _smooth_attitudes(lin, np.zeros_like(x_prior))
         R = R @ exp_so3(delta)
         if np.max(np.linalg.norm(delta, axis=1)) < tol_rad:
@@ -387,11 +387,11 @@ def initial_attitudes(model, *, q_nb0, pre=None, max_iterations=10, tol_rad=1e-2
 #: Halvings of a pass's step before it is taken as it is.
 MAX_HALVINGS = 8
 
-def _keep_or_drop(model, pre, x):
-    """``pre`` if it still serves at ``x`` to first order, else None (preintegrate again)."""
-    if pre is None or pre.needs_repreintegration(x):
+def _keep_or_drop(model, preint, x):
+    """``preint`` if it still serves at ``x`` to first order, else None (preintegrate again)."""
+    if preint is None or preint.needs_repreintegration(x):
         return None
-    return pre
+    return preint
 
 
 def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, progress=None, initial=None):
@@ -424,12 +424,12 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     x_prior, x_sigma = model.prior()
     if initial is None:
         x_lin = x_prior.copy()
-        pre = model.preintegrate(x_lin)
-        R_lin, n_initial = initial_attitudes(model, q_nb0=q_nb0, pre=pre)
+        preint = model.preintegrate(x_lin)
+        R_lin, n_initial = initial_attitudes(model, q_nb0=q_nb0, preint=preint)
     else:
         R_lin = np.asarray(initial[0], dtype=float).copy()
         x_lin = np.asarray(initial[1], dtype=float).copy()
-        pre = model.preintegrate(x_lin)
+        preint = model.preintegrate(x_lin)
         n_initial = 0
     passes = []
     converged = False
@@ -444,15 +444,15 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         # overshoot and the passes would oscillate.  The fixed point is unchanged.
         while True:
             t0 = time.perf_counter()
-            if pre is None:
-                pre = model.preintegrate(x_lin)
-            lin = _linearise(model, pre, R_lin, x_lin, R_prior=R_prior)
+            if preint is None:
+                preint = model.preintegrate(x_lin)
+            lin = _linearise(model, preint, R_lin, x_lin, R_prior=R_prior)
             if base is None or lin.cost <= base[2] * (1.0 + 1e-12) or tau <= 0.5**MAX_HALVINGS:
                 break
             tau *= 0.5
             x_lin = base[0] + tau * base[3]
             R_lin = base[1] @ exp_so3(tau * base[4])
-            pre = _keep_or_drop(model, pre, x_lin)
+            preint = _keep_or_drop(model, preint, x_lin)
         p = _run_filter(model, lin, x_lin, seconds_model=time.perf_counter() - t0)
         if not (np.all(np.isfinite(p.dx)) and np.all(np.isfinite(p.delta_smoothed))):
             raise FloatingPointError(f"square-root filter pass {i} produced non-finite estimates")
@@ -476,7 +476,7 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         tau = 1.0
         x_lin = x_lin + p.dx
         R_lin = R_lin @ exp_so3(p.delta_smoothed)
-        pre = _keep_or_drop(model, pre, x_lin)
+        preint = _keep_or_drop(model, preint, x_lin)
         if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol:
             converged = True
             break

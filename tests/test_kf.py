@@ -147,7 +147,7 @@ def _batch_gauss_newton(model, *, R, x, R_prior, iterations=6):
     x_prior, x_sigma = model.prior()
     s0 = model.initial_attitude_sigma
     for _ in range(iterations):
-        pre = model.preintegrate(x)
+        preint = model.preintegrate(x)
         rows, cols, vals, res = [], [], [], []
         n_rows = 0
 
@@ -165,7 +165,7 @@ def _batch_gauss_newton(model, *, R, x, R_prior, iterations=6):
         res.append(r0 / s0)
         n_rows += 3
         for f in (model.rotation_factors, model.gravity_factors, model.encoder_factors):
-            fr = f(R, pre, x)
+            fr = f(R, preint, x)
             F = fr.r.shape[0]
             rr = (np.arange(3 * F).reshape(F, 3))[:, :, None]
             w = 1.0 / fr.sigma[:, :, None]
@@ -326,12 +326,12 @@ def test_to_result_and_progress():
 # sensor errors, the consumer hand-held session) are in tests/test_accuracy.py, for both solvers.
 
 
-def _batch_cost(model, R, x, *, pre, R_prior, x_prior, x_sigma):
+def _batch_cost(model, R, x, *, preint, R_prior, x_prior, x_sigma):
     """The batch least-squares cost straight from the model's factors: every whitened residual squared,
     plus the priors (twice GTSAM's error of the factor graph)."""
     cost = 0.0
     for f in (model.rotation_factors, model.gravity_factors, model.encoder_factors):
-        cost += float(np.sum(f(R, pre, x).whitened() ** 2))
+        cost += float(np.sum(f(R, preint, x).whitened() ** 2))
     cost += float(np.sum(((x - x_prior) / x_sigma) ** 2))
     r0 = log_so3(R_prior.T @ R[0]) / model.initial_attitude_sigma
     return cost + float(r0 @ r0)
@@ -348,10 +348,10 @@ def test_linearisation_cost_is_the_batch_cost():
     model = CalibrationModel(exp, options=ModelOptions())
     x0, sig = model.prior()
     x = x0 + 0.3 * sig * rng.normal(size=sig.size)
-    pre = model.preintegrate(x)
-    R = model.propagate(exp_so3(np.array([0.01, -0.02, 0.03])), pre, x)
+    preint = model.preintegrate(x)
+    R = model.propagate(exp_so3(np.array([0.01, -0.02, 0.03])), preint, x)
     R_prior = np.eye(3)
-    lin = _linearise(model, pre, R, x, R_prior=R_prior)
-    ref = _batch_cost(model, R, x, pre=pre, R_prior=R_prior, x_prior=x0, x_sigma=sig)
+    lin = _linearise(model, preint, R, x, R_prior=R_prior)
+    ref = _batch_cost(model, R, x, preint=preint, R_prior=R_prior, x_prior=x0, x_sigma=sig)
     assert ref > 10.0
     assert lin.cost == pytest.approx(ref, rel=1e-10)

@@ -23,9 +23,9 @@ def problem():
     exp = wobbly_experiment(rng=rng)
     model = CalibrationModel(exp, options=ModelOptions(keyframe_s=0.5, extra_effects=FURTHER_EFFECTS))
     x = rng.normal(size=model.layout.size) * 1e-3
-    pre = model.preintegrate(x)
-    R = model.propagate(np.eye(3), pre, x) @ exp_so3(rng.normal(size=(model.n_keyframes + 1, 3)) * 1e-2)
-    return model, x, pre, R
+    preint = model.preintegrate(x)
+    R = model.propagate(np.eye(3), preint, x) @ exp_so3(rng.normal(size=(model.n_keyframes + 1, 3)) * 1e-2)
+    return model, x, preint, R
 
 
 @pytest.mark.parametrize("triad", ["gyro", "accel"])
@@ -52,9 +52,9 @@ def test_sensor_inverse_is_exact_and_its_jacobian_matches_fd(triad):
 
 @pytest.mark.parametrize("kind", ["rotation_factors", "gravity_factors", "encoder_factors"])
 def test_factor_jacobian_in_calibration_matches_fd(problem, kind):
-    model, x, pre, R = problem
+    model, x, preint, R = problem
     f = getattr(model, kind)
-    res = f(R, pre, x)
+    res = f(R, preint, x)
     assert res.r.shape[0] > 0
     for c in range(model.layout.size):
         xp, xm = x.copy(), x.copy()
@@ -91,19 +91,19 @@ def test_encoder_jacobian_with_readings_inside_sample_intervals_matches_fd():
 
 @pytest.mark.parametrize("kind", ["gravity_factors", "encoder_factors"])
 def test_unary_factor_jacobian_in_attitude_matches_fd(problem, kind):
-    model, x, pre, R = problem
+    model, x, preint, R = problem
     f = getattr(model, kind)
-    res = f(R, pre, x)
+    res = f(R, preint, x)
     for a in range(3):
         d = np.zeros(3)
         d[a] = EPS
-        fd = (f(R @ exp_so3(d), pre, x).r - f(R @ exp_so3(-d), pre, x).r) / (2 * EPS)
+        fd = (f(R @ exp_so3(d), preint, x).r - f(R @ exp_so3(-d), preint, x).r) / (2 * EPS)
         np.testing.assert_allclose(res.H_R[:, :, a], fd, atol=1e-7 * (1 + np.abs(fd).max()))
 
 
 def test_rotation_factor_jacobians_in_both_attitudes_match_fd(problem):
-    model, x, pre, R = problem
-    res = model.rotation_factors(R, pre, x)
+    model, x, preint, R = problem
+    res = model.rotation_factors(R, preint, x)
     for k in (1, 3, model.n_keyframes - 1):
         for a in range(3):
             d = np.zeros(3)
@@ -111,17 +111,17 @@ def test_rotation_factor_jacobians_in_both_attitudes_match_fd(problem):
             Rp, Rm = R.copy(), R.copy()
             Rp[k] = R[k] @ exp_so3(d)
             Rm[k] = R[k] @ exp_so3(-d)
-            fd = (model.rotation_factors(Rp, pre, x).r - model.rotation_factors(Rm, pre, x).r) / (2 * EPS)
+            fd = (model.rotation_factors(Rp, preint, x).r - model.rotation_factors(Rm, preint, x).r) / (2 * EPS)
             np.testing.assert_allclose(res.H_R[k][:, a], fd[k], atol=1e-8)
             np.testing.assert_allclose(res.H_R_next[k - 1][:, a], fd[k - 1], atol=1e-8)
 
 
 def test_first_order_update_tracks_repreintegration(problem):
-    model, x, pre, R = problem
+    model, x, preint, R = problem
     dx = np.random.default_rng(3).normal(size=x.size) * 1e-6
-    a = model.gravity_factors(R, pre, x + dx).r
+    a = model.gravity_factors(R, preint, x + dx).r
     b = model.gravity_factors(R, model.preintegrate(x + dx), x + dx).r
-    c0 = model.gravity_factors(R, pre, x).r
+    c0 = model.gravity_factors(R, preint, x).r
     assert np.abs(a - b).max() < 1e-3 * np.abs(b - c0).max()
 
 
@@ -303,12 +303,12 @@ def test_preintegration_kernel_matches_direct_recursion(extra, keyframe_s):
                              options=ModelOptions(keyframe_s=keyframe_s, extra_effects=extra))
     assert np.any(np.diff(model.record.reading_sample) == 0)
     x = rng.normal(size=model.layout.size) * 1e-2       # percent level: the nonlinear terms matter
-    pre = model.preintegrate(x)
+    preint = model.preintegrate(x)
     ref = _reference_preintegration(model, x)
     cols = model.terms.columns
     others = np.setdiff1d(np.arange(model.layout.size), cols)
     for name, b in ref.items():
-        a = getattr(pre, name)
+        a = getattr(preint, name)
         assert a.shape[:-1] == b.shape[:-1], name
         if name.startswith(("J_", "reading_J")):
             assert not np.any(a[..., others]), name
