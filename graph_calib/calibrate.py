@@ -12,7 +12,7 @@ alignment) is built once and solved by each.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping
 
 from graph_calib.experiment import Result
@@ -21,6 +21,7 @@ from graph_calib.problem import Problem, build_problem
 from graph_calib.solvers.interface import SolverOutput
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
 from graph_calib.solvers.results import compare, to_result
+from graph_calib.solvers.verdict import Verdict, verdict_of
 
 
 @dataclass(frozen=True)
@@ -33,15 +34,18 @@ class CalibrationRun:
     outputs : mapping of str to SolverOutput
         Each solver's output, by solver name, in the order run.
     results : mapping of str to Result
-        Each solver's result file contents.
+        Each solver's result file contents, the verdict included (key ``verdict``).
     comparison : dict or None
-        ``comparison.json`` of the first two solvers (None with one solver).
+        ``comparison.json`` of the first two solvers (None with one solver), the verdict included.
+    verdict : Verdict
+        Converged, solvers agree, residuals consistent (:mod:`graph_calib.solvers.verdict`).
     """
 
     problem: Problem
     outputs: Mapping[str, SolverOutput]
     results: Mapping[str, Result]
-    comparison: dict | None = None
+    comparison: dict | None
+    verdict: Verdict
 
 
 def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None):
@@ -67,7 +71,12 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
         results[name] = to_result(problem.model, out)
     names = list(results)
     comparison = compare(results[names[0]], results[names[1]]) if len(names) >= 2 else None
-    return CalibrationRun(problem=problem, outputs=outputs, results=results, comparison=comparison)
+    verdict = verdict_of(results, comparison)
+    results = {s: replace(r, extra={**r.extra, "verdict": verdict.to_json()}) for s, r in results.items()}
+    if comparison is not None:
+        comparison = {**comparison, "verdict": verdict.to_json()}
+    return CalibrationRun(problem=problem, outputs=outputs, results=results, comparison=comparison,
+                          verdict=verdict)
 
 
 def calibrate(experiment, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None):

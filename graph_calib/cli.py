@@ -5,7 +5,9 @@ functions, ``add_arguments(parser)`` and ``run(args) -> int``.  Exit codes
 (``cli.md``): 0 success, 2 bad input or arguments (one line, no traceback),
 1 internal failure (one line naming the command and the exception; with the
 environment variable ``GRAPH_CALIB_DEBUG=1`` the exception is re-raised, traceback
-included), 130 when interrupted.
+included), 3 when the work finished but its verdict failed (a solver did not
+converge, the solvers disagree, or the residuals do not fit the noise model; every
+file is still written), 130 when interrupted.
 """
 
 from __future__ import annotations

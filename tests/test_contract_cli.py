@@ -46,8 +46,6 @@ def experiment_file(tmp_path_factory):
     return path
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="cli.md: every command that calibrates ends with a verdict line in words (converged, "
                           "solvers agree, residuals consistent); calibrate ends with the comparison's numbers "
                           "and no verdict")
 def test_calibrate_ends_with_a_verdict_line(experiment_file, tmp_path, capsys):
@@ -57,8 +55,6 @@ def test_calibrate_ends_with_a_verdict_line(experiment_file, tmp_path, capsys):
         assert word in last, last
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError,
-                   reason="cli.md: exit 3 when the two solvers disagree beyond their tolerance (every file still "
                           "written); calibrate returns 0 whatever the comparison")
 def test_calibrate_exit_3_when_the_solvers_disagree(experiment_file, tmp_path, monkeypatch):
     import graph_calib.calibrate as calibrate_module

@@ -72,4 +72,8 @@ def run(args):
     if calibration.comparison is not None:
         io.atomic_write_json(out / "comparison.json", calibration.comparison)
         print(f"  comparison: {comparison_text(calibration.comparison['summary'])} -> {out / 'comparison.json'}")
-    return 0
+    verdict = calibration.verdict
+    for problem in verdict.problems:
+        print(f"  {problem}")
+    print(verdict.text())
+    return 0 if verdict.passed else 3
