@@ -46,8 +46,6 @@ def experiment_file(tmp_path_factory):
     return path
 
 
-                          "solvers agree, residuals consistent); calibrate ends with the comparison's numbers "
-                          "and no verdict")
 def test_calibrate_ends_with_a_verdict_line(experiment_file, tmp_path, capsys):
     assert main(["calibrate", str(experiment_file), "--out", str(tmp_path)]) == 0
     last = [ln for ln in capsys.readouterr().out.splitlines() if ln.strip()][-1]
@@ -55,7 +53,6 @@ def test_calibrate_ends_with_a_verdict_line(experiment_file, tmp_path, capsys):
         assert word in last, last
 
 
-                          "written); calibrate returns 0 whatever the comparison")
 def test_calibrate_exit_3_when_the_solvers_disagree(experiment_file, tmp_path, monkeypatch):
     import graph_calib.calibrate as calibrate_module
 
