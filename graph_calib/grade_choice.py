@@ -35,6 +35,9 @@ PRIOR_FACTOR = 5.0
 ORDER = ("navigation", "tactical", "consumer")
 #: Shortest static interval used, s.
 MIN_STATIC_S = 2.0
+#: A window whose mean rate differs from the start's by more than this is motion (a turntable turning at a
+#: constant rate about the vertical leaves the specific force unchanged), rad/s.
+MAX_RATE_CHANGE = np.deg2rad(0.5)
 
 
 @dataclass(frozen=True)
@@ -97,13 +100,14 @@ def choose_grade(experiment, *, static=None):
     ----------
     experiment : graph_calib.experiment.Experiment
     static : sequence of (int, int), optional
-        Static intervals (sample ranges); default :func:`graph_calib.static_detection.detect_static`.
+        Static intervals (sample ranges); default :func:`graph_calib.static_detection.detect_static` with
+        windows whose mean rate moved by more than :data:`MAX_RATE_CHANGE` from the start's left out.
 
     Returns
     -------
     GradeChoice
     """
-    intervals = detect_static(experiment) if static is None else static
+    intervals = detect_static(experiment, max_rate=MAX_RATE_CHANGE) if static is None else static
     n_min = max(10, int(MIN_STATIC_S * experiment.rate_hz))
     intervals = [(int(a), int(b)) for a, b in intervals if b - a >= n_min]
     if not intervals:

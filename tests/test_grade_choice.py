@@ -18,6 +18,7 @@ def _sim(name, **kw):
 
 
 @pytest.mark.parametrize("scenario, kw, grade", [("nav-subrange-short", {"hours": 0.1}, "navigation"),
+                                                  ("nav-subrange", {"hours": 0.5}, "navigation"),
                                                   ("consumer-handheld", {}, "consumer")])
 def test_simulated_units_get_their_grade(scenario, kw, grade):
     choice = choose_grade(_sim(scenario, **kw))
