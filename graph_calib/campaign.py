@@ -112,7 +112,7 @@ class CampaignOptions:
 
 @dataclass(frozen=True)
 class Task:
-    """One experiment, one solver (picklable; run by :func:`run_task` on a worker)."""
+    """One experiment, one solver (picklable; run by :func:`run_tasks` on a worker with its experiment's others)."""
 
     name: str
     file: str
@@ -313,11 +313,6 @@ def run_tasks(tasks):
         except Exception as exc:  # noqa: BLE001
             outcomes.append(_failure(task, exc))
     return outcomes
-
-
-def run_task(task):
-    """Calibrate one experiment with one solver (:func:`run_tasks` of one task); its outcome dict."""
-    return run_tasks([task])[0]
 
 
 # ---------------------------------------------------------------------------
@@ -755,5 +750,5 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
 
 
 __all__ = ["CAMPAIGN_FORMAT", "CACHE_VERSION", "CampaignOptions", "CampaignRun", "Task", "calibration_options",
-           "file_sha256", "options_sha256", "task_key", "cached", "plan", "run_task", "run_tasks", "execute", "run_campaign",
+           "file_sha256", "options_sha256", "task_key", "cached", "plan", "run_tasks", "execute", "run_campaign",
            "truth_check", "truth_path", "experiment_summary", "check_experiment_header"]
