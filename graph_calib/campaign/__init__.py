@@ -43,7 +43,6 @@ atomic writes) and a rerun does only what changed.
 
 from __future__ import annotations
 
-import hashlib
 import json
 import os
 import sys
@@ -54,87 +53,18 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib import io
+from graph_calib.campaign.tasks import (
+    CACHE_VERSION, SOLVER_CHOICES, CampaignOptions, Task, cached, calibration_options, file_sha256, options_sha256,
+    task_key,
+)
 from graph_calib.errors import InputError
-from graph_calib.model import ModelOptions
-from graph_calib.options import CalibrationOptions, FilterOptions, GraphOptions
 from graph_calib.problem import build_problem
-from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
+from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import compare, to_result
 
 #: Format name of ``campaign.json``.
 CAMPAIGN_FORMAT = "imu-calibration-campaign"
 CAMPAIGN_VERSION = 1
-#: Bumped when a change of the code invalidates cached results.
-CACHE_VERSION = 1
-
-SOLVER_CHOICES = {"both": DEFAULT_SOLVERS, "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",)}
-
-
-@dataclass(frozen=True)
-class CampaignOptions:
-    """How a campaign runs (what it computes comes from the manifest).
-
-    Attributes
-    ----------
-    workers : int or None
-        Dask worker processes of the local cluster (one thread each); None: as many
-        as CPU cores, at most the number of tasks; 0: no Dask, tasks run one after
-        the other in this process.
-    scheduler : str or None
-        Address of an existing Dask scheduler (``tcp://host:8786``); its workers must
-        see the output folder.  Overrides ``workers``.
-    solvers : str or None
-        ``"both"``, ``"sqrt-kf"`` or ``"factor-graph"``; None: the manifest's
-        ``[solver] solvers``, else both.
-    stitch_model : str
-        ``"cubic"`` or ``"linear"``: the stitched model that validation uses.
-    validate : tuple of str
-        Independent experiment files for validation.  A ``<stem>.truth.json`` next
-        to one is its reference; otherwise it is calibrated (factor graph) as an
-        extra task and its own estimate is the reference.
-    force : bool
-        Ignore cached results.
-    report : bool
-        Write ``report.html``.
-    progress : bool
-        Show a progress bar (stderr).
-    """
-
-    workers: int | None = None
-    scheduler: str | None = None
-    solvers: str | None = None
-    stitch_model: str = "cubic"
-    validate: tuple = ()
-    force: bool = False
-    report: bool = True
-    progress: bool = True
-
-
-@dataclass(frozen=True)
-class Task:
-    """One experiment, one solver (picklable; run by :func:`run_tasks` on a worker with its experiment's others)."""
-
-    name: str
-    file: str
-    solver: str
-    options: object
-    out_dir: str
-    key: str
-    input_sha256: str
-    options_sha256: str
-    numba_threads: int = 0
-
-    @property
-    def result_path(self):
-        return Path(self.out_dir) / f"{self.solver}.json"
-
-    @property
-    def residuals_path(self):
-        return Path(self.out_dir) / f"{self.solver}.residuals.h5"
-
-    @property
-    def summary_path(self):
-        return Path(self.out_dir) / "summary.json"
 
 
 @dataclass
@@ -172,62 +102,6 @@ class CampaignRun:
 
 
 # ---------------------------------------------------------------------------
-# options and keys
-# ---------------------------------------------------------------------------
-
-
-def calibration_options(campaign, *, t_ref_degC=None):
-    """The :class:`graph_calib.calibrate.CalibrationOptions` a manifest asks for.
-
-    ``[imu] grade``, ``[priors]``, ``[model] effects / exclude``,
-    ``[solver] keyframe_s / max_iterations`` (the latter for both solvers: LM
-    iterations and filter passes), and the experiment's ``t_ref_degC``.
-    """
-    s = campaign.solver
-    mopt = ModelOptions(
-        keyframe_s=float(s.get("keyframe_s", ModelOptions.keyframe_s)), grade=campaign.grade,
-        extra_effects=tuple(campaign.effects), exclude=tuple(campaign.exclude),
-        prior_sigma=dict(sorted(campaign.priors.items())) or None,
-    )
-    gopt = GraphOptions(max_iterations=int(s["max_iterations"])) if "max_iterations" in s else GraphOptions()
-    kw = {"filter": FilterOptions(max_passes=int(s["max_iterations"]))} if "max_iterations" in s else {}
-    return CalibrationOptions(model=mopt, graph=gopt, t_ref_degC=t_ref_degC, **kw)
-
-
-def file_sha256(path, *, chunk=1 << 22):
-    """SHA-256 (hex) of a file's content."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for block in iter(lambda: fh.read(chunk), b""):
-            h.update(block)
-    return h.hexdigest()
-
-
-def options_sha256(options):
-    """SHA-256 (hex) of calibration options (their repr: frozen dataclasses of plain values)."""
-    return hashlib.sha256(repr(options).encode("utf-8")).hexdigest()
-
-
-def task_key(*, input_sha256, options_sha256, solver):
-    """The cache key of one task."""
-    from graph_calib import __version__
-
-    text = f"graph-calib {__version__} cache {CACHE_VERSION}|{solver}|{input_sha256}|{options_sha256}"
-    return hashlib.sha256(text.encode("utf-8")).hexdigest()
-
-
-def cached(task):
-    """Whether ``task``'s files are on disk with its key."""
-    if not (task.result_path.is_file() and task.residuals_path.is_file() and task.summary_path.is_file()):
-        return False
-    try:
-        doc = json.loads(task.result_path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return False
-    return isinstance(doc, dict) and isinstance(doc.get("campaign"), dict) and doc["campaign"].get("key") == task.key
-
-
-# ---------------------------------------------------------------------------
 # one task (runs on a worker)
 # ---------------------------------------------------------------------------
 
@@ -251,8 +125,6 @@ def experiment_summary(experiment, *, t_ref_degC, points=1500):
         "valid_table_readings": 0 if tbl is None else int(np.count_nonzero(tbl.valid)),
         "series": {"t_s": experiment.t[::step], "sensor_temperature_degC": T[::step]},
     }
-
-
 
 
 def run_tasks(tasks):
