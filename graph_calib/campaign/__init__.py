@@ -44,23 +44,21 @@ atomic writes) and a rerun does only what changed.
 from __future__ import annotations
 
 import json
-import os
 import sys
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from graph_calib import io
+from graph_calib.campaign.execution import execute, experiment_summary, run_tasks
 from graph_calib.campaign.tasks import (
     CACHE_VERSION, SOLVER_CHOICES, CampaignOptions, Task, cached, calibration_options, file_sha256, options_sha256,
     task_key,
 )
 from graph_calib.errors import InputError
-from graph_calib.problem import build_problem
-from graph_calib.solvers.registry import solve
-from graph_calib.solvers.results import compare, to_result
+from graph_calib.solvers.results import compare
 
 #: Format name of ``campaign.json``.
 CAMPAIGN_FORMAT = "imu-calibration-campaign"
@@ -99,212 +97,6 @@ class CampaignRun:
     validations: list = field(default_factory=list)
     failed: list = field(default_factory=list)
     report_path: Path | None = None
-
-
-# ---------------------------------------------------------------------------
-# one task (runs on a worker)
-# ---------------------------------------------------------------------------
-
-
-def experiment_summary(experiment, *, t_ref_degC, points=1500):
-    """``summary.json`` of an experiment: length, temperatures (ranges per sensor and a thinned series)."""
-    from graph_calib.stitching import SENSORS
-
-    T = experiment.sensor_temperatures()
-    step = max(1, experiment.n_samples // points)
-    tbl = experiment.table
-    return {
-        "file": Path(experiment.source).name if experiment.source else "",
-        "imu_id": experiment.imu_id, "n_samples": experiment.n_samples, "rate_hz": experiment.rate_hz,
-        "duration_s": float(experiment.t[-1] - experiment.t[0] + 1.0 / experiment.rate_hz),
-        "t_ref_degC": float(t_ref_degC),
-        "sensors": list(SENSORS),
-        "sensor_temperature_range_degC": np.stack([T.min(axis=0), T.max(axis=0)], axis=1).tolist(),
-        "temperature_range_degC": [float(T.min()), float(T.max())],
-        "table_readings": 0 if tbl is None else int(tbl.t.size),
-        "valid_table_readings": 0 if tbl is None else int(np.count_nonzero(tbl.valid)),
-        "series": {"t_s": experiment.t[::step], "sensor_temperature_degC": T[::step]},
-    }
-
-
-def run_tasks(tasks):
-    """Calibrate one experiment with each task's solver (one problem built for all) and write their files.
-
-    Parameters
-    ----------
-    tasks : sequence of Task
-        Tasks of the same experiment (same file and options).
-
-    Returns
-    -------
-    list of dict
-        Per task ``name``, ``solver``, ``status`` (``"computed"`` or ``"failed"`` with ``error``; an
-        ``input_error`` when the experiment file breaks a rule), ``seconds`` (its share of the set-up
-        plus its solve).
-    """
-    tasks = list(tasks)
-    if not tasks:
-        return []
-    first = tasks[0]
-    if first.numba_threads:
-        try:
-            import numba
-
-            numba.set_num_threads(max(1, min(first.numba_threads, numba.config.NUMBA_NUM_THREADS)))
-        except Exception:  # pragma: no cover - numba threading is an optimisation only
-            pass
-    t0 = time.perf_counter()
-    try:
-        Path(first.out_dir).mkdir(parents=True, exist_ok=True)
-        exp = io.read_experiment(first.file)
-        problem = build_problem(exp, options=first.options)
-        io.atomic_write_json(first.summary_path, experiment_summary(exp, t_ref_degC=problem.model.t_ref_degC))
-    except (KeyboardInterrupt, SystemExit):
-        raise
-    except Exception as exc:  # noqa: BLE001 - reported per task
-        return [_failure(t, exc) for t in tasks]
-    build_seconds = time.perf_counter() - t0
-    outcomes = []
-    for task in tasks:
-        t1 = time.perf_counter()
-        try:
-            output = solve(task.solver, problem, options=task.options)
-            result = to_result(problem.model, output)
-            solve_seconds = time.perf_counter() - t1
-            io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
-                               source=Path(task.file).name, kind=output.residual_quantity)
-            seconds = build_seconds / len(tasks) + solve_seconds
-            extra = dict(result.extra)
-            extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
-                                 "options_sha256": task.options_sha256, "experiment": task.name,
-                                 "seconds": seconds, "setup_seconds": build_seconds, "solve_seconds": solve_seconds}
-            io.write_result(replace(result, extra=extra), task.result_path)
-            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds})
-        except (KeyboardInterrupt, SystemExit):
-            raise
-        except Exception as exc:  # noqa: BLE001
-            outcomes.append(_failure(task, exc))
-    return outcomes
-
-
-# ---------------------------------------------------------------------------
-# running the tasks
-# ---------------------------------------------------------------------------
-
-
-def _progress_bar(total, enabled):
-    if not enabled or total == 0:
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
-
-
-def _say(bar, text, enabled):
-    if not enabled:
-        return
-    if bar is not None:
-        bar.write(text, file=sys.stderr)
-    else:
-        print(text, file=sys.stderr)
-
-
-def _one_line(exc):
-    text = f"{type(exc).__name__}: {exc}".strip().splitlines()
-    return text[0] if text else type(exc).__name__
-
-
-def _failure(task, exc):
-    out = {"name": task.name, "solver": task.solver, "status": "failed", "error": _one_line(exc)}
-    if isinstance(exc, InputError):
-        out["input_error"] = str(exc)
-    return out
-
-
-def _groups(tasks):
-    """Tasks grouped by experiment (one problem set-up serves every solver of an experiment), in order."""
-    groups = {}
-    for t in tasks:
-        groups.setdefault((t.name, t.file, t.out_dir), []).append(t)
-    return list(groups.values())
-
-
-def execute(tasks, *, options, on_done=None):
-    """Run ``tasks`` (Dask or in-process), one job per experiment; ``{(name, solver): outcome dict}``.
-
-    ``on_done(outcome)`` is called in the main process as each task's outcome
-    arrives (its exception, e.g. ``KeyboardInterrupt``, stops the run; finished
-    tasks stay on disk).
-    """
-    outcomes = {}
-    if not tasks:
-        return outcomes
-    bar = _progress_bar(len(tasks), options.progress)
-
-    def finish(task, outcome):
-        outcomes[(task.name, task.solver)] = outcome
-        if bar is not None:
-            bar.update(1)
-        if outcome["status"] == "failed":
-            _say(bar, f"  {task.name} {task.solver}: FAILED: {outcome['error']}", options.progress)
-        else:
-            _say(bar, f"  {task.name} {task.solver}: done in {outcome['seconds']:.1f} s", options.progress)
-        if on_done is not None:
-            on_done(outcome)
-
-    try:
-        if options.scheduler is None and options.workers == 0:
-            for group in _groups(tasks):
-                for t, outcome in zip(group, run_tasks(group)):
-                    finish(t, outcome)
-        else:
-            _run_dask(tasks, options=options, finish=finish, bar=bar)
-    finally:
-        if bar is not None:
-            bar.close()
-    return outcomes
-
-
-def _run_dask(tasks, *, options, finish, bar):
-    import logging
-
-    from distributed import Client, LocalCluster, as_completed
-
-    groups = _groups(tasks)
-    cluster = None
-    if options.scheduler:
-        try:
-            client = Client(options.scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
-    else:
-        n = options.workers if options.workers else min(os.cpu_count() or 1, len(groups))
-        n = max(1, min(n, len(groups)))
-        _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
-        client = Client(cluster)
-    try:
-        by_future = {}
-        for g in groups:
-            key = f"calibrate-{g[0].name}-{'+'.join(t.solver for t in g)}-{g[0].key[:12]}"
-            by_future[client.submit(run_tasks, g, key=key, pure=False)] = g
-        for fut in as_completed(list(by_future)):
-            g = by_future[fut]
-            try:
-                outs = fut.result()
-            except (KeyboardInterrupt, SystemExit):
-                raise
-            except Exception as exc:  # noqa: BLE001 - e.g. a worker that died
-                outs = [_failure(t, exc) for t in g]
-            for t, outcome in zip(g, outs):
-                finish(t, outcome)
-    finally:
-        try:
-            client.close()
-        finally:
-            if cluster is not None:
-                cluster.close()
 
 
 # ---------------------------------------------------------------------------
