@@ -57,6 +57,7 @@ from graph_calib.campaign.tasks import (
     CACHE_VERSION, SOLVER_CHOICES, CampaignOptions, Task, cached, calibration_options, file_sha256, options_sha256,
     task_key,
 )
+from graph_calib.campaign.truth import truth_check, truth_path
 from graph_calib.errors import InputError
 from graph_calib.solvers.results import compare
 
@@ -164,12 +165,6 @@ def _validation_tasks(campaign, out, records, *, options):
     return todo, done, refs
 
 
-def truth_path(experiment_file):
-    """``<stem>.truth.json`` next to an experiment file (the simulator's convention)."""
-    p = Path(experiment_file)
-    return p.with_name(p.stem + ".truth.json")
-
-
 def _check_out(out):
     out = Path(out)
     if out.exists() and not out.is_dir():
@@ -217,46 +212,6 @@ def _check_records(records):
         check_experiment_header(p, dataset="--validate")
         paths.append(p)
     return paths
-
-
-def truth_check(stitched, truth, *, model=None, n=61):
-    """How the stitched curves sit against the truth, inside each element's covered range.
-
-    Returns
-    -------
-    dict
-        Per element ``{"max_abs_z", "max_abs_error"}`` (z: error over the stitched
-        one-sigma band, on ``n`` temperatures across the covered range) and overall
-        ``max_abs_z``, ``fraction_within_1sigma`` (about 0.68 for honest bands),
-        ``fraction_within_2sigma`` and ``consistent``: the largest ``|z|`` below the
-        1 % family-wise limit for four independent checks per element
-        (:func:`graph_calib.stitching.family_z_limit`).
-    """
-    from graph_calib.stitching import family_z_limit
-    from graph_calib.validation import ResultCalibration
-
-    ref = truth if hasattr(truth, "evaluate") else ResultCalibration(truth)
-    per, zs = {}, []
-    for name, cv in stitched.curves.items():
-        lo, hi = cv.t_span
-        T = np.linspace(lo, hi, n)
-        tv = ref.evaluate(np.tile(T[:, None], (1, 6))).get(name)
-        if tv is None:
-            continue
-        v, s = cv.evaluate(T, model)
-        z = np.where(s > 0, (v - tv) / np.where(s > 0, s, 1.0), 0.0)
-        per[name] = {"max_abs_z": float(np.max(np.abs(z))), "max_abs_error": float(np.max(np.abs(v - tv)))}
-        zs.append(z)
-    allz = np.abs(np.concatenate(zs)) if zs else np.zeros(0)
-    # the points of one curve are strongly correlated: count about four independent checks per element
-    limit = family_z_limit(4 * len(per))
-    return {
-        "model": model or "default", "elements": per, "max_abs_z": float(allz.max()) if allz.size else 0.0,
-        "fraction_within_1sigma": float(np.mean(allz <= 1.0)) if allz.size else 1.0,
-        "fraction_within_2sigma": float(np.mean(allz <= 2.0)) if allz.size else 1.0,
-        "family_limit": limit,
-        "consistent": bool(allz.size == 0 or allz.max() <= limit),
-    }
 
 
 def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
