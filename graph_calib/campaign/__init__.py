@@ -49,12 +49,11 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
-
 from graph_calib import io
 from graph_calib.campaign.execution import execute, experiment_summary, run_tasks
+from graph_calib.campaign.planning import check_experiment_header, plan, plan_campaign
 from graph_calib.campaign.tasks import (
-    CACHE_VERSION, SOLVER_CHOICES, CampaignOptions, Task, cached, calibration_options, file_sha256, options_sha256,
+    CACHE_VERSION, CampaignOptions, Task, cached, calibration_options, file_sha256, options_sha256,
     task_key,
 )
 from graph_calib.campaign.truth import truth_check, truth_path
@@ -100,120 +99,6 @@ class CampaignRun:
     report_path: Path | None = None
 
 
-# ---------------------------------------------------------------------------
-# the campaign
-# ---------------------------------------------------------------------------
-
-
-def _solvers(campaign, options):
-    choice = options.solvers or campaign.solver.get("solvers", "both")
-    if choice not in SOLVER_CHOICES:
-        raise InputError(f"unknown solver choice {choice!r}; known: {', '.join(SOLVER_CHOICES)}", dataset="--solver")
-    return SOLVER_CHOICES[choice]
-
-
-def _remove_stale_temporaries(folder):
-    """Temporary files of writes cut short by a killed worker (``.<name>.*.tmp``)."""
-    if not folder.is_dir():
-        return
-    for p in folder.glob(".*.tmp"):
-        try:
-            p.unlink()
-        except OSError:
-            pass
-
-
-def plan(campaign, out, *, options):
-    """Every task of a campaign with its cache key: ``(tasks to run, cached tasks)``."""
-    solvers = _solvers(campaign, options)
-    threads = 1 if (options.scheduler or options.workers != 0) else 0
-    todo, done = [], []
-    for e in campaign.experiments:
-        check_experiment_header(e.file)
-        copts = calibration_options(campaign, t_ref_degC=e.t_ref_degC)
-        osha = options_sha256(copts)
-        fsha = file_sha256(e.file)
-        folder = Path(out) / e.name
-        _remove_stale_temporaries(folder)
-        for s in solvers:
-            t = Task(name=e.name, file=str(e.file), solver=s, options=copts, out_dir=str(folder),
-                     key=task_key(input_sha256=fsha, options_sha256=osha, solver=s), input_sha256=fsha,
-                     options_sha256=osha, numba_threads=threads)
-            (done if (not options.force and cached(t)) else todo).append(t)
-    return todo, done
-
-
-def _validation_tasks(campaign, out, records, *, options):
-    """Tasks calibrating validation records that have no truth file (factor graph only)."""
-    todo, done, refs = [], [], {}
-    threads = 1 if (options.scheduler or options.workers != 0) else 0
-    for rec in records:
-        truth = truth_path(rec)
-        if truth.is_file():
-            refs[rec] = ("truth", truth)
-            continue
-        copts = calibration_options(campaign)
-        osha = options_sha256(copts)
-        fsha = file_sha256(rec)
-        folder = Path(out) / "validation" / rec.stem
-        _remove_stale_temporaries(folder)
-        t = Task(name=f"validation/{rec.stem}", file=str(rec), solver="factor-graph", options=copts,
-                 out_dir=str(folder), key=task_key(input_sha256=fsha, options_sha256=osha, solver="factor-graph"),
-                 input_sha256=fsha, options_sha256=osha, numba_threads=threads)
-        refs[rec] = ("estimate", t.result_path)
-        (done if (not options.force and cached(t)) else todo).append(t)
-    return todo, done, refs
-
-
-def _check_out(out):
-    out = Path(out)
-    if out.exists() and not out.is_dir():
-        raise InputError("exists and is not a folder", path=out, dataset="--out")
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create the output folder: {exc}", path=out, dataset="--out") from None
-    return out
-
-
-def check_experiment_header(path, *, dataset=None):
-    """Cheap check that ``path`` is an experiment file (HDF5 with the right ``format``); InputError if not.
-
-    The full validation (every rule of data-format.md) runs where the file is
-    read, on the worker; this catches a wrong file before any work starts.
-    """
-    import h5py
-
-    path = Path(path)
-    if not path.is_file():
-        raise InputError("file not found" if not path.exists() else "not a file", path=path, dataset=dataset)
-    try:
-        with h5py.File(path, "r") as f:
-            fmt = f.attrs.get("format")
-    except OSError:
-        raise InputError("not an HDF5 file (an experiment file is HDF5, data-format.md)", path=path,
-                         dataset=dataset) from None
-    if isinstance(fmt, bytes):
-        fmt = fmt.decode("utf-8", "replace")
-    if isinstance(fmt, np.ndarray) and fmt.size == 1:
-        fmt = fmt.item()
-    if fmt != io.EXPERIMENT_FORMAT:
-        raise InputError(f"not an experiment file: format attribute is {fmt!r}, expected {io.EXPERIMENT_FORMAT!r}",
-                         path=path, dataset=dataset)
-
-
-def _check_records(records):
-    paths = []
-    for r in records:
-        p = Path(r).resolve()
-        if not p.is_file():
-            raise InputError("validation record not found" if not p.exists() else "not a file", path=p,
-                             dataset="--validate")
-        check_experiment_header(p, dataset="--validate")
-        paths.append(p)
-    return paths
-
-
 def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     """Run (or resume) a campaign: calibrate, compare, stitch, validate, write every file.
 
@@ -239,20 +124,16 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
 
     t_start = time.perf_counter()
     campaign = manifest if isinstance(manifest, io.Campaign) else io.read_manifest(manifest)
-    if options.stitch_model not in ("cubic", "linear"):
-        raise InputError(f"must be 'cubic' or 'linear', got {options.stitch_model!r}", dataset="--stitch")
-    out = _check_out(out)
-    records = _check_records(options.validate)
-    todo, done = plan(campaign, out, options=options)
-    vtodo, vdone, refs = _validation_tasks(campaign, out, records, options=options)
-    solvers = _solvers(campaign, options)
+    planned = plan_campaign(campaign, out, options=options)
+    out, records, refs, solvers = planned.out, planned.records, planned.references, planned.solvers
+    todo, done, vtodo, vdone = planned.todo, planned.done, planned.validation_todo, planned.validation_done
     if options.progress:
         print(f"campaign {campaign.imu_id}: {len(campaign.experiments)} experiment(s) x {len(solvers)} solver(s); "
               f"{len(done) + len(vdone)} cached, {len(todo) + len(vtodo)} to compute", file=sys.stderr)
     t_tasks = time.perf_counter()
-    outcomes = execute(todo + vtodo, options=options, on_done=on_done)
+    outcomes = execute(planned.to_compute, options=options, on_done=on_done)
     tasks_seconds = time.perf_counter() - t_tasks
-    for t in done + vdone:
+    for t in planned.from_cache:
         outcomes[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}
     bad = [o for o in outcomes.values() if o.get("input_error")]
     if bad:  # bad input found by a worker: one clear message, exit code 2 (finished tasks stay cached)
