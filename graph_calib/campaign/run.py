@@ -4,7 +4,8 @@
    (:func:`graph_calib.campaign.planning.plan_campaign`);
 2. compute: the tasks run (:func:`graph_calib.campaign.execution.execute`), the cached ones counted;
 3. collect: the tasks' files read back per experiment, ``comparison.json`` written where both solvers
-   finished, the truth files read;
+   finished, each experiment's verdict (converged, solvers agree, residuals consistent) in
+   ``campaign.json`` and its ``comparison.json``, the truth files read;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
 5. truth check: the stitched curves against the first truth file
    (:func:`graph_calib.campaign.truth.truth_check`);
@@ -29,6 +30,7 @@ from graph_calib.errors import InputError
 from graph_calib.experiment import Result
 from graph_calib.reports.campaign_report import write_report
 from graph_calib.solvers.results import compare
+from graph_calib.solvers.verdict import verdict_of
 from graph_calib.stitching import Stitched, stitch
 from graph_calib.validation import ResultCalibration, Validation, validate, window_means
 
@@ -61,6 +63,11 @@ class CampaignRun:
     report_path : Path or None
         ``report.html``, when written.
     """
+
+    @property
+    def verdict_failed(self):
+        """Names of the experiments whose verdict failed (cli.md: the campaign then exits 3)."""
+        return [e["name"] for e in self.document["experiments"] if not e.get("verdict", {}).get("passed", True)]
 
     out: Path
     document: dict
@@ -185,9 +192,14 @@ def _collect(planned, outcomes):
                 res[s] = r
                 info["seconds"] = (r.extra.get("campaign") or {}).get("seconds")
             entry["results"][s] = info
+        cmp_ = compare(res["sqrt-kf"], res["factor-graph"]) if "sqrt-kf" in res and "factor-graph" in res else None
+        if res:
+            # the verdict of the experiment's solvers together: in campaign.json and comparison.json (the
+            # tasks' result files stay as their workers wrote them, so that cached work is kept byte for byte)
+            entry["verdict"] = verdict_of(res, cmp_).to_json()
         results[e.name] = res
-        if "sqrt-kf" in res and "factor-graph" in res:
-            cmp_ = compare(res["sqrt-kf"], res["factor-graph"])
+        if cmp_ is not None:
+            cmp_["verdict"] = entry["verdict"]
             io.atomic_write_json(folder / "comparison.json", cmp_)
             entry["comparison"] = cmp_["summary"]
         tp = truth_path(e.file)
@@ -274,6 +286,9 @@ def _document(planned, collected, stitched, outcomes, *, primary, stitch_model, 
         "model": {"effects": list(campaign.effects), "exclude": list(campaign.exclude), "priors": campaign.priors,
                   "solver_options": campaign.solver},
         "experiments": collected.experiments,
+        "verdict": {"passed": all(e.get("verdict", {}).get("passed", True) for e in collected.experiments),
+                    "failed": [e["name"] for e in collected.experiments
+                               if not e.get("verdict", {}).get("passed", True)]},
         "stitching": {s: st.to_dict() for s, st in stitched.items()},
         "truth_check": truth_doc,
         "validation": validation_doc,
