@@ -218,7 +218,7 @@ def _check_gaps(d, rate, segment, path):
         k = _first(gap) + 1
         where = "" if segment is None else f" inside segment {int(segment[k])}"
         raise InputError(
-            f"gap of {d[k - 1]:.6g} s ({d[k - 1] * rate:.3g} nominal periods) before this sample{where}; "
+            f"gap of {d[k - 1]:.6g} s ({d[k - 1] * rate:.4g} nominal periods) before this sample{where}; "
             f"at most {MAX_GAP_PERIODS:g} periods are accepted inside a segment: mark where the pieces start in "
             f"{_SEG} (samples are never dropped)",
             path=path, dataset=_T, index=k)
