@@ -341,7 +341,7 @@ def test_csv_repeated_time_in_its_own_units_names_the_line(tmp_path):
 # csv: what new users met
 # ---------------------------------------------------------------------------
 
-KW = dict(latitude_rad=0.8, gravity_mps2=9.8)
+KW = {"latitude_rad": 0.8, "gravity_mps2": 9.8}
 
 
 def _text_csv(tmp_path, rows, name="text.csv"):
@@ -474,7 +474,8 @@ def test_csv_gravity_from_latitude_needs_a_latitude(tmp_path):
 
 def test_csv_segment_column(tmp_path):
     """Three pieces, the second and third after long gaps; rates become increments over one period at a cut."""
-    cut = lambda k: 0 if k < 40 else (1 if k < 70 else 5)  # noqa: E731
+    def cut(k):
+        return 0 if k < 40 else (1 if k < 70 else 5)
     rows = _rows(t=lambda k: repr(k / 100.0 + 10.0 * cut(k)), seg=cut)
     path = _text_csv(tmp_path, rows)
     exp = importers.import_csv(path, columns={**COLS_TEXT, "segment": 9}, **KW)

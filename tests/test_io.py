@@ -288,8 +288,8 @@ RULES = [
      "infinite value"),
     ("t-not-increasing", _edit("imu/t", _at(40, lambda v: v - 0.01)), "/imu/t", 40, "not strictly increasing"),
     ("t-gap", _edit("imu/t", _gap), "/imu/t", 300,
-     r"gap of 0\.06 s \(6 nominal periods\) before this sample; at most 3 periods are accepted inside a "
-     r"segment: mark where the pieces start in /imu/segment"),
+     (r"gap of 0\.06 s \(6 nominal periods\) before this sample; at most 3 periods are accepted inside a "
+      r"segment: mark where the pieces start in /imu/segment")),
     ("t-gap-inside-segment", _segment_and_gap, "/imu/t", 300,
      r"gap of 0\.06 s \(6 nominal periods\) before this sample inside segment 1; at most 3 periods"),
     ("segment-decreasing", _segment(np.repeat(np.array([0, 1, 0], dtype=np.int32), [100, 100, 400])),

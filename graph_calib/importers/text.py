@@ -139,8 +139,8 @@ def read_numeric_table(path, *, delimiter=None, skip_lines=0, n_columns=None, us
         column (counted from 0).
     """
     path = _require_file(path)
-    scan = dict(delimiter=delimiter, skip_lines=skip_lines, n_columns=n_columns,
-                usecols=None if usecols is None else list(usecols), names=column_names)
+    scan = {"delimiter": delimiter, "skip_lines": skip_lines, "n_columns": n_columns,
+            "usecols": None if usecols is None else list(usecols), "names": column_names}
     try:
         data = np.loadtxt(path, delimiter=delimiter, skiprows=skip_lines, comments="#", ndmin=2,
                           dtype=np.float64, encoding="utf-8", quotechar='"', usecols=scan["usecols"])
