@@ -24,7 +24,7 @@ Modules, from the data up:
 - :mod:`graph_calib.diagnosis.records`: :class:`DiagnosisOptions` and what the loop records
   (:class:`CandidateTest`, :class:`DriverTest`, :class:`Round`, :class:`Stage`,
   :class:`Diagnosis` with ``to_json``);
-- :mod:`graph_calib.diagnosis.loop`: :func:`diagnose`, the loop.
+- :mod:`graph_calib.diagnosis.loop`: :func:`diagnose`, the loop as a sequence of steps.
 """
 
 from graph_calib.diagnosis.drivers import (

@@ -169,7 +169,7 @@ class DriverTest:
                                  for lb, e, s in zip(self.labels, self.estimate, self.sigma)]}
 
 
-@dataclass
+@dataclass(frozen=True)
 class Round:
     """One round of the loop: the tests at the current model's solution and what was decided.
 
@@ -254,7 +254,7 @@ class Stage:
     error: dict[str, dict] | None = None
 
 
-@dataclass
+@dataclass(frozen=True)
 class Diagnosis:
     """What :func:`~graph_calib.diagnosis.loop.diagnose` found (``to_json`` gives ``diagnosis.json``).
 
