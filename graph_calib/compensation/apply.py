@@ -113,6 +113,9 @@ def _kind(path):
         raise InputError(f"cannot read: {exc}", path=path) from None
     if head.startswith("# format"):
         return "table", "csv"
+    if head.startswith("/*"):
+        raise InputError("a C header table is written for an INS, not read back: apply the JSON or CSV table",
+                         path=path)
     if not head.startswith("{"):
         raise InputError("not a result file, a compensation table (JSON or CSV) or a campaign.json", path=path)
     try:
