@@ -29,11 +29,13 @@ The table (:meth:`StitchedCalibration.table`)
     (the same numbers); between them the table's linear interpolation departs from a
     curved (cubic) fit by at most ``h^2/8 max|p''|``, which the table states per
     element (``interpolation_error``: largest absolute difference, and the same in
-    units of the element's sigma, over 16 points per grid interval).
+    units of the element's sigma, over 16 points per grid interval and, for a
+    piecewise-linear fit, at its knots, where it departs most).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from dataclasses import dataclass, field
@@ -150,13 +152,15 @@ class StitchedCalibration(ElementCompensation):
         fine = np.append((grid[:-1, None] + np.diff(grid)[:, None] * frac).ravel(), grid[-1])
         curves = {}
         for n in self.curve_elements():
+            knots = self.stitched.curves[n].fit(self.model).knots   # a linear fit departs most at its knots
+            fine_n = fine if knots is None else np.union1d(fine, knots[(knots > grid[0]) & (knots < grid[-1])])
             v, s = self.curve_values(n, grid)
-            vf, sf = self.curve_values(n, fine)
-            err = np.abs(interpolate(grid, v, fine) - vf)
+            vf, sf = self.curve_values(n, fine_n)
+            err = np.abs(interpolate(grid, v, fine_n) - vf)
             in_sigma = err / np.where(sf > 0, sf, np.inf)
             curves[n] = TableCurve(v, s, self.valid_range(n), {
                 "max_abs": float(err.max()), "max_in_sigma": float(in_sigma.max()),
-                "at_degC": float(fine[int(np.argmax(in_sigma))])})
+                "at_degC": float(fine_n[int(np.argmax(in_sigma))])})
         spans = [c.calibrated_range_degC for c in curves.values()]
         info = dict(self.info)
         info.update({"step_degC": float(step_degC),
@@ -190,8 +194,12 @@ class StitchedCalibration(ElementCompensation):
             path = path / "campaign.json"
         doc = read_campaign(path)
         folder = path.parent
-        stitching = doc.get("stitching") or {}
-        if not isinstance(stitching, dict) or not stitching:
+        for key, kind in (("stitching", dict), ("experiments", list)):
+            if not isinstance(doc.get(key), kind):
+                raise InputError(f"missing or not a JSON {'object' if kind is dict else 'list'}", path=path,
+                                 dataset=key)
+        stitching = doc["stitching"]
+        if not stitching:
             raise InputError("the campaign stitched nothing (no solver finished an experiment)", path=path,
                              dataset="stitching")
         solver = solver or doc.get("primary_solver") or next(iter(stitching))
@@ -203,6 +211,9 @@ class StitchedCalibration(ElementCompensation):
             raise InputError(f"stitched model {model!r} is not one of {', '.join(STITCH_MODELS)}", path=path,
                              dataset="stitch_model")
         stored = stitching[solver]
+        if not isinstance(stored, dict) or not isinstance(stored.get("elements"), dict):
+            raise InputError("not a stitching (an object with subranges and elements)", path=path,
+                             dataset=f"stitching.{solver}")
         names = list(stored.get("subranges") or [])
         entries = {e.get("name"): e for e in doc.get("experiments") or [] if isinstance(e, dict)}
         missing = [n for n in names if n not in entries]
@@ -216,11 +227,16 @@ class StitchedCalibration(ElementCompensation):
             rel = ((e.get("results") or {}).get(solver) or {}).get("file") or f"{e.get('folder', n)}/{solver}.json"
             results.append(io.read_result(folder / rel))
             ranges.append(e.get("sensor_temperature_range_degC"))
-        st = stitch(results, names=order, sensor_ranges=ranges, solver=solver)
+        try:
+            st = stitch(results, names=order, sensor_ranges=ranges, solver=solver)
+        except ValueError as exc:      # e.g. a result without sigmas, or bad sensor ranges
+            raise InputError(f"cannot stitch the results it lists: {exc}", path=path,
+                             dataset=f"stitching.{solver}") from None
         _check_refit(st, stored, path=path, solver=solver)
         extra = _unstitched_constants(results, order, ranges)
         return cls(st, model=model, extra_constants=extra,
-                   info={"imu_id": doc.get("imu_id", ""), "source": str(path)})
+                   info={"imu_id": doc.get("imu_id", ""), "source": str(path.resolve()),
+                         "source_sha256": hashlib.sha256(path.read_bytes()).hexdigest()})
 
 
 def read_campaign(path):
@@ -253,7 +269,11 @@ def _check_refit(st, stored, *, path, solver):
                          "again", path=path, dataset=f"stitching.{solver}.elements")
     for name, cv in st.curves.items():
         for kind, fit in cv.fits.items():
-            old = np.asarray((elements[name].get("fits") or {}).get(kind, {}).get("theta", []), dtype=float)
+            entry = elements[name] if isinstance(elements[name], dict) else {}
+            try:
+                old = np.asarray(((entry.get("fits") or {}).get(kind) or {}).get("theta", []), dtype=float)
+            except (TypeError, ValueError, AttributeError):
+                old = np.zeros(0)
             new = fit.theta
             scale = max(float(np.max(np.abs(new))) if new.size else 0.0, 1e-300)
             if old.shape != new.shape or float(np.max(np.abs(old - new))) > REFIT_TOLERANCE * scale:
