@@ -498,4 +498,5 @@ class Calibration:
                    source=str(doc.get("source", "")))
 
 
-__all__ = ["Calibration", "triad_errors", "prepare", "correct_record", "corrected_experiment", "CALIBRATION_FORMAT", "CALIBRATION_VERSION"]
+__all__ = ["Calibration", "triad_errors", "prepare", "correct_record", "corrected_experiment", "CALIBRATION_FORMAT",
+           "CALIBRATION_VERSION"]

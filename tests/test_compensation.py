@@ -10,7 +10,6 @@ import json
 import re
 import shutil
 from dataclasses import replace
-from pathlib import Path
 
 import h5py
 import numpy as np
@@ -83,8 +82,8 @@ def test_interpolation_is_linear_exact_at_grid_points_and_holds_the_ends():
     grid = np.array([-10.0, 0.0, 10.0, 20.0])
     v = np.array([3.0, 1.0e-7, -2.5e-6, 7.0])
     assert interpolate(grid, v, grid).tolist() == v.tolist()                      # the grid values themselves
-    np.testing.assert_allclose(interpolate(grid, v, [5.0, 12.5]), [0.5 * (1e-7 - 2.5e-6), -2.5e-6 + 0.25 * (7 + 2.5e-6)],
-                               rtol=1e-15)
+    expected = [0.5 * (1e-7 - 2.5e-6), -2.5e-6 + 0.25 * (7 + 2.5e-6)]
+    np.testing.assert_allclose(interpolate(grid, v, [5.0, 12.5]), expected, rtol=1e-15)
     assert interpolate(grid, v, [-50.0, 99.0]).tolist() == [3.0, 7.0]            # end values held outside
 
 
@@ -168,7 +167,9 @@ def test_table_holds_the_stitched_values_and_states_its_interpolation_error(stit
         e = c.interpolation_error
         assert 0 < e["max_abs"] and e["max_in_sigma"] < 0.1                 # 1 degC is fine for these curves
     coarse = stitched.table(step_degC=10.0)
-    worst = lambda t: max(c.interpolation_error["max_in_sigma"] for c in t.curves.values())   # noqa: E731
+    def worst(t):
+        return max(c.interpolation_error["max_in_sigma"] for c in t.curves.values())
+
     assert worst(coarse) > 10 * worst(table)                                # h^2: a coarse grid follows worse
 
 
@@ -184,7 +185,7 @@ def test_linear_model_tabulates_every_stitched_element(campaign):
 
 
 def test_apply_table_equals_applying_the_stitched_calibration_at_grid_temperatures(campaign, stitched, tables):
-    """At grid temperatures both hold the same numbers: the corrections agree to 1e-12 of themselves (in fact exactly)."""
+    """At grid temperatures both hold the same numbers: the corrections agree to 1e-12 of themselves (exactly)."""
     raw = io.read_experiment(campaign[0] / "sub3_10_20.h5")
     table = read_table(tables["json"])
     lo, hi = table.info["calibrated_range_degC"]
@@ -215,8 +216,8 @@ def test_between_grid_points_the_difference_is_the_stated_interpolation_error(ca
     X = np.abs(stitched.rows(T))
     w_tab, f_tab = table.correct(exp)
     w_st, f_st = stitched.correct(exp)
-    for got, ref, triad, s, other in (("w", "w", "gyro", w_st, f_st), ("f", "f", "accel", f_st, w_st)):
-        diff = np.abs((w_tab - w_st) if triad == "gyro" else (f_tab - f_st))
+    for triad, s, other, diff in (("gyro", w_st, f_st, np.abs(w_tab - w_st)),
+                                  ("accel", f_st, w_st, np.abs(f_tab - f_st))):
         v = triad_errors(layout, dX, triad, np.abs(s), other=np.abs(other))
         d = triad_errors(layout, X, triad, np.ones_like(s)) - triad_errors(layout, X, triad, np.zeros_like(s))
         d = d.max()
@@ -290,7 +291,7 @@ def test_applying_twice_is_refused_and_visibly_wrong_when_forced(campaign, table
     src = campaign[0] / "sub1_m10_0.h5"
     once, twice = tmp_path / "once.h5", tmp_path / "twice.h5"
     assert _cli(["apply", tables["json"], src, "--out", once], capsys)[0] == 0
-    code, out, err = _cli(["apply", tables["json"], once, "--out", twice], capsys)
+    code, _, err = _cli(["apply", tables["json"], once, "--out", twice], capsys)
     assert code == 2 and not twice.exists()
     assert len(err.strip().splitlines()) == 1 and "already corrected" in err and "--again" in err
     assert _cli(["apply", tables["json"], once, "--out", twice, "--again"], capsys)[0] == 0
@@ -360,7 +361,7 @@ def test_apply_bad_input(case, pattern, campaign, tables, tmp_path, capsys):
     elif case == "solver for a table":
         extra = ["--solver", "sqrt-kf"]
     before = sorted(p.name for p in tmp_path.iterdir())
-    code, stdout, err = _cli(["apply", cal, src, "--out", out, *extra], capsys)
+    code, _, err = _cli(["apply", cal, src, "--out", out, *extra], capsys)
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     assert re.search(pattern, err), err
@@ -397,7 +398,7 @@ def test_export_bad_input(case, pattern, campaign, tmp_path, capsys):
     elif case == "solver":
         extra = ["--solver", "sqrt-kf"]
     out = tmp_path / "tables" / "t.json"
-    code, stdout, err = _cli(["export", camp, "--out", out, *extra], capsys)
+    code, _, err = _cli(["export", camp, "--out", out, *extra], capsys)
     assert code == 2
     assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
     assert re.search(pattern, err), err
