@@ -47,7 +47,7 @@ from graph_calib import io
 from graph_calib.compensation.elements import TABLE_PARAMETERS, ElementCompensation, element_order, parameter_of
 from graph_calib.compensation.table import CompensationTable, TableCurve, interpolate
 from graph_calib.errors import InputError
-from graph_calib.stitching import SubrangePoint, family, fit_element, is_stitched, stitch
+from graph_calib.stitching import Stitched, SubrangePoint, family, fit_element, is_stitched, stitch
 
 #: ``format`` of the campaign summary this module reads, and the newest version it knows.
 CAMPAIGN_FORMAT = "imu-calibration-campaign"
@@ -78,7 +78,7 @@ class StitchedCalibration(ElementCompensation):
         ``imu_id``, ``solver``, ``stitch_model``, ``source``, ``subranges`` (JSON-ready).
     """
 
-    stitched: object
+    stitched: Stitched
     model: str = "cubic"
     extra_constants: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)
