@@ -14,6 +14,7 @@ from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.options import CalibrationOptions
 from graph_calib.params import grade
 from graph_calib.alignment import Alignment, alignment
+from graph_calib.plausibility import check_record
 from graph_calib.static_detection import detect_static
 
 
@@ -44,6 +45,9 @@ def build_problem(experiment, *, options=CalibrationOptions()):
 
     Without a table, gravity measurements count only where the IMU is static
     (``ModelOptions.moving_sigma`` then defaults to 1 m/s^2 for moving keyframes).
+    A record whose gyro increments cannot be in radians (degrees written for radians, rates for
+    increments: :func:`graph_calib.plausibility.check_record`) is refused first, with an
+    :class:`~graph_calib.errors.InputError` (exit 2 on the command line, nothing written).
 
     Parameters
     ----------
@@ -54,8 +58,9 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     -------
     Problem
     """
-    model_options = options.model
     static = detect_static(experiment)
+    check_record(experiment, static=static)
+    model_options = options.model
     static_mask = None
     if experiment.table is None:
         static_mask = np.zeros(experiment.n_samples, dtype=bool)
