@@ -9,6 +9,7 @@ Latitude is given in degrees here, at the edge, and stored in radians.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -89,7 +90,8 @@ def parse_columns(text):
                              dataset="--columns")
         if key in out:
             raise InputError(f"{key} given twice", dataset="--columns")
-        out[key] = int(value) if value.lstrip("-").isdigit() else value
+        # an index is ASCII digits: "²" and "--5" pass str.isdigit but not int() (a header name then)
+        out[key] = int(value) if re.fullmatch(r"-?[0-9]+", value) else value
     return out
 
 

@@ -146,6 +146,9 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_
         raise InputError(f"unknown time units {_show(time_units)}; known: {', '.join(TIME_UNITS)}", dataset="time_units")
     if not isinstance(header_lines, int) or header_lines < 0:
         raise InputError(f"must be a non-negative integer, got {_show(header_lines)}", dataset="header_lines")
+    if delimiter is not None and (not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in '"#\r\n'):
+        raise InputError(f"must be one character other than a quote, '#' or a line break (or None for whitespace), "
+                         f"got {_show(delimiter)}", dataset="delimiter")
     index, temp_keys, channel = _resolve_columns(columns, path=path, delimiter=delimiter, header_lines=header_lines)
     data = read_numeric_table(path, delimiter=delimiter, skip_lines=header_lines)
     n, n_cols = data.shape
