@@ -16,7 +16,8 @@ import numpy as np
 from _report import report
 
 from graph_calib import io
-from graph_calib.calibrate import build_problem, compare, run_factor_graph, run_sqrt_kf
+from graph_calib.calibrate import CalibrationOptions, build_problem
+from graph_calib.solvers import compare, solve, to_result
 from graph_calib.simulation import simulate
 from graph_calib.strapdown import integrate_attitude
 
@@ -54,10 +55,11 @@ def main():
                                                            latitude_rad=exp.latitude_rad))
     problem = timed("set up model + alignment", lambda: build_problem(exp), "setup_s")
     timed("preintegrate (first call compiles or loads)", lambda: problem.model.preintegrate(problem.model.prior()[0]))
-    graph, gr = timed("factor graph solve", lambda: run_factor_graph(problem), "graph_s")
-    kf, fr = timed("square-root filter solve", lambda: run_sqrt_kf(problem), "filter_s")
-    print(f"  factor graph iterations {gr.iterations}, filter passes {len(fr.passes)}")
-    summary = compare(kf, graph)["summary"]
+    opts = CalibrationOptions()
+    gr = timed("factor graph solve", lambda: solve("factor-graph", problem, options=opts), "graph_s")
+    fr = timed("square-root filter solve", lambda: solve("sqrt-kf", problem, options=opts), "filter_s")
+    print(f"  factor graph iterations {gr.iterations}, filter passes {fr.iterations}")
+    summary = compare(to_result(problem.model, fr), to_result(problem.model, gr))["summary"]
     print("  agreement:", summary)
     for key, (label, seconds) in SECONDS.items():
         report(key, seconds, "s", label)

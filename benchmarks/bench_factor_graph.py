@@ -20,8 +20,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
 from _synthetic import turntable_experiment  # noqa: E402
 
-from graph_calib.calibrate import build_problem, run_factor_graph  # noqa: E402
+from graph_calib.calibrate import CalibrationOptions, build_problem  # noqa: E402
 from graph_calib.params import Layout, grade  # noqa: E402
+from graph_calib.solvers import solve  # noqa: E402
 
 
 def main():
@@ -44,10 +45,10 @@ def main():
     t2 = time.perf_counter()
     problem.model.preintegrate(problem.model.prior()[0])      # warm (numba compiled and cached)
     t3 = time.perf_counter()
-    preint = problem.model.preintegrate(problem.model.prior()[0])
+    problem.model.preintegrate(problem.model.prior()[0])
     t4 = time.perf_counter()
     print(f"setup {t2 - t1:.2f} s, preintegration {t4 - t3:.3f} s")
-    _, gr = run_factor_graph(problem)
+    gr = solve("factor-graph", problem, options=CalibrationOptions())
     t5 = time.perf_counter()
     print(f"factor graph: {gr.iterations} iterations, {t5 - t4:.1f} s total, {problem.model.n_keyframes} keyframes")
     report("preintegrate_s", t4 - t3, "s", f"preintegration, {exp.n_samples:,} samples (warm)")

@@ -14,7 +14,13 @@ Applying it
     solvers prepare (:meth:`graph_calib.model.CalibrationModel._prepare_samples`):
     sensor temperature offsets from ``t_ref_degC``, their rate over a 60 s
     window, the other triad's raw signal and the slope-limited derivatives of the
-    raw signals.
+    raw signals.  :func:`correct_record` is that inversion on a prepared record
+    (:func:`prepare`) with one calibration vector, or with one per sample (a
+    stitched calibration or a compensation table evaluated at each sample's
+    sensor temperatures, :mod:`graph_calib.compensation`).
+    :meth:`Calibration.corrected` and :func:`corrected_experiment` turn the
+    corrected rate and force back into increments: an experiment whose
+    ``dtheta``/``dv`` are corrected (``graph-calib apply``).
 
 The errors it predicts
     :meth:`Calibration.sensor_errors` gives, for true signals, what the forward
@@ -57,7 +63,7 @@ from graph_calib import sensor_model
 from graph_calib.errors import InputError
 from graph_calib.model import ModelOptions, PreparedRecord
 from graph_calib.params import Layout, split_element_name
-from graph_calib.sensor_model import sample_features, term_rows
+from graph_calib.sensor_model import correct_sample, sample_features, term_rows
 
 #: ``format`` of a calibration document.
 CALIBRATION_FORMAT = "imu-calibration-coefficients"
@@ -152,6 +158,109 @@ def _columns6(a, n, what):
     if a.shape != (n, 6):
         raise ValueError(f"{what} must have shape ({n}, 6) or (6,), got {a.shape}")
     return a
+
+
+# ---------------------------------------------------------------------------
+# the inverse model on a record, one calibration vector or one per sample
+# ---------------------------------------------------------------------------
+
+
+@numba.njit(cache=True, parallel=True)
+def _inverse_rows(rows, X, m, dT, dTdt, other, domega, dsig, n_iter, out):
+    """:func:`graph_calib.sensor_model.correct` with row ``j`` of ``X`` for sample ``j``.
+
+    The same per-sample call of :func:`graph_calib.sensor_model.correct_sample`
+    as the model's own loop, only the calibration vector changes from row to row.
+    """
+    for j in numba.prange(m.shape[0]):
+        work = np.empty((8, 3))
+        J = np.zeros((3, 1))
+        correct_sample(rows, X[j], m[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], n_iter, out[j], J, False,
+                       work)
+
+
+def prepare(experiment, *, t_ref_degC=None):
+    """The solvers' data preparation of an experiment (:class:`graph_calib.model.PreparedRecord`).
+
+    What :meth:`Calibration.correct` and :func:`correct_record` feed the inverse
+    model with: raw sample means, their slope-limited derivatives, the sensor
+    temperatures' offsets from ``t_ref_degC`` (default: the experiment's mean)
+    and their rates over a 60 s window.
+    """
+    return PreparedRecord(experiment, keyframe_s=ModelOptions.keyframe_s, t_ref_degC=t_ref_degC)
+
+
+def correct_record(layout, X, record, *, n_newton=ModelOptions.n_newton):
+    """Calibrated angular rate and specific force of a prepared record, through the inverse sensor model.
+
+    Parameters
+    ----------
+    layout : graph_calib.params.Layout
+    X : array_like, shape (layout.size,) or (N, layout.size)
+        One calibration vector for every sample, or one per sample (a calibration
+        evaluated at each sample's temperatures, :mod:`graph_calib.compensation`), SI.
+        Temperature coefficients in ``layout`` act on ``dT = T - record.t_ref_degC``.
+    record : graph_calib.model.PreparedRecord
+        From :func:`prepare`.
+    n_newton : int, optional
+        Newton steps of the inversion (one is exact for a model linear in the signal).
+
+    Returns
+    -------
+    omega_ib_b : ndarray, shape (N, 3)
+        rad/s, mean over each sample interval.
+    f_b : ndarray, shape (N, 3)
+        m/s^2, mean over each sample interval.
+
+    Notes
+    -----
+    The gyros get ``dT`` and ``dT/dt`` of the gyro sensors, ``other = f``,
+    ``domega = dsignal = dw/dt``; the accelerometers ``dT`` and ``dT/dt`` of
+    theirs, ``other = w``, ``domega = dw/dt``, ``dsignal = df/dt`` (``w``, ``f``
+    the raw sample means): as the solvers feed the model.  With one vector this is
+    :func:`graph_calib.sensor_model.correct` itself; with one per sample the same
+    per-sample inversion, bit for bit where the rows are equal.
+    """
+    r = record
+    X = np.asarray(X, dtype=float)
+    gyro = dict(dT=r.dTg, dTdt=r.dTdtg, other=r.f_raw, domega=r.dw_raw, dsignal=r.dw_raw)
+    accel = dict(dT=r.dTa, dTdt=r.dTdta, other=r.w_raw, domega=r.dw_raw, dsignal=r.df_raw)
+    if X.ndim == 1:
+        return (sensor_model.correct(layout, X, "gyro", r.w_raw, n_iter=n_newton, **gyro),
+                sensor_model.correct(layout, X, "accel", r.f_raw, n_iter=n_newton, **accel))
+    n = r.w_raw.shape[0]
+    if X.shape != (n, layout.size):
+        raise ValueError(f"X must have shape ({layout.size},) or ({n}, {layout.size}), got {X.shape}")
+    X = np.ascontiguousarray(X)
+    out = []
+    for triad, m, ctx in (("gyro", r.w_raw, gyro), ("accel", r.f_raw, accel)):
+        s = np.empty((n, 3))
+        _inverse_rows(term_rows(layout, triad), X, np.ascontiguousarray(m),
+                      *(np.ascontiguousarray(ctx[k]) for k in ("dT", "dTdt", "other", "domega", "dsignal")),
+                      int(n_newton), s)
+        out.append(s)
+    return out[0], out[1]
+
+
+def corrected_experiment(experiment, omega_ib_b, f_b, *, note=""):
+    """The experiment with corrected increments ``dtheta = omega_ib_b dt``, ``dv = f_b dt``.
+
+    Everything else (times, temperatures, table readings, identity) is kept;
+    ``note`` becomes the first line of the description, the old description
+    follows.  Corrected increments are what the sensors would have delivered
+    without their errors: calibrating them again finds (near) zero sensor errors,
+    and correcting them again subtracts the errors a second time.
+    """
+    from dataclasses import replace
+
+    dt = experiment.dt[:, None]
+    omega_ib_b = np.asarray(omega_ib_b, dtype=float)
+    f_b = np.asarray(f_b, dtype=float)
+    if omega_ib_b.shape != experiment.dtheta.shape or f_b.shape != experiment.dv.shape:
+        raise ValueError(f"corrected signals of shape {omega_ib_b.shape} and {f_b.shape} for an experiment of "
+                         f"{experiment.n_samples} samples")
+    description = "\n".join(s for s in (note, experiment.description) if s)
+    return replace(experiment, dtheta=omega_ib_b * dt, dv=f_b * dt, description=description)
 
 
 # ---------------------------------------------------------------------------
@@ -279,12 +388,19 @@ class Calibration:
         f_b : ndarray, shape (N, 3)
             Specific force, m/s^2, mean over each sample interval.
         """
-        r = PreparedRecord(experiment, keyframe_s=ModelOptions.keyframe_s, t_ref_degC=self.t_ref_degC)
-        omega_ib_b = sensor_model.correct(self.layout, self.x, "gyro", r.w_raw, dT=r.dTg, dTdt=r.dTdtg,
-                                          other=r.f_raw, domega=r.dw_raw, dsignal=r.dw_raw, n_iter=n_newton)
-        f_b = sensor_model.correct(self.layout, self.x, "accel", r.f_raw, dT=r.dTa, dTdt=r.dTdta,
-                                   other=r.w_raw, domega=r.dw_raw, dsignal=r.df_raw, n_iter=n_newton)
-        return omega_ib_b, f_b
+        return correct_record(self.layout, self.x, prepare(experiment, t_ref_degC=self.t_ref_degC),
+                              n_newton=n_newton)
+
+    def corrected(self, experiment, *, n_newton=ModelOptions.n_newton, note=None):
+        """The experiment with its increments corrected: :meth:`correct` times each sample interval.
+
+        ``note`` (default: this calibration's source and reference temperature)
+        heads the description; see :func:`corrected_experiment`.
+        """
+        if note is None:
+            note = f"corrected with the calibration of {self.source or 'an unnamed source'} " \
+                   f"(T_ref {self.t_ref_degC:.2f} degC)"
+        return corrected_experiment(experiment, *self.correct(experiment, n_newton=n_newton), note=note)
 
     def sensor_errors(self, omega_b, f_b, *, dT, dTdt=None, domega_b=None, df_b=None):
         """The sensor errors the calibration predicts: ``measure(signal) - signal`` for each triad.
@@ -382,4 +498,5 @@ class Calibration:
                    source=str(doc.get("source", "")))
 
 
-__all__ = ["Calibration", "triad_errors", "CALIBRATION_FORMAT", "CALIBRATION_VERSION"]
+__all__ = ["Calibration", "triad_errors", "prepare", "correct_record", "corrected_experiment", "CALIBRATION_FORMAT",
+           "CALIBRATION_VERSION"]

@@ -25,6 +25,8 @@ COMMANDS = {
     "calibrate": "calibrate one experiment with one or both solvers",
     "campaign": "calibrate every experiment of a campaign and stitch over temperature",
     "diagnose": "the closed loop: residuals, the effect they point to, before and after",
+    "apply": "correct a raw record with a result, a compensation table or a campaign's stitched calibration",
+    "export": "write a campaign's stitched calibration as a compensation table (JSON, CSV, C header)",
     "demo": "simulate a navigation-grade campaign and run campaign and diagnose on it",
 }
 

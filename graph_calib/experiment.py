@@ -61,6 +61,10 @@ class Experiment:
         Encoder readings, absent for hand-held sessions.
     source : str
         Where the experiment came from (file path), for messages.
+    segment : ndarray of int, shape (N,), or None
+        Segment of each sample, non-decreasing (``/imu/segment``): a record cut
+        together from separate pieces has one segment per piece, and attitude is
+        never assumed continuous across a segment boundary.  None: one segment.
     """
 
     t: np.ndarray
@@ -76,17 +80,42 @@ class Experiment:
     description: str = ""
     table: Table | None = None
     source: str = ""
+    segment: np.ndarray | None = None
 
     @property
     def n_samples(self):
         return int(self.t.shape[0])
 
     @property
+    def n_segments(self):
+        """Number of segments (1 without ``segment``).
+
+        The solvers do not handle more than one yet: a caller must refuse or split such a record.
+        """
+        if self.segment is None:
+            return 1
+        return 1 + int(np.count_nonzero(np.diff(self.segment)))
+
+    def segment_bounds(self):
+        """``[(start, stop), ...]``: the sample ranges ``start:stop`` of the segments, in order."""
+        if self.segment is None:
+            return [(0, self.n_samples)]
+        cuts = (np.flatnonzero(np.diff(self.segment)) + 1).tolist()
+        return list(zip([0] + cuts, cuts + [self.n_samples]))
+
+    @property
     def dt(self):
-        """Length of each sample interval, s, shape (N,)."""
+        """Length of each sample interval, s, shape (N,).
+
+        ``t[k] - t[k-1]``, and the nominal period ``1 / rate_hz`` at the first
+        sample and at the first sample of each segment (a piece's first sample
+        covers one period, not the gap before it).
+        """
         dt = np.empty_like(self.t)
         dt[0] = 1.0 / self.rate_hz
         dt[1:] = np.diff(self.t)
+        if self.segment is not None:
+            dt[1:][np.diff(self.segment) != 0] = 1.0 / self.rate_hz
         return dt
 
     def sensor_temperatures(self):
@@ -110,6 +139,7 @@ class Experiment:
         return replace(
             self, t=self.t[start:stop], dtheta=self.dtheta[start:stop], dv=self.dv[start:stop],
             temperature=self.temperature[start:stop], table=table,
+            segment=None if self.segment is None else self.segment[start:stop],
         )
 
 

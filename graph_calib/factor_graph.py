@@ -143,31 +143,20 @@ def _noise(sigmas, robust, k):
     return gtsam.noiseModel.Robust.Create(est.Create(k), base)
 
 
-def _attitude_prior_error(model, R_prior, this, values, H):
-    p = model.attitude_prior(values.atRot3(X(0)).matrix(), R_prior=R_prior)
-    if H is not None:
-        H[0] = p.H
-    return p.r
-
-
-def _calibration_prior_error(model, this, values, H):
-    p = model.calibration_prior(np.asarray(values.atVector(C(0)), dtype=float))
-    if H is not None:
-        H[0] = p.H
-    return p.r
-
-
 def build_graph(model, cache, *, R_prior, robust=None, robust_k=3.0):
     """The nonlinear factor graph of ``model`` (callbacks bound to ``cache``).
 
-    The priors are the model's prior residuals (already whitened), like every other factor.
+    The priors are the model's (:meth:`CalibrationModel.attitude_prior`, :meth:`CalibrationModel.calibration_prior`:
+    the alignment with ``initial_attitude_sigma``, the grade's priors), posted as GTSAM's native prior
+    factors: their error and Jacobians are the model's prior residuals (tests/test_factor_graph.py checks
+    it), computed in C++, and they keep the graph's iterations bit for bit what they were.
     """
     graph = gtsam.NonlinearFactorGraph()
     K = model.n_keyframes
-    P = model.layout.size
-    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(3), [X(0)],
-                                 partial(_attitude_prior_error, model, np.asarray(R_prior, dtype=float))))
-    graph.add(gtsam.CustomFactor(gtsam.noiseModel.Unit.Create(P), [C(0)], partial(_calibration_prior_error, model)))
+    x_prior, x_sigma = model.prior()
+    graph.add(gtsam.PriorFactorRot3(X(0), gtsam.Rot3(R_prior),
+                                    gtsam.noiseModel.Isotropic.Sigma(3, model.initial_attitude_sigma)))
+    graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
     rot_sigma = cache.rot.sigma
     grav_sigma = cache.grav.sigma
     for k in range(K):

@@ -12,10 +12,12 @@ Turn rule (a table with valid readings)
     Between consecutive valid readings ``i``, ``j`` the encoders give the body's rotation against
     inertial space, ``A_e = q_nb,i^-1 Exp(omega_ie^n (t_j - t_i)) q_nb,j`` with
     ``q_nb = q_nf q_fb_nominal``, of angle ``theta_e`` about the axis ``u``.  The gyro turn is the
-    sum of the increments (less the mean rate over the static intervals, a bias) projected on ``u``:
-    unwrapped, so a 90-deg turn written in degrees gives 5157 deg and not 5157 deg modulo 360.  Its
-    ratio to ``theta_e`` is near 1 for a right record.  A turn beyond 180 deg (seen by the encoders
-    as the shorter rotation the other way) counts as ratio ``theta_g / theta_e`` when the gyros'
+    sum of the increments projected on ``u``, unwrapped, so that a 90-deg turn written in degrees gives
+    5157 deg and not 5157 deg modulo 360.  A bias is taken off first: the gyros' median rate (less the
+    encoders' rotation, the Earth rate) over the readings where the encoders see the table at rest (a
+    turn below :data:`REST_TURN_RAD`).  The ratio of the gyro turn to ``theta_e`` is near 1 for a
+    right record.  A turn beyond 180 deg (seen by the encoders as the shorter rotation the other way)
+    counts as ratio ``theta_g / theta_e`` when the gyros'
     rotation (:func:`graph_calib.strapdown.integrate_attitude`, the Earth rate removed) matches the
     encoders' to within :data:`MATCH_TOLERANCE` of the turn.  The record's ratio is the median over
     the :data:`N_TURNS` largest turns (at least :data:`MIN_TURN_RAD` and a quarter of the largest):
@@ -24,19 +26,23 @@ Turn rule (a table with valid readings)
     written for radians, 0.0175 the reverse, ``rate_hz`` rates written for increments, anything
     else wrong units or a wrong rate.
 
-Static rule (every record; the only one without a table)
-    The median over the static intervals (:func:`graph_calib.static_detection.detect_static`) of the
-    mean angular rate must stay below :data:`STATIC_RATE_FACTOR` times the gyro bias prior of the
-    loosest grade (consumer, 2 deg/s) plus the Earth rate.  The bound does not depend on the grade the
+Static rule (a record without a table, or whose table shows no turn)
+    The median over the static intervals of the mean angular rate must stay below
+    :data:`STATIC_RATE_FACTOR` times the gyro bias prior of the loosest grade (consumer, 2 deg/s) plus
+    the Earth rate.  The bound does not depend on the grade the
     user asked for: a consumer unit calibrated with ``--grade navigation`` is not refused here (the
     verdict judges that later), while a consumer unit whose bias (above 0.7 deg/s) is written in degrees
     is (2 deg/s becomes 2 "rad/s", 115 deg/s).  A navigation-grade unit at rest turns at the Earth
-    rate only, so degrees for radians without a table stay unseen by this rule (0.24 deg/s).
+    rate only, so degrees for radians without a table stay unseen by this rule (0.24 deg/s).  The static
+    intervals are those of :func:`graph_calib.static_detection.detect_static` with ``max_rate`` half the
+    bound: quiet accelerometers are not enough, since a turn about the vertical at a constant rate leaves
+    the specific force unchanged.  On a table with turns the turn rule decides alone.
 
 Examples
 --------
 >>> from graph_calib.simulation import simulate                              # doctest: +SKIP
->>> exp = simulate("nav-subrange-short", rng=np.random.default_rng(1), hours=0.05).run()[0].experiment  # doctest: +SKIP
+>>> sim = simulate("nav-subrange-short", rng=np.random.default_rng(1), hours=0.05)   # doctest: +SKIP
+>>> exp = sim.run()[0].experiment                                           # doctest: +SKIP
 >>> round(turn_ratio(exp), 2)                                                # doctest: +SKIP
 1.0
 """
@@ -48,7 +54,12 @@ import numpy as np
 from graph_calib import constants as c
 from graph_calib.errors import InputError
 from graph_calib.params import GRADES
-from graph_calib.rotations import quat_conjugate, quat_multiply, quat_to_rotvec, rotvec_to_quat
+from graph_calib.rotations import (
+    quat_conjugate,
+    quat_multiply,
+    quat_to_rotvec,
+    rotvec_to_quat,
+)
 from graph_calib.static_detection import detect_static
 from graph_calib.strapdown import attitude_times, integrate_attitude, slerp_attitude
 
@@ -61,6 +72,8 @@ MIN_TURN_RAD = 1.0 * c.DEG_TO_RAD
 #: A turn whose gyro rotation matches the encoders' within this fraction of the turn (or 2 deg) counts as
 #: matching (ratio ``theta_g / theta_e``), whatever its projected sum: turns beyond 180 deg.
 MATCH_TOLERANCE = 0.1
+#: Encoder turn below which the table counts as at rest between two readings (for the gyro bias), rad.
+REST_TURN_RAD = 0.2 * c.DEG_TO_RAD
 #: Multiple of the loosest grade's gyro bias prior above which a static rate is refused.
 STATIC_RATE_FACTOR = 20.0
 #: How close (as a factor) a ratio must be to a named cause to be called that cause.
@@ -69,25 +82,20 @@ CAUSE_FACTOR = 1.3
 _DTHETA = "/imu/dtheta"
 
 
-def check_record(experiment, *, static=None):
+def check_record(experiment):
     """Refuse a record whose gyro increments cannot be in radians (the module docstring's two rules).
 
     Parameters
     ----------
     experiment : graph_calib.experiment.Experiment
         A record that the reader accepted (finite, increasing time, shapes checked).
-    static : array_like of int, shape (P, 2), optional
-        Its static intervals, if already found (:func:`~graph_calib.static_detection.detect_static`).
 
     Raises
     ------
     InputError
         Naming the file, ``/imu/dtheta``, the ratio found and its likely cause.
     """
-    if static is None:
-        static = detect_static(experiment)
-    static = np.asarray(static, dtype=np.int64).reshape(-1, 2)
-    ratio, n, typical = turn_ratio(experiment, static=static, details=True)
+    ratio, n, typical = turn_ratio(experiment, details=True)
     if ratio is not None:
         lo, hi = TURN_RATIO_RANGE
         if not lo <= ratio <= hi:
@@ -96,7 +104,8 @@ def check_record(experiment, *, static=None):
                 f"between valid /table readings, {typical * c.RAD_TO_DEG:.3g} deg typical; accepted "
                 f"{lo:g}..{hi:g}): {_cause(ratio, experiment.rate_hz)}",
                 path=experiment.source or None, dataset=_DTHETA)
-    _check_static_rates(experiment, static)
+        return
+    _check_static_rates(experiment)
 
 
 def _cause(ratio, rate_hz):
@@ -115,24 +124,12 @@ def _cause(ratio, rate_hz):
     return "wrong units, or increments made with a wrong sample rate?"
 
 
-def _static_bias(experiment, static):
-    """Mean gyro rate over the static intervals, rad/s, shape (3,) (zero without any)."""
-    if static.shape[0] == 0:
-        return np.zeros(3)
-    mask = np.zeros(experiment.n_samples, dtype=bool)
-    for a, b in static:
-        mask[a:b] = True
-    return experiment.dtheta[mask].sum(axis=0) / experiment.dt[mask].sum()
-
-
-def turns(experiment, *, static=None):
+def turns(experiment):
     """Encoder turns between consecutive valid table readings and the gyros' ratio to each.
 
     Parameters
     ----------
     experiment : graph_calib.experiment.Experiment
-    static : array_like of int, shape (P, 2), optional
-        Static intervals (for the bias removed from the increments); found when not given.
 
     Returns
     -------
@@ -146,9 +143,6 @@ def turns(experiment, *, static=None):
     tab = experiment.table
     if tab is None:
         return empty
-    if static is None:
-        static = detect_static(experiment)
-    static = np.asarray(static, dtype=np.int64).reshape(-1, 2)
     ta = attitude_times(experiment.t, experiment.rate_hz)
     valid = np.asarray(tab.valid, dtype=bool)
     tr = np.asarray(tab.t, dtype=float)[valid]
@@ -159,38 +153,40 @@ def turns(experiment, *, static=None):
         return empty
     lat = float(experiment.latitude_rad)
     w_n = c.omega_ie_n(lat)
-    dtheta = experiment.dtheta - _static_bias(experiment, static) * experiment.dt[:, None]
-    # the gyros: body rotation against inertial space (Earth part of integrate_attitude taken off)
-    q = integrate_attitude(dtheta, t=experiment.t, rate_hz=experiment.rate_hz, q_nb0=[1.0, 0.0, 0.0, 0.0],
-                           latitude_rad=lat)
-    body = quat_multiply(rotvec_to_quat((ta - ta[0])[:, None] * w_n), q)
-    body_r = slerp_attitude(body, ta, tr)
-    a_g = quat_multiply(quat_conjugate(body_r[:-1]), body_r[1:])
-    # the encoders: the same rotation, from the faceplate attitudes through the nominal mounting
+    span = np.diff(tr)
+    # the encoders: the body's rotation against inertial space, from the faceplate through the nominal mounting
     q_nb = quat_multiply(q_nf, np.asarray(tab.q_fb_nominal, dtype=float))
-    earth = rotvec_to_quat(np.diff(tr)[:, None] * w_n)
+    earth = rotvec_to_quat(span[:, None] * w_n)
     a_e = quat_multiply(quat_multiply(quat_conjugate(q_nb[:-1]), earth), q_nb[1:])
     r_e = quat_to_rotvec(a_e)
     theta_e = np.linalg.norm(r_e, axis=1)
+    # the gyros' sums between readings, less a bias: their median rate where the encoders see the table at rest
+    cum = np.vstack([np.zeros((1, 3)), np.cumsum(experiment.dtheta, axis=0)])
+    summed = np.diff(np.column_stack([np.interp(tr, ta, cum[:, k]) for k in range(3)]), axis=0)
+    rest = theta_e < REST_TURN_RAD
+    bias = np.median((summed - r_e)[rest] / span[rest, None], axis=0) if rest.sum() >= 3 else np.zeros(3)
+    summed = summed - bias * span[:, None]
+    # the gyros' rotation between readings (Earth part of integrate_attitude taken off), for turns beyond 180 deg
+    q = integrate_attitude(experiment.dtheta - bias * experiment.dt[:, None], t=experiment.t,
+                           rate_hz=experiment.rate_hz, q_nb0=[1.0, 0.0, 0.0, 0.0], latitude_rad=lat)
+    body_r = slerp_attitude(quat_multiply(rotvec_to_quat((ta - ta[0])[:, None] * w_n), q), ta, tr)
+    a_g = quat_multiply(quat_conjugate(body_r[:-1]), body_r[1:])
     theta_g = np.linalg.norm(quat_to_rotvec(a_g), axis=1)
     mismatch = np.linalg.norm(quat_to_rotvec(quat_multiply(quat_conjugate(a_g), a_e)), axis=1)
-    # the unwrapped gyro turn: increments summed and projected on the encoders' axis
-    cum = np.vstack([np.zeros((1, 3)), np.cumsum(dtheta, axis=0)])
-    cum_r = np.column_stack([np.interp(tr, ta, cum[:, k]) for k in range(3)])
+    # the unwrapped gyro turn: the sums projected on the encoders' axis
     axis = r_e / np.maximum(theta_e, 1e-300)[:, None]
-    projected = np.abs(np.sum(np.diff(cum_r, axis=0) * axis, axis=1))
+    projected = np.abs(np.sum(summed * axis, axis=1))
     with np.errstate(divide="ignore", invalid="ignore"):
         matches = mismatch <= np.maximum(MATCH_TOLERANCE * theta_e, 2.0 * c.DEG_TO_RAD)
         ratio = np.where(matches, theta_g, projected) / theta_e
-    segment = getattr(experiment, "segment", None)   # a record cut from pieces: no turn across a cut
-    if segment is not None:
-        seg_r = np.asarray(segment)[np.clip(np.searchsorted(experiment.t, tr), 0, experiment.n_samples - 1)]
+    if experiment.segment is not None:                # a record cut from pieces: no turn across a cut
+        seg_r = np.asarray(experiment.segment)[np.clip(np.searchsorted(experiment.t, tr), 0, experiment.n_samples - 1)]
         same = seg_r[:-1] == seg_r[1:]
         theta_e, ratio = theta_e[same], ratio[same]
     return theta_e, ratio
 
 
-def turn_ratio(experiment, *, static=None, details=False):
+def turn_ratio(experiment, *, details=False):
     """The record's ratio of gyro to encoder turns: the median over the largest turns (module docstring).
 
     Returns
@@ -199,7 +195,7 @@ def turn_ratio(experiment, *, static=None, details=False):
         None without a table, or without a turn of at least :data:`MIN_TURN_RAD`.  With
         ``details=True``, ``(ratio, number of turns, median encoder turn in rad)``.
     """
-    theta_e, ratio = turns(experiment, static=static)
+    theta_e, ratio = turns(experiment)
     keep = theta_e >= MIN_TURN_RAD
     if not keep.any():
         return (None, 0, 0.0) if details else None
@@ -215,7 +211,11 @@ def static_rate_bound():
     return STATIC_RATE_FACTOR * float(g.prior_sigma["gyro.bias"]) + c.OMEGA_E, name
 
 
-def _check_static_rates(experiment, static):
+def _check_static_rates(experiment):
+    bound, name = static_rate_bound()
+    # at rest: quiet accelerometers, and a mean rate within half the bound of the first seconds' (a turn about
+    # the vertical at a constant rate leaves the specific force unchanged)
+    static = detect_static(experiment, max_rate=0.5 * bound)
     if static.shape[0] == 0:
         return
     dt = experiment.dt
@@ -224,7 +224,6 @@ def _check_static_rates(experiment, static):
     a, b = static[:, 0], static[:, 1]
     mean_rate = np.linalg.norm(cum_w[b] - cum_w[a], axis=1) / (cum_t[b] - cum_t[a])
     rate = float(np.median(mean_rate))
-    bound, name = static_rate_bound()
     if rate > bound:
         sigma = GRADES[name].prior_sigma["gyro.bias"]
         raise InputError(
@@ -246,5 +245,15 @@ def _static_cause(rate, bound, rate_hz):
     return "wrong units, or increments made with a wrong sample rate?"
 
 
-__all__ = ["check_record", "turns", "turn_ratio", "static_rate_bound", "TURN_RATIO_RANGE", "N_TURNS",
-           "MIN_TURN_RAD", "MATCH_TOLERANCE", "STATIC_RATE_FACTOR"]
+__all__ = [
+    "MATCH_TOLERANCE",
+    "MIN_TURN_RAD",
+    "N_TURNS",
+    "REST_TURN_RAD",
+    "STATIC_RATE_FACTOR",
+    "TURN_RATIO_RANGE",
+    "check_record",
+    "static_rate_bound",
+    "turn_ratio",
+    "turns",
+]

@@ -14,6 +14,7 @@ from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.options import CalibrationOptions
 from graph_calib.params import grade
 from graph_calib.alignment import Alignment, alignment
+from graph_calib.errors import InputError
 from graph_calib.plausibility import check_record
 from graph_calib.static_detection import detect_static
 
@@ -58,9 +59,14 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     -------
     Problem
     """
-    static = detect_static(experiment)
-    check_record(experiment, static=static)
+    if experiment.n_segments > 1:
+        raise InputError(f"the record is cut into {experiment.n_segments} segments (/imu/segment); calibrating a "
+                         f"record cut together is not supported yet: calibrate each piece on its own "
+                         f"(Experiment.segment_bounds gives them)", path=experiment.source or None,
+                         dataset="/imu/segment")
+    check_record(experiment)
     model_options = options.model
+    static = detect_static(experiment)
     static_mask = None
     if experiment.table is None:
         static_mask = np.zeros(experiment.n_samples, dtype=bool)

@@ -132,6 +132,15 @@ def test_diagnose_command_writes_the_files_of_cli_md(tmp_path):
     html = (out / "report.html").read_text()
     assert "time_lag.accel" in html and "data:image/png;base64," in html
     io.read_result(tmp_path / "sim" / "effect_time_lag_accel.truth.json")   # the truth file it used
+    # the calibration the loop ends with, directly usable: each solver's result with the added effect
+    assert js["verdict"]["passed"] and js["calibration"]["files"] == ["factor-graph.json", "sqrt-kf.json",
+                                                                       "comparison.json"]
+    for solver in ("factor-graph", "sqrt-kf"):
+        res = io.read_result(out / f"{solver}.json")
+        assert "time_lag.accel" in res.effects and res.extra["verdict"]["passed"]
+        assert res.values["time_lag.accel"] > 0
+    assert json.loads((out / "comparison.json").read_text())["summary"]["agree"]
+    assert r.stdout.strip().splitlines()[-1].startswith("verdict: pass")
     # bad input: exit 2, one line
     r = subprocess.run([sys.executable, "-m", "graph_calib.cli", "diagnose", str(tmp_path / "nope.h5"), "--out",
                         str(out)], capture_output=True, text=True, cwd=REPO)

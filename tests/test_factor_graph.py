@@ -113,3 +113,38 @@ def test_first_attitude_prior_follows_what_the_alignment_could_use():
     assert build_problem(no_table).model.initial_attitude_sigma == pytest.approx(gc)
     consumer = CalibrationOptions(model=ModelOptions(grade="consumer"))
     assert build_problem(no_table, options=consumer).model.initial_attitude_sigma == pytest.approx(np.pi)
+
+
+def test_graph_priors_are_the_model_prior_residuals():
+    """GTSAM's native prior factors in the graph whiten exactly as the model's prior residuals do."""
+    import gtsam
+    from gtsam.symbol_shorthand import C, X
+
+    from graph_calib.factor_graph import _Cache, build_graph
+    from graph_calib.rotations import exp_so3
+
+    rng = np.random.default_rng(21)
+    exp, _ = turntable_experiment(layout=DECL, x=_truth(rng))
+    model = build_problem(exp).model
+    x_prior, x_sigma = model.prior()
+    x = x_prior + x_sigma * rng.normal(size=x_sigma.size)
+    preint = model.preintegrate(x)
+    R_prior = exp_so3(np.array([0.2, -0.1, 0.4]))
+    R = model.propagate(R_prior @ exp_so3(np.array([0.05, 0.3, -0.2])), preint, x)
+    cache = _Cache(model, preint)
+    cache.evaluate(R, x)
+    graph = build_graph(model, cache, R_prior=R_prior)
+    values = gtsam.Values()
+    for k in range(R.shape[0]):
+        values.insert(X(k), gtsam.Rot3(R[k]))
+    values.insert(C(0), x)
+    att, cal = model.attitude_prior(R[0], R_prior=R_prior), model.calibration_prior(x)
+    assert graph.at(0).error(values) == pytest.approx(att.cost, rel=1e-12)
+    assert graph.at(1).error(values) == pytest.approx(cal.cost, rel=1e-12)
+    lin = graph.at(0).linearize(values)
+    A, b = lin.jacobian()
+    np.testing.assert_allclose(A, att.H, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(b, -att.r, rtol=1e-9, atol=1e-12)
+    A, b = graph.at(1).linearize(values).jacobian()
+    np.testing.assert_allclose(A, cal.H, rtol=1e-12)
+    np.testing.assert_allclose(b, -cal.r, rtol=1e-12)

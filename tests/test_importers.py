@@ -49,6 +49,7 @@ def test_xsens_import(xsens):
     assert exp.temperature_names == ("assumed_constant",) and np.all(exp.temperature == 20.0)
     assert exp.latitude_rad == pytest.approx(math.radians(45.41)) and exp.gravity_mps2 == 9.81744
     assert "Copyright (c) 2014, Alberto Pretto" in exp.description
+    assert exp.segment is None and exp.n_segments == 1  # one session: one segment
 
 
 def test_xsens_conversion_is_counts_over_nominal_scale(xsens):
@@ -73,6 +74,7 @@ def test_mpu6050_import(real_data, name, rows):
     assert np.mean(_specific_force(exp)) == pytest.approx(exp.gravity_mps2, rel=0.10)
     assert exp.latitude_rad == pytest.approx(math.radians(-32.89))
     assert "MIT licence" in exp.description
+    assert exp.segment is None
 
 
 def test_mpu6050_calibration_session_duration_and_gravity(real_data):
@@ -158,7 +160,7 @@ def test_xsens_different_lengths_are_refused(tmp_path):
 
 def test_xsens_non_numeric_cell_names_the_line(tmp_path):
     a, g = _xsens_pair(tmp_path, acc_lines={4: "0.07 32768 abc 32768"})
-    with pytest.raises(InputError, match=re.escape(f"{a}: line 5: non-numeric cell 'abc' in column 3")):
+    with pytest.raises(InputError, match=re.escape(f"{a}: line 5: non-numeric cell 'abc' in column 2 (y)")):
         importers.import_xsens(a, g)
 
 
@@ -319,8 +321,190 @@ def test_csv_time_not_increasing_names_the_line(tmp_path):
     lines = path.read_text().splitlines()
     lines[6], lines[7] = lines[7], lines[6]
     path.write_text("\n".join(lines) + "\n")
-    with pytest.raises(InputError, match=re.escape(f"{path}: line 8: time")):
+    with pytest.raises(InputError, match=re.escape(
+            f"{path}: line 8: time 5.03 s is not after the previous row's 5.035 s: rows must be in time order")):
         importers.import_csv(path, columns=COLS, latitude_rad=0.8, gravity_mps2=9.8)
+
+
+def test_csv_repeated_time_in_its_own_units_names_the_line(tmp_path):
+    path = _csv(tmp_path, rate=100.0)
+    data = np.loadtxt(path, delimiter=",")
+    data[:, 0] = np.round(data[:, 0] * 1000.0)
+    data[20, 0] = data[19, 0]
+    np.savetxt(path, data, delimiter=",", fmt="%.17g")
+    with pytest.raises(InputError, match=re.escape(
+            f"{path}: line 21: time 5190.0 ms is not after the previous row's 5190.0 ms")):
+        importers.import_csv(path, columns=COLS, latitude_rad=0.8, gravity_mps2=9.8, time_units="ms")
+
+
+# ---------------------------------------------------------------------------
+# csv: what new users met
+# ---------------------------------------------------------------------------
+
+KW = {"latitude_rad": 0.8, "gravity_mps2": 9.8}
+
+
+def _text_csv(tmp_path, rows, name="text.csv"):
+    path = tmp_path / name
+    path.write_text("\n".join(rows) + "\n")
+    return path
+
+
+def _rows(n=100, *, first="x_a", t=lambda k: f"{k / 100.0!r}", seg=None):
+    """Rows ``first, t, gx, gy, gz, ax, ay, az, temp[, seg]``: static, z up; column 0 holds text."""
+    return [f"{first},{t(k)},0,0,0.01,0,0,9.8,21" + ("" if seg is None else f",{seg(k)}") for k in range(n)]
+
+
+COLS_TEXT = {"t": 1, "gx": 2, "gy": 3, "gz": 4, "ax": 5, "ay": 6, "az": 7, "temp": 8}
+
+
+def test_csv_unmapped_columns_may_hold_anything(tmp_path):
+    rows = _rows()
+    rows[5] = rows[5].replace("x_a", '"free, text"', 1)  # a quoted cell holding the delimiter is one cell
+    rows[6] = rows[6].replace("x_a", "", 1)
+    exp = importers.import_csv(_text_csv(tmp_path, rows), columns=COLS_TEXT, **KW)
+    assert exp.n_samples == 100 and exp.rate_hz == 100.0
+    np.testing.assert_allclose(exp.dv[:, 2], 9.8 / 100.0)
+
+
+def test_csv_mapped_column_must_be_numeric_and_columns_count_from_0(tmp_path):
+    path = _text_csv(tmp_path, _rows())
+    with pytest.raises(InputError, match=re.escape(f"{path}: line 1: non-numeric cell 'x_a' in column 0 (t)")):
+        importers.import_csv(path, columns={**COLS_TEXT, "t": 0}, **KW)
+
+
+def test_csv_non_finite_value_names_the_column_from_0(tmp_path):
+    rows = _rows()
+    rows[9] = rows[9].replace(",0.01,", ",nan,")
+    path = _text_csv(tmp_path, rows)
+    with pytest.raises(InputError, match=re.escape(f"{path}: line 10: non-finite value nan in column 4 (gz)")):
+        importers.import_csv(path, columns=COLS_TEXT, **KW)
+
+
+def test_csv_rows_of_another_width_are_refused_even_in_unmapped_columns(tmp_path):
+    rows = _rows()
+    rows[30] = rows[30] + ",5"  # e.g. a decimal comma, which would shift the columns after it
+    path = _text_csv(tmp_path, rows)
+    with pytest.raises(InputError, match=re.escape(f"{path}: line 31: 10 columns, expected 9")):
+        importers.import_csv(path, columns=COLS_TEXT, **KW)
+
+
+def test_csv_sample_index_time_with_rate(tmp_path):
+    path = _text_csv(tmp_path, _rows(t=lambda k: str(k + 7)))
+    exp = importers.import_csv(path, columns=COLS_TEXT, time_units="samples", rate_hz=204.8, **KW)
+    np.testing.assert_allclose(exp.t, (np.arange(100) + 7) / 204.8, rtol=1e-15)
+    assert exp.rate_hz == 204.8
+    np.testing.assert_allclose(exp.dtheta[:, 2], 0.01 / 204.8, rtol=1e-12)
+    assert "time column in samples (t = index / 204.8 Hz)" in exp.description
+
+
+def test_csv_sample_index_time_needs_the_rate(tmp_path):
+    path = _text_csv(tmp_path, _rows(t=str))
+    with pytest.raises(InputError, match=re.escape(
+            "rate_hz: time units 'samples': give the sample rate (--rate-hz), t = index / rate_hz")):
+        importers.import_csv(path, columns=COLS_TEXT, time_units="samples", **KW)
+
+
+def test_csv_sample_index_must_be_an_integer(tmp_path):
+    rows = _rows(t=str)
+    rows[3] = rows[3].replace(",3,", ",3.5,", 1)
+    path = _text_csv(tmp_path, rows)
+    with pytest.raises(InputError, match=re.escape(f"{path}: line 4: sample index 3.5 is not an integer")):
+        importers.import_csv(path, columns=COLS_TEXT, time_units="samples", rate_hz=100.0, **KW)
+
+
+@pytest.mark.parametrize("rate_hz", [None, 204.8])
+def test_csv_sample_index_read_as_seconds_is_refused(tmp_path, rate_hz):
+    path = _text_csv(tmp_path, _rows(t=str))
+    with pytest.raises(InputError, match=re.escape(
+            f"{path}: time_units: the time column holds whole numbers one apart, a 1 Hz record if they are "
+            "seconds: if they count samples give time units 'samples' (--time-units samples)")):
+        importers.import_csv(path, columns=COLS_TEXT, rate_hz=rate_hz, **KW)
+
+
+def test_csv_whole_seconds_are_accepted_with_a_rate_of_1_hz(tmp_path):
+    rows = [r.replace(",0.01,", ",0.0001,") for r in _rows(t=str)]
+    exp = importers.import_csv(_text_csv(tmp_path, rows), columns=COLS_TEXT, rate_hz=1.0, **KW)
+    assert exp.rate_hz == 1.0 and exp.t[-1] == 99.0
+
+
+def test_csv_time_units_without_a_time_column_are_refused(tmp_path):
+    path = _text_csv(tmp_path, _rows())
+    with pytest.raises(InputError, match=re.escape(
+            "time_units: 'ms' given, but no time column (t=COLUMN): samples are then k / rate_hz apart")):
+        importers.import_csv(path, columns={k: v for k, v in COLS_TEXT.items() if k != "t"}, time_units="ms",
+                             rate_hz=100.0, **KW)
+
+
+def test_csv_delimiter_must_be_one_character(tmp_path):
+    path = _text_csv(tmp_path, _rows())
+    with pytest.raises(InputError, match=re.escape("delimiter: must be one character other than")):
+        importers.import_csv(path, columns=COLS_TEXT, delimiter=";;", **KW)
+
+
+def test_normal_gravity_is_wgs84_somigliana():
+    assert importers.normal_gravity(0.0) == pytest.approx(9.7803253359, abs=1e-10)
+    assert importers.normal_gravity(math.pi / 2) == pytest.approx(9.8321849379, abs=1e-9)
+    assert importers.normal_gravity(math.radians(-32.89)) == pytest.approx(9.79557, abs=1e-5)  # docs: Mendoza
+    # 45 deg: 9.8061978 with the WGS-84 constants (GRS80's, often quoted, give 9.8061992)
+    assert importers.normal_gravity(math.radians(45.0)) == pytest.approx(9.8061978, abs=1e-7)
+
+
+def test_csv_gravity_from_latitude_says_so(tmp_path):
+    path = _text_csv(tmp_path, _rows())
+    exp = importers.import_csv(path, columns=COLS_TEXT, latitude_rad=math.radians(48.0))
+    assert exp.gravity_mps2 == importers.normal_gravity(math.radians(48.0))
+    assert exp.description.endswith("Gravity 9.80891 m/s^2 is WGS-84 normal gravity (Somigliana) at latitude "
+                                    "48.0000 deg, at sea level: no local value was given.")
+    given = importers.import_csv(path, columns=COLS_TEXT, latitude_rad=math.radians(48.0), description="bench 3")
+    assert given.description.startswith("bench 3 Gravity 9.80891")
+
+
+def test_csv_gravity_from_latitude_needs_a_latitude(tmp_path):
+    path = _text_csv(tmp_path, _rows())
+    with pytest.raises(InputError, match=re.escape(
+            "latitude_rad: normal gravity needs a latitude in [-pi/2, pi/2] rad, got 48.0")):
+        importers.import_csv(path, columns=COLS_TEXT, latitude_rad=48.0)
+
+
+# ---------------------------------------------------------------------------
+# csv: segments
+# ---------------------------------------------------------------------------
+
+
+def test_csv_segment_column(tmp_path):
+    """Three pieces, the second and third after long gaps; rates become increments over one period at a cut."""
+    def cut(k):
+        return 0 if k < 40 else (1 if k < 70 else 5)
+    rows = _rows(t=lambda k: repr(k / 100.0 + 10.0 * cut(k)), seg=cut)
+    path = _text_csv(tmp_path, rows)
+    exp = importers.import_csv(path, columns={**COLS_TEXT, "segment": 9}, **KW)
+    assert exp.segment.dtype == np.int32 and np.array_equal(exp.segment, np.repeat([0, 1, 5], [40, 30, 30]))
+    assert exp.n_segments == 3 and exp.segment_bounds() == [(0, 40), (40, 70), (70, 100)]
+    np.testing.assert_allclose(exp.dtheta[:, 2], 0.01 / 100.0, rtol=1e-9)  # also at samples 40 and 70
+    assert "3 segment(s) from the segment column" in exp.description
+    out = tmp_path / "seg.h5"
+    write_experiment(exp, out)
+    assert np.array_equal(read_experiment(out).segment, exp.segment)
+    # the same gaps without the segment column: refused at the first one, naming the sample and the line
+    with pytest.raises(InputError, match=re.escape(f"{path}: /imu/t [sample 40]: gap of 10.01 s (1001 nominal "
+                                                   "periods) before this sample; at most 3 periods")) as info:
+        importers.import_csv(path, columns=COLS_TEXT, **KW)
+    assert str(info.value).endswith("(input line 41)")
+
+
+def test_csv_segment_must_be_an_integer(tmp_path):
+    path = _text_csv(tmp_path, _rows(seg=lambda k: 0 if k < 50 else 0.5))
+    with pytest.raises(InputError, match=re.escape(f"{path}: line 51: segment 0.5 is not an integer")):
+        importers.import_csv(path, columns={**COLS_TEXT, "segment": 9}, **KW)
+
+
+def test_csv_decreasing_segment_names_the_line(tmp_path):
+    path = _text_csv(tmp_path, ["# a comment line"] + _rows(seg=lambda k: 1 if k < 50 else 0))
+    with pytest.raises(InputError, match=re.escape(
+            f"{path}: /imu/segment [sample 50]: segment 0 after segment 1: segments must be non-decreasing")) as info:
+        importers.import_csv(path, columns={**COLS_TEXT, "segment": 9}, **KW)
+    assert str(info.value).endswith("(input line 52)")
 
 
 # ---------------------------------------------------------------------------
@@ -359,6 +543,22 @@ def test_cli_import_csv(tmp_path, capsys):
     np.testing.assert_allclose(exp.dtheta[:, 1], math.radians(30.0) / 200.0, rtol=1e-12)
 
 
+def test_cli_import_csv_gravity_from_latitude_prints_a_note(tmp_path, capsys):
+    path = _text_csv(tmp_path, _rows(t=str, seg=lambda k: k // 50))
+    out = tmp_path / "csv.h5"
+    rc = main(["import", "csv", str(path), "--out", str(out), "--columns",
+               "t=1,gx=2,gy=3,gz=4,ax=5,ay=6,az=7,temp=8,segment=9", "--time-units", "samples",
+               "--rate-hz", "204.8", "--latitude-deg", "48"])
+    assert rc == 0, capsys.readouterr().err
+    text = capsys.readouterr().out
+    assert "100 samples in 2 segments" in text
+    assert ("note: gravity 9.80891 m/s^2 is WGS-84 normal gravity (Somigliana) at 48 deg latitude, at sea level; "
+            "give --gravity for the local value") in text
+    exp = read_experiment(out)
+    assert exp.rate_hz == 204.8 and exp.n_segments == 2
+    assert exp.gravity_mps2 == pytest.approx(9.80891, abs=1e-5) and "normal gravity" in exp.description
+
+
 def test_cli_missing_input_file_exits_2(tmp_path, capsys):
     missing = tmp_path / "nope.csv"
     rc = main(["import", "mpu6050", str(missing), "--out", str(tmp_path / "x.h5")])
@@ -375,6 +575,9 @@ def test_cli_missing_input_file_exits_2(tmp_path, capsys):
     (["csv", "a.csv", "--columns", "t=0,gx", "--latitude-deg", "10", "--gravity", "9.8"],
      "--columns: expected KEY=COLUMN items"),
     (["mpu6050", "a.csv", "--latitude-deg", "123"], r"--latitude-deg: latitude must be within \[-90, 90\]"),
+    (["csv", "a.csv", "--columns", "t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6", "--gravity", "9.8"],
+     re.escape("--latitude-deg: required for format csv: the bench latitude in degrees (the Earth rate needs it; "
+               "without --gravity, gravity is the normal gravity at that latitude)")),
 ])
 def test_cli_bad_options_exit_2(tmp_path, capsys, args, pattern):
     rc = main(["import", *args, "--out", str(tmp_path / "x.h5")])

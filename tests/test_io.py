@@ -31,6 +31,9 @@ def _assert_experiments_equal(a, b):
     for name in ("temperature_names", "rate_hz", "latitude_rad", "gravity_mps2", "imu_id", "description"):
         assert getattr(a, name) == getattr(b, name), name
         assert type(getattr(a, name)) is type(getattr(b, name)), name
+    assert (a.segment is None) == (b.segment is None)
+    if a.segment is not None:
+        assert np.array_equal(a.segment, b.segment)
     assert (a.table is None) == (b.table is None)
     if a.table is not None:
         for name in ("t", "q_nf", "valid", "q_fb_nominal"):
@@ -88,6 +91,17 @@ def _gap(a):
     return a
 
 
+def _segment(values):
+    """Corruption: add ``/imu/segment`` holding ``values`` (600 samples)."""
+    return lambda f: f["imu"].create_dataset("segment", data=values)
+
+
+def _segment_and_gap(f):
+    """Segments 0 | 1 cut at sample 200, a gap at sample 300 (inside segment 1)."""
+    _segment(np.repeat(np.array([0, 1], dtype=np.int32), [200, 400]))(f)
+    _replace_dataset(f, "imu/t", _gap(f["imu/t"][()]))
+
+
 @pytest.fixture
 def good_file(tmp_path, experiment_factory):
     path = tmp_path / "exp.h5"
@@ -122,6 +136,74 @@ def test_experiment_round_trip_without_table(tmp_path, experiment_factory):
     _assert_experiments_equal(exp, back)
     with h5py.File(path, "r") as f:
         assert "table" not in f
+
+
+def _three_pieces(experiment_factory):
+    """The factory's record cut into segments 0, 1 and 4 at samples 200 and 300, with a gap at each cut."""
+    exp = experiment_factory(with_table=False)
+    t = exp.t.copy()
+    t[200:] += 5.0
+    t[300:] += 0.5
+    segment = np.repeat(np.array([0, 1, 4], dtype=np.int32), [200, 100, 300])
+    return replace(exp, t=t, segment=segment)
+
+
+def test_experiment_round_trip_with_segments(tmp_path, experiment_factory):
+    exp = _three_pieces(experiment_factory)
+    path = tmp_path / "exp.h5"
+    write_experiment(exp, path)
+    back = read_experiment(path)
+    _assert_experiments_equal(exp, back)
+    assert back.segment.dtype == np.int32 and np.array_equal(back.segment, exp.segment)
+    with h5py.File(path, "r") as f:
+        assert f["imu/segment"].dtype == np.int32 and f["imu/segment"].shape == (600,)
+    assert back.n_segments == 3 and back.segment_bounds() == [(0, 200), (200, 300), (300, 600)]
+
+
+def test_gaps_at_segment_boundaries_are_accepted(tmp_path, experiment_factory):
+    """The same gaps that are refused without /imu/segment are accepted where the segment changes."""
+    exp = _three_pieces(experiment_factory)
+    with pytest.raises(InputError, match=r"/imu/t \[sample 200\]: gap of 5\.01 s \(501 nominal periods\)"):
+        validate_experiment(replace(exp, segment=None), path="memory")
+    validate_experiment(exp, path="memory")  # no exception
+    path = tmp_path / "exp.h5"
+    write_experiment(exp, path)
+    assert read_experiment(path).n_segments == 3
+
+
+def test_without_segment_a_record_is_one_segment(good_file):
+    exp = read_experiment(good_file)
+    with h5py.File(good_file, "r") as f:
+        assert "segment" not in f["imu"]
+    assert exp.segment is None and exp.n_segments == 1 and exp.segment_bounds() == [(0, 600)]
+
+
+def test_integer_segment_types_are_read_as_int32(good_file):
+    with h5py.File(good_file, "r+") as f:
+        f["imu"].create_dataset("segment", data=np.repeat(np.array([3, 7], dtype=np.int64), [300, 300]))
+    exp = read_experiment(good_file)
+    assert exp.segment.dtype == np.int32 and exp.n_segments == 2
+
+
+def test_first_sample_of_a_segment_covers_one_nominal_period(experiment_factory):
+    exp = _three_pieces(experiment_factory)
+    dt = exp.dt
+    assert dt[0] == dt[200] == dt[300] == 1.0 / exp.rate_hz
+    assert dt[199] == pytest.approx(0.01) and dt[201] == pytest.approx(0.01)
+
+
+def test_slice_keeps_the_segments(experiment_factory):
+    exp = _three_pieces(experiment_factory).slice(150, 350)
+    assert np.array_equal(exp.segment, np.repeat([0, 1, 4], [50, 100, 50])) and exp.n_segments == 3
+
+
+def test_write_refuses_decreasing_segments_and_writes_nothing(tmp_path, experiment_factory):
+    exp = _three_pieces(experiment_factory)
+    bad = replace(exp, segment=exp.segment[::-1].copy())
+    path = tmp_path / "exp.h5"
+    with pytest.raises(InputError, match=re.escape(f"{path}: /imu/segment [sample 300]: segment 1 after segment 4")):
+        write_experiment(bad, path)
+    assert not path.exists()
 
 
 def test_float32_datasets_are_upcast(good_file):
@@ -205,7 +287,20 @@ RULES = [
     ("temperature-inf", _edit("imu/temperature", _at(77, lambda v: [np.inf, 20.0])), "/imu/temperature", 77,
      "infinite value"),
     ("t-not-increasing", _edit("imu/t", _at(40, lambda v: v - 0.01)), "/imu/t", 40, "not strictly increasing"),
-    ("t-gap", _edit("imu/t", _gap), "/imu/t", 300, r"gap of 0\.06 s \(6 nominal periods\)"),
+    ("t-gap", _edit("imu/t", _gap), "/imu/t", 300,
+     (r"gap of 0\.06 s \(6 nominal periods\) before this sample; at most 3 periods are accepted inside a "
+      r"segment: mark where the pieces start in /imu/segment")),
+    ("t-gap-inside-segment", _segment_and_gap, "/imu/t", 300,
+     r"gap of 0\.06 s \(6 nominal periods\) before this sample inside segment 1; at most 3 periods"),
+    ("segment-decreasing", _segment(np.repeat(np.array([0, 1, 0], dtype=np.int32), [100, 100, 400])),
+     "/imu/segment", 200, "segment 0 after segment 1: segments must be non-decreasing"),
+    ("segment-dtype", _segment(np.zeros(600)), "/imu/segment", None, "dtype float64 is not an integer type"),
+    ("segment-shape", _segment(np.zeros(599, dtype=np.int32)), "/imu/segment", None,
+     r"shape \(599,\), expected \(600,\)"),
+    ("segment-beyond-int32", _segment(np.repeat(np.array([0, 2**31], dtype=np.int64), [10, 590])),
+     "/imu/segment", 10, "segment 2147483648 does not fit the file's int32"),
+    ("segment-is-group", lambda f: f["imu"].create_group("segment"), "/imu/segment", None,
+     "is a group, expected a dataset"),
     ("rate-missing", _del_attr("imu", "rate_hz"), '/imu.attrs["rate_hz"]', None, "missing attribute"),
     ("rate-not-positive", _set_attr("imu", "rate_hz", -100.0), '/imu.attrs["rate_hz"]', None,
      "must be a positive finite number"),

@@ -24,11 +24,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 import pytest
+from conftest import REAL_DATA, make_experiment
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
-from conftest import REAL_DATA, make_experiment
 from graph_calib import importers, io
 from graph_calib.cli import main
 from graph_calib.errors import InputError
@@ -40,7 +40,7 @@ pytestmark = [pytest.mark.filterwarnings("ignore:loadtxt. input contained no dat
               pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning"),
               pytest.mark.filterwarnings("ignore::numpy.exceptions.ComplexWarning")]
 
-SETTINGS = dict(deadline=None, derandomize=True, database=None, suppress_health_check=list(HealthCheck))
+SETTINGS = {"deadline": None, "derandomize": True, "database": None, "suppress_health_check": list(HealthCheck)}
 
 
 def examples(n):
@@ -498,7 +498,7 @@ def _valid_csv(n=150):
 
 CSV_BYTES = _valid_csv()
 CSV_COLUMNS = {"t": 0, "gx": 1, "gy": 2, "gz": 3, "ax": 4, "ay": 5, "az": 6, "temp": 7}
-CSV_OPTIONS = dict(columns=CSV_COLUMNS, latitude_rad=0.95, gravity_mps2=9.80, header_lines=1)
+CSV_OPTIONS = {"columns": CSV_COLUMNS, "latitude_rad": 0.95, "gravity_mps2": 9.80, "header_lines": 1}
 
 
 def test_the_unmutated_inputs_import():
@@ -546,8 +546,8 @@ def test_import_csv_refuses_random_text_and_columns(rows, header, delimiter, col
     with scratch() as d:
         path = d / "log.csv"
         path.write_bytes(text.encode("utf-8", "surrogatepass"))
-        kw = dict(latitude_rad=0.95, gravity_mps2=9.80, rate_hz=100.0, temperature_degC=20.0, delimiter=delimiter,
-                  header_lines=len(header))
+        kw = {"latitude_rad": 0.95, "gravity_mps2": 9.80, "rate_hz": 100.0, "temperature_degC": 20.0,
+              "delimiter": delimiter, "header_lines": len(header)}
         kw.update(options)
         try:
             importers.import_csv(path, columns=columns, **kw)

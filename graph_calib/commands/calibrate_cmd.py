@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
 from graph_calib.errors import InputError
+from graph_calib.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, GraphOptions
 from graph_calib.effects import FURTHER_EFFECTS
@@ -21,7 +23,8 @@ def add_arguments(p):
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default="both")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
-                   help="IMU grade for priors and noise (default: navigation)")
+                   help="IMU grade for priors and noise (default: chosen from the static intervals' noise and "
+                        "offsets, printed with the reason)")
     p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="model a further effect of model.md (repeatable)")
@@ -31,14 +34,14 @@ def add_arguments(p):
                    help="also write each solver's residual time series, SOLVER.residuals.h5 (docs/data-format.md)")
 
 
-def options_from_args(args):
-    """The :class:`graph_calib.options.CalibrationOptions` the arguments ask for."""
+def options_from_args(args, *, grade=None):
+    """The :class:`graph_calib.options.CalibrationOptions` the arguments ask for (``grade``: the chosen one)."""
     for e in args.effect:
         if e not in FURTHER_EFFECTS:
             raise InputError(f"unknown effect {e!r}; known: {', '.join(FURTHER_EFFECTS)}", dataset="--effect")
     if args.keyframe <= 0:
         raise InputError("must be positive", dataset="--keyframe")
-    model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or "navigation",
+    model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade or "navigation",
                          extra_effects=tuple(args.effect))
     return CalibrationOptions(model=model, graph=GraphOptions(robust=args.robust), t_ref_degC=args.t_ref)
 
@@ -51,8 +54,13 @@ def run(args):
     path = Path(args.experiment)
     if not path.exists():
         raise InputError("no such file", path=path)
-    options = options_from_args(args)
+    options_from_args(args)                       # bad arguments refused before the file is read
     exp = io.read_experiment(path)
+    choice = None
+    if args.grade is None:
+        choice = choose_grade(exp)
+        print(f"grade: {choice.reason}")
+    options = options_from_args(args, grade=choice.grade if choice else None)
     out = Path(args.out)
     solvers = DEFAULT_SOLVERS if args.solver == "both" else (args.solver,)
     problem = build_problem(exp, options=options)
@@ -62,6 +70,8 @@ def run(args):
           f"{m.n_keyframes} keyframes, {m.layout.size} parameters, T_ref {m.t_ref_degC:.2f} degC", file=sys.stderr)
     calibration = solve_problem(problem, options=options, solvers=solvers, progress=_print_progress)
     for s, res in calibration.results.items():
+        if choice is not None:
+            res = replace(res, extra={**res.extra, "grade_choice": choice.to_json()})
         io.write_result(res, out / f"{s}.json")
         output = calibration.outputs[s]
         if args.residuals:

@@ -55,7 +55,13 @@ def print_summary(run, out=None):
         if cmp_:
             line += (f", filter vs graph max {cmp_['max_abs_difference_in_sigma']:.2g} sigma "
                      f"({'agree' if cmp_['agree'] else 'DIFFER'})")
+        verdict = e.get("verdict")
+        if verdict:
+            chi = ", ".join(f"{v:.2f}" for v in verdict["fit_chi2_per_dof"].values())
+            line += f", chi2/dof {chi}: {'pass' if verdict['passed'] else 'VERDICT FAILED'}"
         print(line, file=out)
+        for problem in (verdict or {}).get("problems", []):
+            print(f"    {problem}", file=out)
     primary = doc.get("primary_solver")
     st = run.stitched.get(primary)
     if st is not None:
@@ -75,6 +81,13 @@ def print_summary(run, out=None):
               f"{'pass' if r['pass']['all'] else 'FAIL'}", file=out)
     outdir = Path(run.out)
     print(f"  -> {outdir / 'campaign.json'}" + (f", {run.report_path}" if run.report_path else ""), file=out)
+    failed = run.verdict_failed
+    if failed:
+        print(f"verdict: FAIL: {len(failed)} of {len(doc['experiments'])} experiment(s) failed theirs "
+              f"({', '.join(failed)}); converged, solvers agree and residuals consistent are required", file=out)
+    else:
+        print("verdict: pass: every experiment converged, its solvers agree and its residuals are consistent",
+              file=out)
 
 
 def run(args):
@@ -87,4 +100,4 @@ def run(args):
         for f in result.failed:
             print(f"graph-calib campaign: {f['name']} {f['solver']} failed: {f['error']}", file=sys.stderr)
         return 1
-    return 0
+    return 0 if not result.verdict_failed else 3

@@ -11,16 +11,22 @@ Writes ``diagnosis.json`` and ``report.html`` (docs/diagnosis.md).
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from graph_calib.errors import InputError
+from graph_calib.grade_choice import choose_grade
+from graph_calib.solvers.registry import DEFAULT_SOLVERS
+from graph_calib.solvers.results import compare
+from graph_calib.solvers.verdict import verdict_of
 
 
 def add_arguments(p):
     p.add_argument("experiment", help="experiment file (HDF5, data-format.md)")
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default="navigation",
-                   help="IMU grade for priors and noise (default: navigation)")
+    p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
+                   help="IMU grade for priors and noise (default: chosen from the static intervals, printed with "
+                        "the reason)")
     p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="a further effect of model.md in the model from the start, not tested (repeatable)")
@@ -38,12 +44,11 @@ def add_arguments(p):
     p.add_argument("--no-truth", action="store_true", help="ignore a truth file beside the experiment")
 
 
-def _options(args):
-    from graph_calib.options import CalibrationOptions
+def _options(args, *, grade="navigation"):
     from graph_calib.diagnosis import DiagnosisOptions
-    from graph_calib.options import GraphOptions
-    from graph_calib.model import ModelOptions
     from graph_calib.effects import FURTHER_EFFECTS
+    from graph_calib.model import ModelOptions
+    from graph_calib.options import CalibrationOptions, GraphOptions
 
     for e in args.effect:
         if e not in FURTHER_EFFECTS:
@@ -59,7 +64,7 @@ def _options(args):
         if args.max_iterations < 1:
             raise InputError("must be at least 1", dataset="--max-iterations")
         graph = GraphOptions(max_iterations=args.max_iterations)
-    calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade,
+    calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade,
                                                  extra_effects=tuple(args.effect)), graph=graph, t_ref_degC=args.t_ref)
     solvers = ("factor-graph", "sqrt-kf") if args.solver == "both" else ("factor-graph",)
     diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers)
@@ -88,8 +93,13 @@ def run(args):
     path = Path(args.experiment)
     if not path.exists():
         raise InputError("no such file", path=path)
-    calibration_options, diagnosis_options = _options(args)
+    _options(args)                                # bad arguments refused before the file is read
     exp = io.read_experiment(path)
+    choice = None
+    if args.grade is None:
+        choice = choose_grade(exp)
+        print(f"grade: {choice.reason}")
+    calibration_options, diagnosis_options = _options(args, grade=choice.grade if choice else "navigation")
     truth, tp = _truth(args, path)
     out = Path(args.out)
     try:
@@ -103,8 +113,23 @@ def run(args):
     print(f"{path.name}: {exp.n_samples} samples, {exp.t[-1] - exp.t[0] + 1 / exp.rate_hz:.0f} s"
           + (f"; truth {tp.name}" if tp else ""), file=sys.stderr)
     diag = diagnose(exp, options=calibration_options, diagnosis=diagnosis_options, truth=truth, progress=say)
+    # the calibration the loop ends with, as calibrate writes it: each solver's result, the comparison, the verdict
+    final = dict(diag.after.results)
+    solvers = [s for s in DEFAULT_SOLVERS if s in final]
+    comparison = compare(final[solvers[0]], final[solvers[1]]) if len(solvers) == 2 else None
+    verdict = verdict_of(final, comparison)
+    extra = {"verdict": verdict.to_json(), "diagnosis": {"added": list(diag.added)}}
+    if choice is not None:
+        extra["grade_choice"] = choice.to_json()
+    for s, res in final.items():
+        io.write_result(replace(res, extra={**res.extra, **extra}), out / f"{s}.json")
+    if comparison is not None:
+        io.atomic_write_json(out / "comparison.json", {**comparison, "verdict": verdict.to_json()})
     js = diag.to_json()
     js["source"] = path.name
+    js["verdict"] = verdict.to_json()
+    js["calibration"] = {"model": list(diag.after.layout), "files": [f"{s}.json" for s in final]
+                         + (["comparison.json"] if comparison is not None else [])}
     io.atomic_write_json(out / "diagnosis.json", js)
     write_report(diag, out / "report.html")
     print(f"added: {', '.join(diag.added) or 'nothing'}; unexplained: {str(diag.unexplained).lower()}")
@@ -118,5 +143,9 @@ def run(args):
             e = st.error["factor-graph"]
             err = f"; error vs truth RMS {e['rms_z']:.2f} sigma (max {e['max_abs_z']:.1f}, {e['worst']})"
         print(f"  {label}: largest whitened residual RMS per kind: {line}{err}")
-    print(f"  -> {out / 'diagnosis.json'}, {out / 'report.html'} ({diag.seconds:.0f} s)")
-    return 0
+    print(f"  -> {out / 'diagnosis.json'}, {out / 'report.html'}, the final calibration "
+          f"{', '.join(js['calibration']['files'])} ({diag.seconds:.0f} s)")
+    for problem in verdict.problems:
+        print(f"  {problem}")
+    print(verdict.text())
+    return 0 if verdict.passed else 3

@@ -3,7 +3,10 @@
 Formats: ``xsens`` (two inputs: the accelerometer file, then the gyro file, of
 IMU-TK's sample data), ``mpu6050`` (one CSV of UNCuyo's ImuCalibration), ``csv``
 (any delimited log, described by ``--columns`` and the units options).
-Latitude is given in degrees here, at the edge, and stored in radians.
+Latitude is given in degrees here, at the edge, and stored in radians.  For a
+csv log the latitude is required; without ``--gravity`` the gravity is the
+WGS-84 normal gravity at that latitude at sea level, and a note says so.
+Columns are counted from 0, in ``--columns`` and in every message.
 """
 
 from __future__ import annotations
@@ -42,9 +45,10 @@ def add_arguments(parser):
     site = parser.add_argument_group("bench")
     site.add_argument("--latitude-deg", type=float, metavar="DEG",
                       help="bench latitude, degrees (default: xsens Padova 45.41, mpu6050 Mendoza -32.89; "
-                           "required for csv)")
+                           "required for csv: the Earth rate needs it)")
     site.add_argument("--gravity", type=float, metavar="MPS2",
-                      help="local gravity, m/s^2 (default: xsens 9.81744, mpu6050 9.7933; required for csv)")
+                      help="local gravity, m/s^2 (default: xsens 9.81744, mpu6050 9.7933; csv: WGS-84 normal "
+                           "gravity at --latitude-deg, at sea level)")
     site.add_argument("--temperature", type=float, metavar="DEGC",
                       help="assumed constant temperature, degC, for logs without one (default 20 for xsens "
                            "and mpu6050)")
@@ -65,13 +69,17 @@ def add_arguments(parser):
                            "1 / median spacing)")
     csv = parser.add_argument_group("csv layout")
     csv.add_argument("--columns", metavar="MAP",
-                     help="e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6,temp=7 (0-based indices or header names; "
-                          "several temperatures as temp:NAME=COL)")
+                     help="e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6,temp=7: column indices counted from 0 (as in "
+                          "every message) or header names; several temperatures as temp:NAME=COL; segment=COL "
+                          "for a column of integer segment numbers (pieces of a record cut together, "
+                          "non-decreasing). Columns not mapped are ignored, whatever they hold")
     csv.add_argument("--gyro-units", choices=tuple(importers.GYRO_UNITS),
                      help="rad/s, deg/s (rates) or rad, deg (increments); default rad/s")
     csv.add_argument("--accel-units", choices=tuple(importers.ACCEL_UNITS),
                      help="m/s^2, g (specific force) or m/s (increments); default m/s^2")
-    csv.add_argument("--time-units", choices=tuple(importers.TIME_UNITS), help="units of the time column; default s")
+    csv.add_argument("--time-units", choices=tuple(importers.TIME_UNITS),
+                     help="units of the time column; default s. samples: a sample index, t = index / --rate-hz "
+                          "(then required)")
     csv.add_argument("--delimiter", metavar="SEP",
                      help=f"column separator: a character or one of {', '.join(_DELIMITERS)}; default comma")
     csv.add_argument("--header-lines", type=int, metavar="N", help="lines before the data; default 0")
@@ -155,16 +163,16 @@ def _import(args):
         raise InputError("required for format csv (e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6,temp=7)",
                          dataset="--columns")
     if args.latitude_deg is None:
-        raise InputError("required for format csv: the bench latitude in degrees", dataset="--latitude-deg")
-    if args.gravity is None:
-        raise InputError("required for format csv: the local gravity in m/s^2", dataset="--gravity")
+        raise InputError("required for format csv: the bench latitude in degrees (the Earth rate needs it; "
+                         "without --gravity, gravity is the normal gravity at that latitude)",
+                         dataset="--latitude-deg")
     delimiter = _given(args, "delimiter", ",")
     delimiter = _DELIMITERS.get(delimiter, delimiter)
     if delimiter == " ":
         delimiter = None
     return importers.import_csv(
         inputs[0], columns=parse_columns(args.columns), latitude_rad=_latitude(args, None),
-        gravity_mps2=args.gravity, rate_hz=args.rate_hz, time_units=_given(args, "time_units", "s"),
+        gravity_mps2=args.gravity, rate_hz=args.rate_hz, time_units=args.time_units,
         gyro_units=_given(args, "gyro_units", "rad/s"), accel_units=_given(args, "accel_units", "m/s^2"),
         gyro_counts_per_unit=args.gyro_scale, gyro_offset_counts=_given(args, "gyro_offset", 0.0),
         accel_counts_per_unit=args.accel_scale, accel_offset_counts=_given(args, "accel_offset", 0.0),
@@ -180,8 +188,9 @@ def summary(experiment):
     f = np.linalg.norm(e.dv, axis=1) / dt
     w = np.linalg.norm(e.dtheta, axis=1) / dt
     temp = e.temperature
+    segments = f" in {e.n_segments} segments" if e.n_segments > 1 else ""
     return [
-        f"{e.n_samples} samples, {e.t[-1] - e.t[0] + 1.0 / e.rate_hz:.2f} s at {e.rate_hz:g} Hz",
+        f"{e.n_samples} samples{segments}, {e.t[-1] - e.t[0] + 1.0 / e.rate_hz:.2f} s at {e.rate_hz:g} Hz",
         f"mean |f| = {f.mean():.4f} m/s^2 ({f.mean() / e.gravity_mps2:.4f} x local gravity {e.gravity_mps2:g}), "
         f"largest |omega| = {w.max() * c.RAD_TO_DEG:.1f} deg/s",
         f"temperature: {temp.shape[1]} channel(s) ({', '.join(e.temperature_names)}), "
@@ -198,5 +207,9 @@ def run(args):
     print(f"graph-calib import {args.format}: " + ", ".join(str(p) for p in args.inputs))
     for line in summary(experiment):
         print("  " + line)
+    if args.format == "csv" and args.gravity is None:
+        print(f"note: gravity {experiment.gravity_mps2:.5f} m/s^2 is WGS-84 normal gravity (Somigliana) at "
+              f"{args.latitude_deg:g} deg latitude, at sea level; give --gravity for the local value (it falls "
+              "by about 3.1e-6 m/s^2 per metre of altitude)")
     print(f"wrote {out}")
     return 0

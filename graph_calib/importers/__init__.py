@@ -10,7 +10,8 @@ ready for :func:`graph_calib.io.write_experiment`:
 * :func:`import_mpu6050` — the MPU-6050 logs of UNCuyo's ImuCalibration (CSV of
   int16 counts with a small header);
 * :func:`import_csv` — any delimited text log, described by a column mapping and
-  units.
+  units (only the mapped columns are read; a ``segment`` column gives
+  ``/imu/segment``; gravity defaults to :func:`normal_gravity` at the latitude).
 
 A sample holding a rate (``omega``, ``f``) becomes an increment over the
 interval it closes, ``dtheta[k] = omega[k] * (t[k] - t[k-1])`` with
@@ -25,8 +26,8 @@ Modules
     Reading delimited text (:func:`read_numeric_table`) and the checks of counts,
     time columns and options, naming the file and the line.
 :mod:`~graph_calib.importers.build`
-    Rates to increments, the assumed temperature channel, assembling and
-    validating the experiment.
+    Rates to increments, the assumed temperature channel, WGS-84 normal gravity
+    (:func:`normal_gravity`), assembling and validating the experiment.
 :mod:`~graph_calib.importers.xsens`
     :func:`import_xsens` and the nominal constants of the IMU-TK data.
 :mod:`~graph_calib.importers.mpu6050`
@@ -36,11 +37,13 @@ Modules
     :func:`import_csv` and its units.
 
 Errors in the input (missing file, wrong column count, non-numeric cell,
-mismatched time stamps, values that cannot be raw counts) raise
-:class:`~graph_calib.errors.InputError` naming the file and the line.
+rows out of time order, mismatched time stamps, values that cannot be raw
+counts) raise :class:`~graph_calib.errors.InputError` naming the file and the
+line, and the column where one is at fault, counted from 0 as ``--columns``
+counts.
 """
 
-from graph_calib.importers.build import ASSUMED_TEMPERATURE_NAME
+from graph_calib.importers.build import ASSUMED_TEMPERATURE_NAME, normal_gravity
 from graph_calib.importers.csv import (
     ACCEL_UNITS,
     CSV_SENSOR_COLUMNS,
@@ -72,6 +75,7 @@ from graph_calib.importers.xsens import (
 
 __all__ = [
     "import_xsens", "import_mpu6050", "import_csv", "mpu6050_reference_calibration", "read_numeric_table",
+    "normal_gravity",
     "ASSUMED_TEMPERATURE_NAME", "GYRO_UNITS", "ACCEL_UNITS", "TIME_UNITS", "CSV_SENSOR_COLUMNS",
     "XSENS_LATITUDE_RAD", "XSENS_GRAVITY_MPS2", "XSENS_ACCEL_COUNTS_PER_MPS2", "XSENS_GYRO_COUNTS_PER_RADS",
     "XSENS_OFFSET_COUNTS", "XSENS_RATE_HZ", "XSENS_NOTICE", "MPU6050_LATITUDE_RAD", "MPU6050_GRAVITY_MPS2",

@@ -1,6 +1,13 @@
-r"""Any delimited text log, described by a column mapping and units (:func:`import_csv`)."""
+r"""Any delimited text log, described by a column mapping and units (:func:`import_csv`).
+
+Columns are counted from 0, in the mapping and in every message.  Only the
+mapped columns are read (the others may hold anything, text included); every
+row must still have the same number of columns.
+"""
 
 from __future__ import annotations
+
+import math
 
 import numpy as np
 
@@ -11,30 +18,37 @@ from graph_calib.importers.build import (
     _build,
     _constant_temperature,
     _intervals,
+    normal_gravity,
 )
 from graph_calib.importers.text import (
     _check_time_column,
+    _data_line_numbers,
     _nominal_rate,
+    _num,
     _positive,
     _require_file,
     _show,
     _split,
     read_numeric_table,
+    table_width,
 )
+from graph_calib.io import RATE_TOLERANCE
 
 #: Units of :func:`import_csv`: name -> (factor to SI, True for a rate, False for an increment).
 GYRO_UNITS = {"rad/s": (1.0, True), "deg/s": (c.DEG_TO_RAD, True), "rad": (1.0, False), "deg": (c.DEG_TO_RAD, False)}
 ACCEL_UNITS = {"m/s^2": (1.0, True), "g": (c.G0, True), "m/s": (1.0, False)}
-TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9}
+#: Units of the time column: name -> factor to s; ``"samples"`` (None) is a sample index, ``t = index / rate_hz``.
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "samples": None}
 CSV_SENSOR_COLUMNS = ("gx", "gy", "gz", "ax", "ay", "az")
+_INT32 = np.iinfo(np.int32)
 
 
 def _resolve_columns(columns, *, path, delimiter, header_lines):
-    """Check a column mapping; return ({key: 0-based index}, [temperature keys], {key: channel name})."""
+    """Check a column mapping; return ({key: index from 0}, [temperature keys], {key: channel name})."""
     if not isinstance(columns, dict) or not columns:
-        raise InputError("columns must map names (t, gx, gy, gz, ax, ay, az, temp or temp:NAME) to columns",
+        raise InputError("columns must map names (t, gx, gy, gz, ax, ay, az, segment, temp or temp:NAME) to columns",
                          dataset="columns")
-    known = ("t",) + CSV_SENSOR_COLUMNS
+    known = ("t",) + CSV_SENSOR_COLUMNS + ("segment",)
     temp_keys, channel = [], {}
     for key in columns:
         if key == "temp" or key.startswith("temp:"):
@@ -57,8 +71,11 @@ def _resolve_columns(columns, *, path, delimiter, header_lines):
                 if header_lines < 1:
                     raise InputError(f"column {key}={_show(col)} names a header column, but header_lines is 0",
                                      dataset="columns")
-                with open(path, encoding="utf-8") as fh:
-                    lines = [fh.readline() for _ in range(header_lines)]
+                try:
+                    with open(path, encoding="utf-8") as fh:
+                        lines = [fh.readline() for _ in range(header_lines)]
+                except UnicodeDecodeError:
+                    raise InputError("not a UTF-8 text file", path=path) from None
                 header = _split(lines[-1].strip(), delimiter)
             if col not in header:
                 raise InputError(f"column {_show(col)} not in the header line {header_lines} ({', '.join(header)})",
@@ -71,7 +88,8 @@ def _resolve_columns(columns, *, path, delimiter, header_lines):
                 raise InputError(f"column of {key} must be an index or a header name, got {_show(col)}",
                                  dataset="columns") from None
             if idx < 0 or isinstance(col, bool):
-                raise InputError(f"column of {key} must be a 0-based index >= 0, got {_show(col)}", dataset="columns")
+                raise InputError(f"column of {key} must be an index >= 0 (columns count from 0), got {_show(col)}",
+                                 dataset="columns")
             index[key] = idx
     seen = {}
     for key, idx in index.items():
@@ -81,7 +99,34 @@ def _resolve_columns(columns, *, path, delimiter, header_lines):
     return index, temp_keys, channel
 
 
-def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_units="s",
+def _whole(values, *, what, path, skip_lines):
+    """Refuse a column that must hold integers (fitting int32) at its first other value, naming the line."""
+    bad = (values != np.round(values)) | (values < _INT32.min) | (values > _INT32.max)
+    if bad.any():
+        row = int(np.flatnonzero(bad)[0])
+        line = _data_line_numbers(path, skip_lines)[row]
+        raise InputError(f"{what} {_show(values[row])} is not an integer (within int32)", path=path,
+                         dataset=f"line {line}")
+
+
+def _time_column(raw, *, time_units, rate_hz, path, skip_lines):
+    """Seconds from the time column in its units; refuses rows out of order and a sample index read as seconds."""
+    if time_units == "samples":
+        _whole(raw, what="sample index", path=path, skip_lines=skip_lines)
+    _check_time_column(raw, path=path, skip_lines=skip_lines, unit=time_units)
+    if time_units == "samples":
+        return raw / rate_hz
+    if (time_units == "s" and raw.shape[0] >= 2 and np.all(raw == np.round(raw))
+            and np.median(np.diff(raw)) == 1.0
+            and not (rate_hz is not None and abs(rate_hz - 1.0) <= RATE_TOLERANCE)):
+        raise InputError(
+            "the time column holds whole numbers one apart, a 1 Hz record if they are seconds: if they count "
+            "samples give time units 'samples' (--time-units samples) and the sample rate (--rate-hz); if they "
+            "are seconds, confirm with a rate of 1 Hz (--rate-hz 1)", path=path, dataset="time_units")
+    return raw * TIME_UNITS[time_units]
+
+
+def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, time_units=None,
                gyro_units="rad/s", accel_units="m/s^2", gyro_counts_per_unit=None, gyro_offset_counts=0.0,
                accel_counts_per_unit=None, accel_offset_counts=0.0, temperature_degC=None,
                temperature_map=None, delimiter=",", header_lines=0, imu_id="", description=None):
@@ -92,18 +137,24 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_
     path : str or Path
     columns : dict
         ``{key: column}`` with keys ``gx gy gz ax ay az`` (required), ``t``
-        (optional) and ``temp`` or ``temp:NAME`` (one per temperature channel,
-        degC, in the order given).  A column is a 0-based index, or a name from
-        the last header line.  Further columns of the file are ignored.
+        (optional), ``segment`` (optional) and ``temp`` or ``temp:NAME`` (one
+        per temperature channel, degC, in the order given).  A column is an
+        index counted from 0, or a name from the last header line.  Further
+        columns of the file are ignored whatever they hold; every row must still
+        have the same number of columns.
     latitude_rad : float
         Bench latitude, rad.
-    gravity_mps2 : float
-        Local gravity magnitude, m/s^2.
+    gravity_mps2 : float or None
+        Local gravity magnitude, m/s^2.  None: WGS-84 normal gravity at
+        ``latitude_rad`` at sea level (:func:`normal_gravity`), and the
+        description says so.
     rate_hz : float or None
-        Nominal sample rate, Hz.  Without a time column it is required and
-        ``t[k] = k / rate_hz``; with one it defaults to ``1 / median(diff(t))``
-        rounded to 6 significant digits.
-    time_units : {'s', 'ms', 'us', 'ns'}
+        Nominal sample rate, Hz.  Required without a time column
+        (``t[k] = k / rate_hz``) and with ``time_units="samples"``; otherwise it
+        defaults to ``1 / median(diff(t))`` rounded to 6 significant digits.
+    time_units : {'s', 'ms', 'us', 'ns', 'samples'} or None
+        Units of the ``t`` column (default ``'s'``); ``'samples'``: a sample
+        index, ``t = index / rate_hz``.  Refused without a ``t`` column.
     gyro_units : {'rad/s', 'deg/s', 'rad', 'deg'}
         Rates (multiplied by the sample interval) or increments.
     accel_units : {'m/s^2', 'g', 'm/s'}
@@ -120,7 +171,7 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_
     temperature_map : sequence of 6 int or None
         Channel of gyro x, y, z and accel x, y, z (default all 0).
     delimiter : str or None
-        Column separator; None for whitespace.
+        One-character column separator (``"`` quotes a cell); None for whitespace.
     header_lines : int
         Lines before the data; the last one may name the columns.
     imu_id : str
@@ -130,11 +181,16 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_
     Returns
     -------
     Experiment
+        With ``segment`` (int32, from the ``segment`` column) when one is mapped:
+        the record's pieces, non-decreasing; a time gap is allowed only where
+        the segment changes, and the first sample of each segment covers one
+        nominal period.
 
     Raises
     ------
     InputError
-        Bad options (naming the option), or a malformed file (naming the line).
+        Bad options (naming the option), or a malformed file (naming the line
+        and the column, counted from 0).
     """
     path = _require_file(path)
     if gyro_units not in GYRO_UNITS:
@@ -142,39 +198,64 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_
     if accel_units not in ACCEL_UNITS:
         raise InputError(f"unknown accel units {_show(accel_units)}; known: {', '.join(ACCEL_UNITS)}",
                          dataset="accel_units")
-    if time_units not in TIME_UNITS:
+    if time_units is not None and time_units not in TIME_UNITS:
         raise InputError(f"unknown time units {_show(time_units)}; known: {', '.join(TIME_UNITS)}", dataset="time_units")
     if not isinstance(header_lines, int) or header_lines < 0:
         raise InputError(f"must be a non-negative integer, got {_show(header_lines)}", dataset="header_lines")
-    if delimiter is not None and (not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in '"#\r\n'):
-        raise InputError(f"must be one character other than a quote, '#' or a line break (or None for whitespace), "
+    if delimiter is not None and (not isinstance(delimiter, str) or len(delimiter) != 1 or delimiter in '"#'):
+        raise InputError(f"must be one character other than '\"' and '#' (or None for whitespace), "
                          f"got {_show(delimiter)}", dataset="delimiter")
+    if rate_hz is not None:
+        rate_hz = _positive(rate_hz, "rate_hz")
     index, temp_keys, channel = _resolve_columns(columns, path=path, delimiter=delimiter, header_lines=header_lines)
-    data = read_numeric_table(path, delimiter=delimiter, skip_lines=header_lines)
-    n, n_cols = data.shape
+    if "t" in index:
+        time_units = "s" if time_units is None else time_units
+        if time_units == "samples" and rate_hz is None:
+            raise InputError("time units 'samples': give the sample rate (--rate-hz), t = index / rate_hz",
+                             dataset="rate_hz")
+    elif time_units is not None:
+        raise InputError(f"{_show(time_units)} given, but no time column (t=COLUMN): samples are then "
+                         "k / rate_hz apart", dataset="time_units")
+    gravity_text = ""
+    if gravity_mps2 is None:
+        lat = _num(latitude_rad)
+        if not isinstance(lat, float) or not math.isfinite(lat) or abs(lat) > math.pi / 2:
+            raise InputError(f"normal gravity needs a latitude in [-pi/2, pi/2] rad, got {_show(latitude_rad)}",
+                             dataset="latitude_rad")
+        gravity_mps2 = normal_gravity(lat)
+        gravity_text = (f"Gravity {gravity_mps2:.5f} m/s^2 is WGS-84 normal gravity (Somigliana) at latitude "
+                        f"{math.degrees(lat):.4f} deg, at sea level: no local value was given.")
+
+    n_cols = table_width(path, delimiter=delimiter, skip_lines=header_lines)
     too_far = {k: i for k, i in index.items() if i >= n_cols}
     if too_far:
         key, idx = next(iter(too_far.items()))
-        raise InputError(f"column {idx} of {key} is beyond the {n_cols} columns of the file", path=path,
-                         dataset="columns")
+        raise InputError(f"column {idx} of {key} is beyond the {n_cols} columns of the file (columns count from 0)",
+                         path=path, dataset="columns")
+    keys = list(index)
+    table = read_numeric_table(path, delimiter=delimiter, skip_lines=header_lines,
+                               usecols=[index[k] for k in keys], column_names={i: k for k, i in index.items()})
+    col = {k: table[:, j] for j, k in enumerate(keys)}
+    n = table.shape[0]
 
     if "t" in index:
-        t = data[:, index["t"]] * TIME_UNITS[time_units]
-        _check_time_column(t, path=path, skip_lines=header_lines)
+        t = _time_column(col["t"], time_units=time_units, rate_hz=rate_hz, path=path, skip_lines=header_lines)
         if rate_hz is None:
             if n < 2:
                 raise InputError("one sample: give rate_hz", path=path, dataset="rate_hz")
-            rate_hz = _nominal_rate(t)
-        rate_hz = _positive(rate_hz, "rate_hz")
+            rate_hz = _positive(_nominal_rate(t), "rate_hz")
     else:
         if rate_hz is None:
             raise InputError("no time column: give the sample rate", dataset="rate_hz")
-        rate_hz = _positive(rate_hz, "rate_hz")
         t = np.arange(n, dtype=np.float64) / rate_hz
-    dt = _intervals(t, rate_hz)[:, None]
+    segment = None
+    if "segment" in index:
+        _whole(col["segment"], what="segment", path=path, skip_lines=header_lines)
+        segment = col["segment"].astype(np.int32)
+    dt = _intervals(t, rate_hz, segment)[:, None]
 
     def triad(keys, units_table, units, counts_per_unit, offset, label):
-        raw = data[:, [index[k] for k in keys]]
+        raw = np.column_stack([col[k] for k in keys])
         if counts_per_unit is not None:
             raw = (raw - float(offset)) / _positive(counts_per_unit, f"{label}_counts_per_unit")
         factor, is_rate = units_table[units]
@@ -188,7 +269,7 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_
         if temperature_degC is not None:
             raise InputError("temperature columns are given: an assumed temperature would be ignored",
                              dataset="temperature_degC")
-        temperature = data[:, [index[k] for k in temp_keys]]
+        temperature = np.column_stack([col[k] for k in temp_keys])
         names = tuple(channel[k] for k in temp_keys)
         temp_text = f"temperature channels {', '.join(names)} from the log"
     else:
@@ -214,12 +295,17 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2, rate_hz=None, time_
             f"Imported from {path.name}: gyro in {units_text(gyro_units, gyro_counts_per_unit, gyro_offset_counts)}, "
             f"accel in {units_text(accel_units, accel_counts_per_unit, accel_offset_counts)}, "
             + (f"time column in {time_units}" if "t" in index else f"t = k / {rate_hz:g} Hz")
+            + (f" (t = index / {rate_hz:g} Hz)" if time_units == "samples" else "")
+            + (f"; {1 + int(np.count_nonzero(np.diff(segment)))} segment(s) from the segment column"
+               if segment is not None else "")
             + f"; {temp_text}."
         )
+    if gravity_text:  # provenance of a computed constant: kept next to a description given too
+        description = f"{description} {gravity_text}" if description else gravity_text
     return _build(t=t, dtheta=dtheta, dv=dv, temperature=temperature, names=names,
                   temperature_map=temperature_map, rate_hz=rate_hz, latitude_rad=latitude_rad,
                   gravity_mps2=gravity_mps2, imu_id=imu_id, description=description, source=path,
-                  skip_lines=header_lines)
+                  skip_lines=header_lines, segment=segment)
 
 
 __all__ = ["import_csv", "GYRO_UNITS", "ACCEL_UNITS", "TIME_UNITS", "CSV_SENSOR_COLUMNS"]

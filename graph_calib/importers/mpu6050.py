@@ -112,7 +112,8 @@ def import_mpu6050(csv_path, *, latitude_rad=MPU6050_LATITUDE_RAD, gravity_mps2=
         fs, header = _read_mpu6050_header(path)
     except UnicodeDecodeError:
         raise InputError("not a UTF-8 text file", path=path) from None
-    data = read_numeric_table(path, delimiter=",", skip_lines=5, n_columns=6)
+    data = read_numeric_table(path, delimiter=",", skip_lines=5, n_columns=6,
+                              column_names=dict(enumerate(MPU6050_COLUMNS)))
     n_sat = _check_counts(data, path=path, skip_lines=5, lo=-32768, hi=32767, what="int16")
     n = data.shape[0]
     t = np.arange(n, dtype=np.float64) / fs

@@ -85,8 +85,9 @@ def import_xsens(acc_path, gyro_path, *, latitude_rad=XSENS_LATITUDE_RAD, gravit
     sa = _positive(accel_scale_counts_per_mps2, "accel_scale_counts_per_mps2")
     sg = _positive(gyro_scale_counts_per_rads, "gyro_scale_counts_per_rads")
     rate_hz = _positive(rate_hz, "rate_hz")
-    acc = read_numeric_table(acc_path, n_columns=4)
-    gyro = read_numeric_table(gyro_path, n_columns=4)
+    names = dict(enumerate(("t", "x", "y", "z")))
+    acc = read_numeric_table(acc_path, n_columns=4, column_names=names)
+    gyro = read_numeric_table(gyro_path, n_columns=4, column_names=names)
     if acc.shape[0] != gyro.shape[0]:
         raise InputError(f"{gyro.shape[0]} data lines, but {acc_path} has {acc.shape[0]}; "
                          "the two files must hold the same time stamps", path=gyro_path)

@@ -49,7 +49,8 @@ EXPERIMENT_VERSION = 1
 #: 9.76 (high Andes at the equator) to 9.83 (poles); the margin only has to
 #: catch unit mistakes (g units give about 1, ft/s^2 about 32).
 GRAVITY_RANGE_MPS2 = (9.7, 9.9)
-#: Largest gap between two samples, in nominal sample periods.
+#: Largest gap between two samples of one segment, in nominal sample periods
+#: (any gap is allowed at a boundary of ``/imu/segment``).
 MAX_GAP_PERIODS = 3.0
 #: Largest relative difference between ``rate_hz`` and ``1 / median(diff(t))``.
 RATE_TOLERANCE = 0.10
@@ -69,6 +70,8 @@ QUATERNION_NORM_TOL = 1e-6
 # Dataset and attribute names as they appear in messages.
 _ROOT = '/.attrs["{}"]'
 _T, _DTHETA, _DV, _TEMP = "/imu/t", "/imu/dtheta", "/imu/dv", "/imu/temperature"
+_SEG = "/imu/segment"
+_INT32 = np.iinfo(np.int32)
 _RATE = '/imu.attrs["rate_hz"]'
 _TMAP = '/imu.attrs["temperature_map"]'
 _NAMES = '/imu/temperature.attrs["names"]'
@@ -185,14 +188,41 @@ def _check_time(experiment, path):
             f"rate_hz = {_show(rate)} disagrees with the median sample spacing {median:.6g} s "
             f"({1.0 / median:.6g} Hz) by more than {RATE_TOLERANCE:.0%}",
             path=path, dataset=_RATE)
+    return t, rate, d
+
+
+def _check_segment(segment, n, path):
+    """``/imu/segment``: (N,) integers that fit int32, non-decreasing; None (absent) is one segment."""
+    if segment is None:
+        return None
+    seg = _check_array(segment, path=path, dataset=_SEG, shape=(n,), kind="i")
+    bad = (seg < _INT32.min) | (seg > _INT32.max)
+    if bad.any():
+        k = _first(bad)
+        raise InputError(f"segment {int(seg[k])} does not fit the file's int32", path=path, dataset=_SEG, index=k)
+    bad = np.diff(seg) < 0
+    if bad.any():
+        k = _first(bad) + 1
+        raise InputError(
+            f"segment {int(seg[k])} after segment {int(seg[k - 1])}: segments must be non-decreasing "
+            "(the samples of one piece together, the pieces in time order)",
+            path=path, dataset=_SEG, index=k)
+    return seg
+
+
+def _check_gaps(d, rate, segment, path):
+    """The discontinuity rule: no gap of more than MAX_GAP_PERIODS inside a segment."""
     gap = d > MAX_GAP_PERIODS / rate
+    if segment is not None:
+        gap &= np.diff(segment) == 0
     if gap.any():
         k = _first(gap) + 1
+        where = "" if segment is None else f" inside segment {int(segment[k])}"
         raise InputError(
-            f"gap of {d[k - 1]:.6g} s ({d[k - 1] * rate:.3g} nominal periods) before this sample; "
-            f"at most {MAX_GAP_PERIODS:g} periods are accepted (split the record, samples are never dropped)",
+            f"gap of {d[k - 1]:.6g} s ({d[k - 1] * rate:.4g} nominal periods) before this sample{where}; "
+            f"at most {MAX_GAP_PERIODS:g} periods are accepted inside a segment: mark where the pieces start in "
+            f"{_SEG} (samples are never dropped)",
             path=path, dataset=_T, index=k)
-    return t, rate
 
 
 def _check_temperature(experiment, n, path):
@@ -282,8 +312,8 @@ def validate_experiment(experiment, *, path):
     Used by :func:`read_experiment` on what it read and by
     :func:`write_experiment` before it writes.  The rules and their thresholds are
     listed in ``docs/data-format.md``; they are checked in the order root
-    attributes, time and rate, increments' shapes and values, temperatures,
-    plausibility of the increments, table.
+    attributes, time and rate, segments, gaps inside a segment, increments'
+    shapes and values, temperatures, plausibility of the increments, table.
 
     Parameters
     ----------
@@ -301,8 +331,10 @@ def validate_experiment(experiment, *, path):
     if not isinstance(experiment, Experiment):
         raise InputError(f"expected an Experiment, got {type(experiment).__name__}", path=path)
     _check_root(experiment, path)
-    t, rate = _check_time(experiment, path)
+    t, rate, d = _check_time(experiment, path)
     n = t.shape[0]
+    segment = _check_segment(experiment.segment, n, path)
+    _check_gaps(d, rate, segment, path)
     # shapes and finiteness of the increments before the temperatures, plausibility after
     dtheta = _check_array(experiment.dtheta, path=path, dataset=_DTHETA, shape=(n, 3))
     dv = _check_array(experiment.dv, path=path, dataset=_DV, shape=(n, 3))
@@ -399,7 +431,8 @@ def read_experiment(path):
     -------
     Experiment
         Floating arrays as float64 (float32 in the file is upcast),
-        ``temperature_map`` as int64, ``source`` set to ``str(path)``.  The
+        ``temperature_map`` as int64, ``segment`` as int32 (None when the
+        file has no ``/imu/segment``), ``source`` set to ``str(path)``.  The
         optional ``/truth`` group and any further datasets are not read.
 
     Raises
@@ -435,6 +468,7 @@ def read_experiment(path):
         dv = _dataset(imu, "dv", path)
         temperature = _dataset(imu, "temperature", path)
         names = _attr_str_tuple(_require_attr(imu["temperature"], "names", path, _NAMES))
+        segment = _dataset(imu, "segment", path) if "segment" in imu else None
         table = None
         if "table" in f:
             tab = _group(f, "table", path)
@@ -447,7 +481,7 @@ def read_experiment(path):
         t=t, dtheta=dtheta, dv=dv, temperature=temperature, temperature_names=names,
         temperature_map=np.asarray(tmap), rate_hz=rate, latitude_rad=root["latitude_rad"],
         gravity_mps2=root["gravity_mps2"], imu_id=root["imu_id"], description=description,
-        table=table, source=str(path),
+        table=table, source=str(path), segment=segment,
     )
     validate_experiment(raw, path=path)
     if table is not None:
@@ -458,7 +492,7 @@ def read_experiment(path):
         temperature_names=tuple(names), temperature_map=np.asarray(tmap, dtype=np.int64),
         rate_hz=float(rate), latitude_rad=float(root["latitude_rad"]),
         gravity_mps2=float(root["gravity_mps2"]), imu_id=root["imu_id"], description=description,
-        table=table, source=str(path),
+        table=table, source=str(path), segment=None if segment is None else np.asarray(segment, dtype=np.int32),
     )
 
 
@@ -495,6 +529,8 @@ def write_experiment(experiment, path, *, compression=None):
             for name in ("t", "dtheta", "dv", "temperature"):
                 imu.create_dataset(name, data=_float64(getattr(e, name)), compression=compression)
             imu["temperature"].attrs["names"] = np.array(list(e.temperature_names), dtype=h5py.string_dtype())
+            if e.segment is not None:
+                imu.create_dataset("segment", data=np.asarray(e.segment, dtype=np.int32), compression=compression)
             if e.table is not None:
                 tab = f.create_group("table")
                 tab.attrs["q_fb_nominal"] = _float64(e.table.q_fb_nominal)

@@ -1,0 +1,233 @@
+"""Running a campaign's tasks: one job per experiment, in this process or on Dask, with a progress display.
+
+- :func:`run_tasks`: one job, what a worker runs: the experiment read and its problem set up once, then
+  each task's solver, each task's files written as soon as its solver finishes (:func:`experiment_summary`
+  is its ``summary.json``);
+- :func:`execute`: every job, one after the other in this process (``workers=0``), on a local Dask
+  cluster of processes with one thread each, or on an existing cluster given by its scheduler address;
+  a tqdm bar and a line per finished task on stderr.
+
+``distributed`` is imported inside the function that starts or joins a cluster: importing it takes
+seconds and a campaign run in this process (``workers=0``) never needs it.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import sys
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numba
+import numpy as np
+from tqdm import tqdm
+
+from graph_calib import io
+from graph_calib.errors import InputError
+from graph_calib.problem import build_problem
+from graph_calib.solvers.registry import solve
+from graph_calib.solvers.results import to_result
+from graph_calib.stitching import SENSORS
+
+
+# ---------------------------------------------------------------------------
+# one task (runs on a worker)
+# ---------------------------------------------------------------------------
+
+
+def experiment_summary(experiment, *, t_ref_degC, points=1500):
+    """``summary.json`` of an experiment: length, temperatures (ranges per sensor and a thinned series)."""
+    T = experiment.sensor_temperatures()
+    step = max(1, experiment.n_samples // points)
+    tbl = experiment.table
+    return {
+        "file": Path(experiment.source).name if experiment.source else "",
+        "imu_id": experiment.imu_id, "n_samples": experiment.n_samples, "rate_hz": experiment.rate_hz,
+        "duration_s": float(experiment.t[-1] - experiment.t[0] + 1.0 / experiment.rate_hz),
+        "t_ref_degC": float(t_ref_degC),
+        "sensors": list(SENSORS),
+        "sensor_temperature_range_degC": np.stack([T.min(axis=0), T.max(axis=0)], axis=1).tolist(),
+        "temperature_range_degC": [float(T.min()), float(T.max())],
+        "table_readings": 0 if tbl is None else int(tbl.t.size),
+        "valid_table_readings": 0 if tbl is None else int(np.count_nonzero(tbl.valid)),
+        "series": {"t_s": experiment.t[::step], "sensor_temperature_degC": T[::step]},
+    }
+
+
+def run_tasks(tasks):
+    """Calibrate one experiment with each task's solver (one problem built for all) and write their files.
+
+    Parameters
+    ----------
+    tasks : sequence of Task
+        Tasks of the same experiment (same file and options).
+
+    Returns
+    -------
+    list of dict
+        Per task ``name``, ``solver``, ``status`` (``"computed"`` or ``"failed"`` with ``error``; an
+        ``input_error`` when the experiment file breaks a rule), ``seconds`` (its share of the set-up
+        plus its solve).
+    """
+    tasks = list(tasks)
+    if not tasks:
+        return []
+    first = tasks[0]
+    if first.numba_threads:
+        try:
+            numba.set_num_threads(max(1, min(first.numba_threads, numba.config.NUMBA_NUM_THREADS)))
+        except Exception:  # pragma: no cover - numba threading is an optimisation only
+            pass
+    t0 = time.perf_counter()
+    try:
+        Path(first.out_dir).mkdir(parents=True, exist_ok=True)
+        exp = io.read_experiment(first.file)
+        problem = build_problem(exp, options=first.options)
+        io.atomic_write_json(first.summary_path, experiment_summary(exp, t_ref_degC=problem.model.t_ref_degC))
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - reported per task
+        return [_failure(t, exc) for t in tasks]
+    build_seconds = time.perf_counter() - t0
+    outcomes = []
+    for task in tasks:
+        t1 = time.perf_counter()
+        try:
+            output = solve(task.solver, problem, options=task.options)
+            result = to_result(problem.model, output)
+            solve_seconds = time.perf_counter() - t1
+            io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
+                               source=Path(task.file).name, kind=output.residual_quantity)
+            seconds = build_seconds / len(tasks) + solve_seconds
+            extra = dict(result.extra)
+            extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
+                                 "options_sha256": task.options_sha256, "experiment": task.name,
+                                 "seconds": seconds, "setup_seconds": build_seconds, "solve_seconds": solve_seconds}
+            io.write_result(replace(result, extra=extra), task.result_path)
+            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds})
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            outcomes.append(_failure(task, exc))
+    return outcomes
+
+
+# ---------------------------------------------------------------------------
+# running the tasks
+# ---------------------------------------------------------------------------
+
+
+def _progress_bar(total, enabled):
+    if not enabled or total == 0:
+        return None
+    return tqdm(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
+
+
+def _say(bar, text, enabled):
+    if not enabled:
+        return
+    if bar is not None:
+        bar.write(text, file=sys.stderr)
+    else:
+        print(text, file=sys.stderr)
+
+
+def _one_line(exc):
+    text = f"{type(exc).__name__}: {exc}".strip().splitlines()
+    return text[0] if text else type(exc).__name__
+
+
+def _failure(task, exc):
+    out = {"name": task.name, "solver": task.solver, "status": "failed", "error": _one_line(exc)}
+    if isinstance(exc, InputError):
+        out["input_error"] = str(exc)
+    return out
+
+
+def _groups(tasks):
+    """Tasks grouped by experiment (one problem set-up serves every solver of an experiment), in order."""
+    groups = {}
+    for t in tasks:
+        groups.setdefault((t.name, t.file, t.out_dir), []).append(t)
+    return list(groups.values())
+
+
+def execute(tasks, *, options, on_done=None):
+    """Run ``tasks`` (Dask or in-process), one job per experiment; ``{(name, solver): outcome dict}``.
+
+    ``on_done(outcome)`` is called in the main process as each task's outcome
+    arrives (its exception, e.g. ``KeyboardInterrupt``, stops the run; finished
+    tasks stay on disk).
+    """
+    outcomes = {}
+    if not tasks:
+        return outcomes
+    bar = _progress_bar(len(tasks), options.progress)
+
+    def finish(task, outcome):
+        outcomes[(task.name, task.solver)] = outcome
+        if bar is not None:
+            bar.update(1)
+        if outcome["status"] == "failed":
+            _say(bar, f"  {task.name} {task.solver}: FAILED: {outcome['error']}", options.progress)
+        else:
+            _say(bar, f"  {task.name} {task.solver}: done in {outcome['seconds']:.1f} s", options.progress)
+        if on_done is not None:
+            on_done(outcome)
+
+    try:
+        if options.scheduler is None and options.workers == 0:
+            for group in _groups(tasks):
+                for t, outcome in zip(group, run_tasks(group)):
+                    finish(t, outcome)
+        else:
+            _run_dask(tasks, options=options, finish=finish, bar=bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    return outcomes
+
+
+def _run_dask(tasks, *, options, finish, bar):
+    from distributed import Client, LocalCluster, as_completed  # seconds to import: only here (module docstring)
+
+    groups = _groups(tasks)
+    cluster = None
+    if options.scheduler:
+        try:
+            client = Client(options.scheduler, timeout="10s")
+        except (OSError, TimeoutError) as exc:
+            raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
+    else:
+        n = options.workers if options.workers else min(os.cpu_count() or 1, len(groups))
+        n = max(1, min(n, len(groups)))
+        _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                               silence_logs=logging.ERROR)
+        client = Client(cluster)
+    try:
+        by_future = {}
+        for g in groups:
+            key = f"calibrate-{g[0].name}-{'+'.join(t.solver for t in g)}-{g[0].key[:12]}"
+            by_future[client.submit(run_tasks, g, key=key, pure=False)] = g
+        for fut in as_completed(list(by_future)):
+            g = by_future[fut]
+            try:
+                outs = fut.result()
+            except (KeyboardInterrupt, SystemExit):
+                raise
+            except Exception as exc:  # noqa: BLE001 - e.g. a worker that died
+                outs = [_failure(t, exc) for t in g]
+            for t, outcome in zip(g, outs):
+                finish(t, outcome)
+    finally:
+        try:
+            client.close()
+        finally:
+            if cluster is not None:
+                cluster.close()
+
+
+__all__ = ["experiment_summary", "run_tasks", "execute"]

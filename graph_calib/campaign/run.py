@@ -1,0 +1,312 @@
+"""A whole campaign, :func:`run_campaign`, as a sequence of phases, one job each.
+
+1. read and plan: the manifest read, the inputs checked, every task listed as to compute or cached
+   (:func:`graph_calib.campaign.planning.plan_campaign`);
+2. compute: the tasks run (:func:`graph_calib.campaign.execution.execute`), the cached ones counted;
+3. collect: the tasks' files read back per experiment, ``comparison.json`` written where both solvers
+   finished, each experiment's verdict (converged, solvers agree, residuals consistent) in
+   ``campaign.json`` and its ``comparison.json``, the truth files read;
+4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
+5. truth check: the stitched curves against the first truth file
+   (:func:`graph_calib.campaign.truth.truth_check`);
+6. validate: the stitched calibration on each independent record (:func:`graph_calib.validation.validate`);
+7. document and report: ``campaign.json`` (:class:`CampaignRun.document`) and ``report.html``.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from graph_calib import io
+from graph_calib.campaign.execution import execute
+from graph_calib.campaign.planning import plan_campaign
+from graph_calib.campaign.tasks import CampaignOptions
+from graph_calib.campaign.truth import truth_check, truth_path
+from graph_calib.errors import InputError
+from graph_calib.experiment import Result
+from graph_calib.reports.campaign_report import write_report
+from graph_calib.solvers.results import compare
+from graph_calib.solvers.verdict import verdict_of
+from graph_calib.stitching import Stitched, stitch
+from graph_calib.validation import ResultCalibration, Validation, validate, window_means
+
+#: Format name of ``campaign.json``.
+CAMPAIGN_FORMAT = "imu-calibration-campaign"
+CAMPAIGN_VERSION = 1
+
+
+@dataclass
+class CampaignRun:
+    """What :func:`run_campaign` produced (files on disk, the main objects in memory).
+
+    Attributes
+    ----------
+    out : Path
+    document : dict
+        The content of ``campaign.json``.
+    results : dict
+        ``{experiment name: {solver: Result}}``.
+    summaries : dict
+        ``{experiment name: summary dict}``.
+    truths : dict
+        ``{experiment name: truth Result}`` where a truth file exists.
+    stitched : dict
+        ``{solver: graph_calib.stitching.Stitched}``.
+    validations : list
+        :class:`graph_calib.validation.Validation` objects (default model, primary solver first).
+    failed : list of dict
+        Tasks that raised: ``{"name", "solver", "error"}``.
+    report_path : Path or None
+        ``report.html``, when written.
+    """
+
+    @property
+    def verdict_failed(self):
+        """Names of the experiments whose verdict failed (cli.md: the campaign then exits 3)."""
+        return [e["name"] for e in self.document["experiments"] if not e.get("verdict", {}).get("passed", True)]
+
+    out: Path
+    document: dict
+    results: dict[str, dict[str, Result]] = field(default_factory=dict)
+    summaries: dict[str, dict] = field(default_factory=dict)
+    truths: dict[str, Result] = field(default_factory=dict)
+    stitched: dict[str, Stitched] = field(default_factory=dict)
+    validations: list[Validation] = field(default_factory=list)
+    failed: list[dict] = field(default_factory=list)
+    report_path: Path | None = None
+
+
+@dataclass(frozen=True)
+class _Collected:
+    """What the tasks left on disk, read back (phase 3).
+
+    Attributes
+    ----------
+    experiments : list of dict
+        ``campaign.json``'s ``experiments``.
+    results, summaries, truths, failed
+        As in :class:`CampaignRun`.
+    """
+
+    experiments: list[dict]
+    results: dict[str, dict[str, Result]]
+    summaries: dict[str, dict]
+    truths: dict[str, Result]
+    failed: list[dict]
+
+
+def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
+    """Run (or resume) a campaign: calibrate, compare, stitch, validate, write every file.
+
+    Parameters
+    ----------
+    manifest : str, Path or graph_calib.io.Campaign
+    out : str or Path
+        Output folder (created).
+    options : CampaignOptions
+    on_done : callable, optional
+        Called with each finished task's outcome dict (in the main process).
+
+    Returns
+    -------
+    CampaignRun
+
+    Raises
+    ------
+    InputError
+        A bad manifest, a missing experiment or validation file, a bad option.
+    """
+    t_start = time.perf_counter()
+    planned = _read_and_plan(manifest, out, options=options)
+    outcomes, tasks_seconds = _compute(planned, options=options, on_done=on_done)
+    collected = _collect(planned, outcomes)
+    stitched = _stitch(planned, collected)
+    truth_doc = _check_truth(stitched, collected.truths)
+    primary = "factor-graph" if "factor-graph" in stitched else next(iter(stitched), None)
+    validations, validation_doc = _validate(planned, stitched, outcomes, primary=primary,
+                                            stitch_model=options.stitch_model)
+    document = _document(planned, collected, stitched, outcomes, primary=primary, stitch_model=options.stitch_model,
+                         truth_doc=truth_doc, validation_doc=validation_doc, tasks_seconds=tasks_seconds)
+    run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
+                      truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed)
+    _write_report_and_document(run, report=options.report, t_start=t_start)
+    return run
+
+
+def _read_and_plan(manifest, out, *, options):
+    """Phase 1: the manifest read, the inputs checked, the tasks listed; one line on stderr with ``progress``."""
+    campaign = manifest if isinstance(manifest, io.Campaign) else io.read_manifest(manifest)
+    planned = plan_campaign(campaign, out, options=options)
+    if options.progress:
+        print(f"campaign {campaign.imu_id}: {len(campaign.experiments)} experiment(s) x {len(planned.solvers)} "
+              f"solver(s); {len(planned.from_cache)} cached, {len(planned.to_compute)} to compute", file=sys.stderr)
+    return planned
+
+
+def _compute(planned, *, options, on_done):
+    """Phase 2: the tasks run; ``({(name, solver): outcome dict}, seconds)`` with the cached tasks' outcomes.
+
+    Raises
+    ------
+    InputError
+        A worker found an experiment file breaking a rule of the format (finished tasks stay cached).
+    """
+    t_tasks = time.perf_counter()
+    outcomes = execute(planned.to_compute, options=options, on_done=on_done)
+    tasks_seconds = time.perf_counter() - t_tasks
+    for t in planned.from_cache:
+        outcomes[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}
+    bad = [o for o in outcomes.values() if o.get("input_error")]
+    if bad:  # bad input found by a worker: one clear message, exit code 2 (finished tasks stay cached)
+        raise InputError(bad[0]["input_error"])
+    return outcomes, tasks_seconds
+
+
+def _collect(planned, outcomes):
+    """Phase 3: every experiment's summary and results read back, ``comparison.json`` written, its truth read."""
+    out = planned.out
+    experiments_doc, results, summaries, truths, failed = [], {}, {}, {}, []
+    for e in planned.campaign.experiments:
+        folder = out / e.name
+        entry = {"name": e.name, "file": str(e.file), "folder": e.name, "t_ref_degC": e.t_ref_degC, "results": {}}
+        summary_file = folder / "summary.json"
+        if summary_file.is_file():
+            summ = json.loads(summary_file.read_text(encoding="utf-8"))
+            summaries[e.name] = summ
+            entry.update({k: summ[k] for k in ("t_ref_degC", "duration_s", "n_samples", "rate_hz",
+                                               "temperature_range_degC", "sensor_temperature_range_degC")})
+        res = {}
+        for s in planned.solvers:
+            oc = outcomes.get((e.name, s), {"status": "missing"})
+            info = {"status": oc["status"], "file": f"{e.name}/{s}.json"}
+            if oc["status"] == "failed":
+                info["error"] = oc["error"]
+                failed.append({"name": e.name, "solver": s, "error": oc["error"]})
+            p = folder / f"{s}.json"
+            if oc["status"] in ("computed", "cached") and p.is_file():
+                r = io.read_result(p)
+                res[s] = r
+                info["seconds"] = (r.extra.get("campaign") or {}).get("seconds")
+            entry["results"][s] = info
+        cmp_ = compare(res["sqrt-kf"], res["factor-graph"]) if "sqrt-kf" in res and "factor-graph" in res else None
+        if res:
+            # the verdict of the experiment's solvers together: in campaign.json and comparison.json (the
+            # tasks' result files stay as their workers wrote them, so that cached work is kept byte for byte)
+            entry["verdict"] = verdict_of(res, cmp_).to_json()
+        results[e.name] = res
+        if cmp_ is not None:
+            cmp_["verdict"] = entry["verdict"]
+            io.atomic_write_json(folder / "comparison.json", cmp_)
+            entry["comparison"] = cmp_["summary"]
+        tp = truth_path(e.file)
+        if tp.is_file():
+            try:
+                truths[e.name] = io.read_result(tp)
+                entry["truth"] = str(tp)
+            except InputError as exc:
+                entry["truth_error"] = str(exc)
+        experiments_doc.append(entry)
+    return _Collected(experiments=experiments_doc, results=results, summaries=summaries, truths=truths,
+                      failed=failed)
+
+
+def _stitch(planned, collected):
+    """Phase 4: ``{solver: Stitched}`` over the experiments that solver finished."""
+    stitched = {}
+    for s in planned.solvers:
+        names = [e.name for e in planned.campaign.experiments if s in collected.results[e.name]]
+        if not names:
+            continue
+        ranges = [collected.summaries.get(n, {}).get("sensor_temperature_range_degC") for n in names]
+        stitched[s] = stitch([collected.results[n][s] for n in names], names=names, sensor_ranges=ranges, solver=s)
+    return stitched
+
+
+def _check_truth(stitched, truths):
+    """Phase 5: ``{solver: {model: truth_check}}`` against the first truth file, ``{}`` without one."""
+    truth_any = next(iter(truths.values()), None)
+    truth_doc = {}
+    if truth_any is not None:
+        for s, st in stitched.items():
+            truth_doc[s] = {m: truth_check(st, truth_any, model=m) for m in ("cubic", "linear")}
+    return truth_doc
+
+
+def _validate(planned, stitched, outcomes, *, primary, stitch_model):
+    """Phase 6: the stitched calibrations on each validation record, both models, primary solver first.
+
+    Returns
+    -------
+    validations : list of graph_calib.validation.Validation
+        Those of ``stitch_model``.
+    validation_doc : list of dict
+        ``campaign.json``'s ``validation``.
+    """
+    validations, validation_doc = [], []
+    if not planned.records or primary is None:
+        return validations, validation_doc
+    order = [primary] + [s for s in stitched if s != primary]
+    for rec in planned.records:
+        kind, ref_path = planned.references[rec]
+        entry = {"record": str(rec), "reference_kind": kind, "reference": str(ref_path)}
+        if not Path(ref_path).is_file():
+            oc = outcomes.get((f"validation/{rec.stem}", "factor-graph"), {})
+            entry["error"] = oc.get("error", "the record's own calibration is missing")
+            validation_doc.append(entry)
+            continue
+        reference = ResultCalibration(io.read_result(ref_path))
+        exp = io.read_experiment(rec)
+        w = window_means(exp)
+        entry["results"] = {}
+        for s in order:
+            entry["results"][s] = {}
+            for m in (stitch_model, "cubic" if stitch_model == "linear" else "linear"):
+                v = validate(exp, stitched[s], reference, model=m, windows=w, record_name=rec.name)
+                entry["results"][s][m] = v.summary()
+                if m == stitch_model:
+                    validations.append(v)
+        validation_doc.append(entry)
+        del exp
+    return validations, validation_doc
+
+
+def _document(planned, collected, stitched, outcomes, *, primary, stitch_model, truth_doc, validation_doc,
+              tasks_seconds):
+    """Phase 7a: the content of ``campaign.json`` (its timing completed by :func:`_write_report_and_document`)."""
+    campaign, failed = planned.campaign, collected.failed
+    n_computed = sum(1 for o in outcomes.values() if o["status"] == "computed")
+    return {
+        "format": CAMPAIGN_FORMAT, "version": CAMPAIGN_VERSION,
+        "manifest": str(campaign.path), "imu_id": campaign.imu_id, "grade": campaign.grade,
+        "solvers": list(planned.solvers), "primary_solver": primary, "stitch_model": stitch_model,
+        "model": {"effects": list(campaign.effects), "exclude": list(campaign.exclude), "priors": campaign.priors,
+                  "solver_options": campaign.solver},
+        "experiments": collected.experiments,
+        "verdict": {"passed": all(e.get("verdict", {}).get("passed", True) for e in collected.experiments),
+                    "failed": [e["name"] for e in collected.experiments
+                               if not e.get("verdict", {}).get("passed", True)]},
+        "stitching": {s: st.to_dict() for s, st in stitched.items()},
+        "truth_check": truth_doc,
+        "validation": validation_doc,
+        "failed": failed,
+        "timing": {"tasks_computed": n_computed, "tasks_cached": len(outcomes) - n_computed
+                   - len(failed), "tasks_failed": len(failed), "tasks_seconds": tasks_seconds},
+    }
+
+
+def _write_report_and_document(run, *, report, t_start):
+    """Phase 7b: ``report.html`` (with ``report``) and then ``campaign.json``, their timings in the document."""
+    doc = run.document
+    if report:
+        t_rep = time.perf_counter()
+        run.report_path = write_report(run, run.out / "report.html")
+        doc["timing"]["report_seconds"] = time.perf_counter() - t_rep
+    doc["timing"]["total_seconds"] = time.perf_counter() - t_start
+    io.atomic_write_json(run.out / "campaign.json", doc)
+
+
+__all__ = ["CAMPAIGN_FORMAT", "CAMPAIGN_VERSION", "CampaignRun", "run_campaign"]

@@ -1,0 +1,385 @@
+"""The closed loop: calibrate, test every further effect, add the most significant one, repeat.
+
+:func:`diagnose` calibrates with the declared model and then runs rounds until no
+candidate is significant (or the limit of added effects is reached).  A round
+(:func:`_round`) is a sequence of steps:
+
+1. linearise the model extended by every untested candidate at the current solution
+   and eliminate the attitudes (:func:`~graph_calib.diagnosis.reduced_system.linearise`);
+2. score-test each candidate against the current model (:func:`_test_candidates`);
+3. score-test each generic driver group on each sensor axis (:func:`_test_drivers`);
+4. decide (:func:`_decide`): add the most significant candidate that explains the
+   significant driver signatures, or is needed beyond those it leaves
+   (:func:`_encompassing_check`).
+
+After an effect is added the graph is re-solved on the same record from the previous
+solution (:func:`_add_effect`).  Driver signatures significant at the final model are
+reported as ``unexplained``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import replace
+
+import numpy as np
+from scipy import stats
+
+from graph_calib import effects
+from graph_calib.diagnosis.records import (
+    CandidateTest,
+    Diagnosis,
+    DiagnosisOptions,
+    DriverTest,
+    Round,
+    Stage,
+)
+from graph_calib.diagnosis.reduced_system import linearise
+from graph_calib.diagnosis.residuals import (
+    error_against_truth,
+    factor_residuals,
+    filter_innovations,
+    residual_statistics,
+)
+from graph_calib.diagnosis.score import score_test, with_priors
+from graph_calib.options import CalibrationOptions
+from graph_calib.problem import build_problem
+from graph_calib.solvers.registry import solve
+from graph_calib.solvers.results import to_result
+
+
+def _columns(layout, name):
+    """Columns of parameter ``name`` in ``layout``."""
+    return np.arange(layout.size)[layout.slice(name)]
+
+
+def _with_effects(options, extra_effects):
+    """``options`` with ``extra_effects`` as the model's further effects."""
+    return replace(options, model=replace(options.model, extra_effects=tuple(extra_effects)))
+
+
+def _solve_graph(problem, *, options, initial=None):
+    """The factor graph's solution of ``problem``."""
+    return solve("factor-graph", problem, options=options, initial=initial)
+
+
+# ---------------------------------------------------------------------------
+# a calibrated stage (before, after)
+# ---------------------------------------------------------------------------
+
+
+def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None,
+                say=lambda msg: None):
+    """The stage of ``problem`` solved by the factor graph (``graph``): the filter, residuals, statistics, error."""
+    model = problem.model
+    series = factor_residuals(model, graph.attitudes, graph.x)
+    results = {"factor-graph": to_result(model, graph)}
+    stage = Stage(layout=tuple(model.layout.names), problem=problem, graph=graph, results=results, residuals=series)
+    if "sqrt-kf" in diagnosis_options.solvers:
+        say("  square-root filter ...")
+        kf = solve("sqrt-kf", problem, options=options)
+        stage.results["sqrt-kf"] = to_result(model, kf)
+        stage.kf = kf
+        stage.innovations = filter_innovations(kf, model)
+    stage.statistics = residual_statistics(stage)
+    if truth is not None:
+        stage.error = {}
+        for solver, res in stage.results.items():
+            e = error_against_truth(res, truth)
+            if fixed_sigmas is not None and solver in fixed_sigmas:
+                e["rms_z_fixed"] = error_against_truth(res, truth, sigmas=fixed_sigmas[solver])["rms_z"]
+            else:
+                e["rms_z_fixed"] = e["rms_z"]
+            stage.error[solver] = e
+    return stage
+
+
+# ---------------------------------------------------------------------------
+# one round
+# ---------------------------------------------------------------------------
+
+
+def _test_candidates(system, layout, names, *, diagnosis_options):
+    """Score test of each candidate ``names`` against the current model (Bonferroni over those tested).
+
+    Parameters
+    ----------
+    system : ReducedSystem
+    layout : graph_calib.params.Layout
+        The extended layout (a candidate absent from it is not estimable in this experiment).
+    names : sequence of str
+    diagnosis_options : DiagnosisOptions
+
+    Returns
+    -------
+    tests : list of CandidateTest
+        In the order of ``names``.
+    columns : dict of str to ndarray
+        The columns of each candidate tested (not skipped).
+    """
+    vf = system.variance_factor
+    raw = {}
+    skipped = {}
+    for name in names:
+        if name not in layout:
+            skipped[name] = effects.effect(name).why_needs or "not estimable in this experiment's model"
+            continue
+        idx = _columns(layout, name)
+        sc = score_test(system.A, system.b, system.null, idx, scale=system.prior_sigma[idx],
+                        min_eig=diagnosis_options.identifiable, scale_factor=vf)
+        if sc.dof == 0:
+            skipped[name] = ("not identifiable: the data determine no combination of its elements better than "
+                             "the prior")
+            continue
+        raw[name] = (idx, sc)
+    m = max(1, len(raw))
+    tests = []
+    for name in names:
+        if name in skipped:
+            tests.append(CandidateTest(name, 0.0, 0, effects.effect(name).size, float("nan"), 0.0, False,
+                                       skipped[name], (), ()))
+            continue
+        idx, sc = raw[name]
+        thr = float(stats.chi2.isf(diagnosis_options.alpha / m, sc.dof))
+        tests.append(CandidateTest(name, sc.statistic, sc.dof, sc.dim, thr, sc.log10_p(), sc.statistic > thr, None,
+                                   tuple(sc.estimate.tolist()), tuple(sc.sigma.tolist())))
+    return tests, {name: idx for name, (idx, _) in raw.items()}
+
+
+def _test_drivers(system, drivers, model, *, diagnosis_options):
+    """Score test of each driver group on each sensor axis against the current model (Bonferroni).
+
+    Parameters
+    ----------
+    system : ReducedSystem
+        With the driver columns (after ``system.layout``).
+    drivers : list of Driver
+        The driver columns, in order.
+    model : graph_calib.model.CalibrationModel
+        The extended model (where an accelerometer bias is seen).
+    diagnosis_options : DiagnosisOptions
+
+    Returns
+    -------
+    tests : list of DriverTest
+    columns : dict of (str, str) to ndarray
+        The columns of each ``(group, axis)`` tested.
+    """
+    vf = system.variance_factor
+    groups = {}
+    for i, d in enumerate(drivers):
+        groups.setdefault((d.group, d.axis), []).append(i)
+    draw = {}
+    for key, ii in groups.items():
+        idx = system.layout.size + np.asarray(ii)
+        sc = score_test(system.A, system.b, system.null, idx, min_eig=diagnosis_options.driver_min_eig,
+                        scale_factor=vf)
+        if sc.dof:
+            draw[key] = (idx, ii, sc)
+    md = max(1, len(draw))
+    tests = []
+    # where an accelerometer bias is seen: every keyframe, or only the static ones without a table
+    if model.options.moving_sigma is not None:
+        acc_keys = model.record.static_key
+    else:
+        acc_keys = np.ones(model.n_keyframes, bool)
+    for (g, ax), (idx, ii, sc) in draw.items():
+        thr = float(stats.chi2.isf(diagnosis_options.alpha / md, sc.dof))
+        prof = system.driver_means[:, [drivers[i].series for i in ii]] @ sc.estimate   # fitted bias per keyframe
+        seen = acc_keys if ax.startswith("accel") and np.any(acc_keys) else np.ones(prof.size, bool)
+        prof = np.where(seen, prof - prof[seen].mean(), np.nan)                       # the mean is the bias
+        tests.append(DriverTest(g, ax, tuple(drivers[i].label for i in ii), sc.statistic, sc.dof, thr,
+                                sc.log10_p(), sc.statistic > thr, tuple(sc.estimate.tolist()),
+                                tuple(sc.sigma_identifiable.tolist()), float(np.sqrt(np.nanmean(prof**2))),
+                                tuple(prof.tolist())))
+    return tests, {key: idx for key, (idx, _, _) in draw.items()}
+
+
+def _added_text(t, why=""):
+    """The round's decision when candidate test ``t`` is added (``why``: what the encompassing test said)."""
+    return (f"added {t.name}: score statistic {t.statistic:.1f} > {t.threshold:.1f} "
+            f"(chi-square, {t.dof} dof, log10 p = {t.log10_p:.1f})" + (f"; {why}" if why else ""))
+
+
+def _encompassing_check(test, columns, system, significant_drivers, driver_columns, *, n_tested,
+                        diagnosis_options):
+    """Does significant candidate ``test`` explain the driver signatures, or only mimic one?
+
+    The driver signatures still significant given the candidate are those it leaves; the
+    candidate is needed when it is still significant given those (the generic alternative).
+
+    Parameters
+    ----------
+    test : CandidateTest
+    columns : ndarray of int
+        The candidate's columns.
+    system : ReducedSystem
+    significant_drivers : list of DriverTest
+    driver_columns : dict of (str, str) to ndarray
+        Columns of each driver test (:func:`_test_drivers`).
+    n_tested : int
+        Candidates tested in the round (Bonferroni).
+    diagnosis_options : DiagnosisOptions
+
+    Returns
+    -------
+    check : dict
+        The check as ``diagnosis.json``'s ``encompassing_checks`` holds it.
+    why : str or None
+        Why the candidate is added, or None when it only mimics driver signatures.
+    """
+    vf = system.variance_factor
+    A_c = with_priors(system, columns)
+    base_c = np.concatenate([system.null, columns])
+    left = []
+    for d in significant_drivers:
+        didx = driver_columns[(d.group, d.axis)]
+        sc = score_test(A_c, system.b, base_c, didx, min_eig=diagnosis_options.driver_min_eig, scale_factor=vf)
+        if sc.statistic > d.threshold and sc.dof:
+            left.append((sc.log10_p(), d, didx, sc))
+    check = {"candidate": test.name, "drivers_significant_before": len(significant_drivers),
+             "drivers_left_given_candidate": [{"driver": d.group, "axis": d.axis, "statistic": sc.statistic,
+                                               "dof": sc.dof, "threshold": d.threshold}
+                                              for _, d, _, sc in sorted(left, key=lambda z: z[0])]}
+    if not left:
+        check["verdict"] = "explains every significant driver signature"
+        return check, "it explains every significant driver signature"
+    # the generic alternative: every driver signature the candidate leaves unexplained
+    dcols = np.concatenate([z[2] for z in left])
+    names_left = ", ".join(f"{d.group} on {d.axis}" for _, d, _, _ in sorted(left, key=lambda z: z[0]))
+    sc_c = score_test(system.A, system.b, np.concatenate([system.null, dcols]), columns,
+                      scale=system.prior_sigma[columns], min_eig=diagnosis_options.identifiable, scale_factor=vf)
+    thr_c = float(stats.chi2.isf(diagnosis_options.alpha / max(1, n_tested), max(sc_c.dof, 1)))
+    check["candidate_given_drivers"] = {"statistic": sc_c.statistic, "dof": sc_c.dof, "threshold": thr_c}
+    if sc_c.dof and sc_c.statistic > thr_c:
+        check["verdict"] = (f"needed beyond the driver signatures it leaves ({names_left}): "
+                            f"{sc_c.statistic:.1f} > {thr_c:.1f}")
+        return check, "still significant given the driver signatures it does not explain"
+    check["verdict"] = (f"not added: it only mimics driver signatures the catalogue lacks ({names_left}): "
+                        f"{sc_c.statistic:.1f} <= {thr_c:.1f} given those drivers")
+    return check, None
+
+
+def _decide(system, candidate_tests, candidate_columns, driver_tests, driver_columns, *, allow_add,
+            diagnosis_options):
+    """The round's decision: the effect added (or None), the decision in words, the encompassing checks.
+
+    The significant candidates are taken most significant first; with the encompassing
+    check the first one that is not a mere mimic of a driver signature is added.
+    """
+    significant = sorted((t for t in candidate_tests if t.significant), key=lambda t: t.log10_p)
+    if not significant:
+        return None, (f"no candidate significant at alpha = {diagnosis_options.alpha:g} "
+                      f"(Bonferroni over {len(candidate_columns)} candidates)"), []
+    if not allow_add:
+        return None, f"most significant candidate {significant[0].name} not added: the limit of added effects", []
+    significant_drivers = [d for d in driver_tests if d.significant]
+    if not diagnosis_options.encompassing or not significant_drivers:
+        return significant[0].name, _added_text(significant[0]), []
+    checks = []
+    for t in significant:
+        check, why = _encompassing_check(t, candidate_columns[t.name], system, significant_drivers, driver_columns,
+                                         n_tested=len(candidate_columns), diagnosis_options=diagnosis_options)
+        checks.append(check)
+        if why is not None:
+            return t.name, _added_text(t, why), checks
+    return None, ("no candidate added: every significant candidate only mimics a driver signature "
+                  "that the catalogue lacks"), checks
+
+
+def _round(index, *, options, problem, graph, diagnosis_options, candidates, allow_add=True):
+    """One round: linearise the extended model at the solution, test, decide."""
+    t0 = time.perf_counter()
+    model = problem.model
+    untested = [name for name in candidates if name not in model.layout]
+    # the same prepared record, static intervals and alignment: only the layout grows
+    extended = model.with_effects(tuple(options.model.extra_effects) + tuple(untested))
+    x_extended = extended.layout.embed(model.layout, graph.x)
+    system, drivers = linearise(extended, graph.attitudes, x_extended, q_nb0=problem.q_nb0,
+                                null_names=model.layout.names, n_segments=diagnosis_options.time_segments)
+    candidate_tests, candidate_columns = _test_candidates(system, extended.layout, untested,
+                                                          diagnosis_options=diagnosis_options)
+    driver_tests, driver_columns = _test_drivers(system, drivers, extended, diagnosis_options=diagnosis_options)
+    added, decision, checks = _decide(system, candidate_tests, candidate_columns, driver_tests, driver_columns,
+                                      allow_add=allow_add, diagnosis_options=diagnosis_options)
+    return Round(index=index, layout=tuple(model.layout.names), candidates=candidate_tests, drivers=driver_tests,
+                 variance_factor=system.variance_factor, chi2_per_dof=system.chi2 / max(system.dof, 1),
+                 added=added, decision=decision, checks=checks, seconds=time.perf_counter() - t0)
+
+
+# ---------------------------------------------------------------------------
+# the loop
+# ---------------------------------------------------------------------------
+
+
+def _add_effect(name, *, options, problem, graph, say):
+    """Add effect ``name`` to the model and re-solve from the previous solution: ``(options, problem, graph)``."""
+    options = _with_effects(options, tuple(options.model.extra_effects) + (name,))
+    grown = problem.with_effects(options.model.extra_effects)
+    x0 = grown.model.layout.embed(problem.model.layout, graph.x)
+    say(f"re-solving with {name} ...")
+    graph = _solve_graph(grown, options=options, initial=(graph.attitudes, x0))
+    return options, grown, graph
+
+
+def _context(experiment, *, model, options, diagnosis_options, truth):
+    """The experiment and the run, for ``diagnosis.json`` (``model``: the declared model)."""
+    e = experiment
+    return {
+        "n_samples": e.n_samples, "duration_s": float(e.t[-1] - e.t[0] + 1.0 / e.rate_hz),
+        "rate_hz": float(e.rate_hz), "table": e.table is not None, "grade": options.model.grade,
+        "keyframes": int(model.n_keyframes), "keyframe_s": float(options.model.keyframe_s),
+        "t_ref_degC": float(model.t_ref_degC), "solvers": list(diagnosis_options.solvers),
+        "temperature_range_degC": [float(model.temperatures.min()), float(model.temperatures.max())],
+        "truth": truth is not None,
+    }
+
+
+def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=None, progress=None):
+    """The closed loop on one experiment.
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    options : graph_calib.calibrate.CalibrationOptions, optional
+        The declared model (grade, keyframes, effects already modelled, priors).
+    diagnosis : DiagnosisOptions
+    truth : graph_calib.experiment.Result, optional
+        A simulator's truth: the error of the declared parameters before and after.
+    progress : callable, optional
+        Called with one-line messages.
+
+    Returns
+    -------
+    Diagnosis
+    """
+    t_start = time.perf_counter()
+    say = progress or (lambda msg: None)
+    options = CalibrationOptions() if options is None else options
+    problem = build_problem(experiment, options=options)
+    options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
+    candidates = tuple(diagnosis.candidates or effects.FURTHER_EFFECTS)
+    declared = problem.model
+    say(f"declared model: {declared.layout.size} parameters, {declared.n_keyframes} keyframes; factor graph ...")
+    graph = _solve_graph(problem, options=options)
+    before = _make_stage(problem, graph, options=options, diagnosis_options=diagnosis, truth=truth, say=say)
+    fixed = {s: r.sigmas for s, r in before.results.items()}
+    rounds, added = [], []
+    while True:
+        rnd = _round(len(rounds) + 1, options=options, problem=problem, graph=graph, diagnosis_options=diagnosis,
+                     candidates=candidates, allow_add=len(added) < diagnosis.max_added)
+        rounds.append(rnd)
+        say(f"round {rnd.index}: {rnd.decision}")
+        if rnd.added is None:
+            break
+        added.append(rnd.added)
+        options, problem, graph = _add_effect(rnd.added, options=options, problem=problem, graph=graph, say=say)
+    after = before if not added else _make_stage(problem, graph, options=options, diagnosis_options=diagnosis,
+                                                 truth=truth, fixed_sigmas=fixed, say=say)
+    signature = sorted((d for d in rounds[-1].drivers if d.significant), key=lambda d: d.log10_p)
+    source = experiment.source.rsplit("/", 1)[-1] if experiment.source else ""
+    return Diagnosis(source=source, added=added, unexplained=bool(signature), signature=signature, rounds=rounds,
+                     before=before, after=after, options=diagnosis,
+                     context=_context(experiment, model=declared, options=options, diagnosis_options=diagnosis,
+                                      truth=truth),
+                     seconds=time.perf_counter() - t_start)
