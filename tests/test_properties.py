@@ -510,8 +510,13 @@ def test_the_unmutated_inputs_import():
         assert importers.import_mpu6050(mpu).n_samples == 300
 
 
+def _insert(blob):
+    return Mutation(lambda data: blob + data, f"insert_bytes(at 0, {blob!r})")
+
+
 @examples(150)
 @given(muts=mutations)
+@example(muts=[_insert(b"\x80")])      # found on the merged csv reader: UnicodeDecodeError while scanning rows
 def test_import_csv_refuses_mutated_logs(muts):
     with scratch() as d:
         path = d / "log.csv"
