@@ -15,6 +15,7 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.params import grade
 from graph_calib.alignment import Alignment, alignment
 from graph_calib.errors import InputError
+from graph_calib.plausibility import check_record
 from graph_calib.static_detection import detect_static
 
 
@@ -45,6 +46,9 @@ def build_problem(experiment, *, options=CalibrationOptions()):
 
     Without a table, gravity measurements count only where the IMU is static
     (``ModelOptions.moving_sigma`` then defaults to 1 m/s^2 for moving keyframes).
+    A record whose gyro increments cannot be in radians (degrees written for radians, rates for
+    increments: :func:`graph_calib.plausibility.check_record`) is refused first, with an
+    :class:`~graph_calib.errors.InputError` (exit 2 on the command line, nothing written).
 
     Parameters
     ----------
@@ -60,6 +64,7 @@ def build_problem(experiment, *, options=CalibrationOptions()):
                          f"record cut together is not supported yet: calibrate each piece on its own "
                          f"(Experiment.segment_bounds gives them)", path=experiment.source or None,
                          dataset="/imu/segment")
+    check_record(experiment)
     model_options = options.model
     static = detect_static(experiment)
     static_mask = None

@@ -20,7 +20,7 @@ LAYERS = {
     "graph_calib.effects": 1,
     "graph_calib.params": 2, "graph_calib.sensor_model": 2,
     "graph_calib.io": 3, "graph_calib.strapdown": 3, "graph_calib.static_detection": 3, "graph_calib.alignment": 3,
-    "graph_calib.model": 4,
+    "graph_calib.model": 4, "graph_calib.plausibility": 4,
     "graph_calib.options": 5, "graph_calib.problem": 5, "graph_calib.calibration": 5, "graph_calib.grade_choice": 5,
     "graph_calib.solvers": 6,
     "graph_calib.factor_graph": 7, "kf_reference": 7,

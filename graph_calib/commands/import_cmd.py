@@ -12,6 +12,7 @@ Columns are counted from 0, in ``--columns`` and in every message.
 from __future__ import annotations
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -97,7 +98,8 @@ def parse_columns(text):
                              dataset="--columns")
         if key in out:
             raise InputError(f"{key} given twice", dataset="--columns")
-        out[key] = int(value) if value.lstrip("-").isdigit() else value
+        # an index is ASCII digits: "²" and "--5" pass str.isdigit but not int() (a header name then)
+        out[key] = int(value) if re.fullmatch(r"-?[0-9]+", value) else value
     return out
 
 

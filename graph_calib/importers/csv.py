@@ -71,8 +71,11 @@ def _resolve_columns(columns, *, path, delimiter, header_lines):
                 if header_lines < 1:
                     raise InputError(f"column {key}={_show(col)} names a header column, but header_lines is 0",
                                      dataset="columns")
-                with open(path, encoding="utf-8") as fh:
-                    lines = [fh.readline() for _ in range(header_lines)]
+                try:
+                    with open(path, encoding="utf-8") as fh:
+                        lines = [fh.readline() for _ in range(header_lines)]
+                except UnicodeDecodeError:
+                    raise InputError("not a UTF-8 text file", path=path) from None
                 header = _split(lines[-1].strip(), delimiter)
             if col not in header:
                 raise InputError(f"column {_show(col)} not in the header line {header_lines} ({', '.join(header)})",

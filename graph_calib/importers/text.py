@@ -51,11 +51,14 @@ def _split(line, delimiter):
 
 def _data_rows(path, skip_lines):
     """``(line number, text)`` of every data row (1-based; blank and comment lines and the header skipped)."""
-    with open(path, encoding="utf-8") as fh:
-        for no, line in enumerate(fh, start=1):
-            text = _strip_comment(line)
-            if no > skip_lines and text:
-                yield no, text
+    try:
+        with open(path, encoding="utf-8") as fh:
+            for no, line in enumerate(fh, start=1):
+                text = _strip_comment(line)
+                if no > skip_lines and text:
+                    yield no, text
+    except UnicodeDecodeError:
+        raise InputError("not a UTF-8 text file", path=path) from None
 
 
 def _data_line_numbers(path, skip_lines):

@@ -3,19 +3,27 @@
 from __future__ import annotations
 
 import numbers
+import re
+import sys
 
 import numpy as np
 
 
 def _show(x):
-    """``repr`` of a value for messages, numpy scalars shown as plain Python numbers."""
+    """``repr`` of a value for messages, numpy scalars shown as plain Python numbers, on one line.
+
+    numpy wraps the ``repr`` of a long array over several lines; a message is one line (cli.md).
+    """
     if isinstance(x, np.generic):
         x = x.item()
-    return repr(x)
+    return re.sub(r"\s*\n\s*", " ", repr(x))
 
 
 def _is_real(x):
-    return isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+    """A real number that a float can hold: an integer beyond the float range (JSON and TOML allow any
+    number of digits) is not, so that ``math.isfinite`` never overflows on it."""
+    return (isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+            and not (isinstance(x, numbers.Integral) and abs(x) > sys.float_info.max))
 
 
 def _is_int(x):

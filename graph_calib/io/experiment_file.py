@@ -25,6 +25,7 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -406,6 +407,19 @@ def _float64(a):
     return np.asarray(a, dtype=np.float64)
 
 
+@contextlib.contextmanager
+def _damage_as_input_error(path):
+    """h5py's errors on a damaged file (and strings that are not UTF-8) as one InputError naming the file."""
+    try:
+        yield
+    except InputError:
+        raise
+    except (OSError, RuntimeError, KeyError, ValueError, TypeError) as exc:
+        first = (str(exc).strip().splitlines() or [""])[0]
+        raise InputError(f"cannot be read, damaged or not written as HDF5 of this format "
+                         f"({type(exc).__name__}: {first})", path=path) from None
+
+
 def read_experiment(path):
     """Read and validate an experiment file (HDF5).
 
@@ -434,7 +448,7 @@ def read_experiment(path):
         f = h5py.File(path, "r")
     except OSError as exc:
         raise InputError(f"not a readable HDF5 file ({exc})", path=path) from None
-    with f:
+    with _damage_as_input_error(path), f:
         fmt = _attr_scalar(_require_attr(f, "format", path, _ROOT.format("format")))
         if fmt != EXPERIMENT_FORMAT:
             raise InputError(f"format is {_show(fmt)}, expected {_show(EXPERIMENT_FORMAT)}",

@@ -171,7 +171,7 @@ def read_manifest(path):
     grade = imu.get("grade")
     if grade is None:
         raise InputError(f"missing grade; known: {', '.join(params.GRADES)}", path=path, dataset="[imu].grade")
-    if grade not in params.GRADES:
+    if not isinstance(grade, str) or grade not in params.GRADES:
         raise InputError(f"unknown grade {_show(grade)}; known: {', '.join(params.GRADES)}", path=path,
                          dataset="[imu].grade")
 
