@@ -11,7 +11,7 @@ Applying it
     :meth:`Calibration.correct` turns an experiment's raw increments into the
     angular rate ``omega_ib_b`` and the specific force ``f_b`` by the inverse
     model (:func:`graph_calib.sensor_model.correct`), with the context the
-    solvers prepare (:meth:`graph_calib.model.CalibrationModel._prepare_samples`):
+    solvers prepare (:class:`graph_calib.model.PreparedRecord`):
     sensor temperature offsets from ``t_ref_degC``, their rate over a 60 s
     window, the other triad's raw signal and the slope-limited derivatives of the
     raw signals.  :func:`correct_record` is that inversion on a prepared record

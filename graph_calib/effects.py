@@ -214,7 +214,7 @@ REGISTRY = (
              prior=PriorRule("gyro.bias_tc", divisor=2.0), size=(0.02 * DH, 0.03 * DH),
              view=("temperature", "gyro"), temperature_of="gyro.bias", temperature_order=3),
     _further("accel.bias_tc3", XYZ, "m/s^2/degC^3", "micro-g/degC^3", _UG, triad="accel", term="bias_tc3",
-             prior=PriorRule("accel.bias_tc", divisor=2.0), size=(20 * UG, 30 * UG),
+             prior=PriorRule("accel.bias_tc", divisor=2.0), size=(1 * UG, 2 * UG),
              view=("temperature", "accel"), temperature_of="accel.bias", temperature_order=3),
 )
 
