@@ -411,9 +411,12 @@ def validate(record, calibration, reference, *, model=None, window_s=1.0, window
     ----------
     record : graph_calib.experiment.Experiment
         An independent record (not used in the calibration).
-    calibration : graph_calib.stitching.Stitched or ResultCalibration
+    calibration : graph_calib.stitching.Stitched or ResultCalibration or graph_calib.compensation.CompensationTable
         Anything with ``sensor_errors(T_sensors, omega_b, f_b)`` (:class:`ResultCalibration`) or
-        ``evaluate(T_sensors, model) -> {element: values}``.
+        ``evaluate(T_sensors, model) -> {element: values}``.  A compensation table is evaluated as
+        ``graph-calib apply`` interpolates it, and its elements' ``calibrated_range_degC`` select the
+        windows inside, so an exported table reproduces the campaign's figures of its stitched
+        calibration (``docs/compensation.md``).
     reference : ResultCalibration or graph_calib.experiment.Result
         The truth (simulated data) or the record's own calibration.
     model : str, optional

@@ -21,6 +21,7 @@ from graph_calib.compensation import (
     BENCH_PARAMETERS, INTERPOLATION, PROVENANCE_ATTRIBUTE, TABLE_VERSION, CompensationTable, StitchedCalibration,
     TableCurve, correction_of, element_identifier, interpolate, read_table, write_table,
 )
+from graph_calib.constants import DH_TO_RS
 from graph_calib.params import Layout
 
 EFFECTS = ("gyro.g_sensitivity", "time_lag.accel")
@@ -300,6 +301,186 @@ def test_applying_twice_is_refused_and_visibly_wrong_when_forced(campaign, table
     c2 = np.mean(e1.dtheta - e2.dtheta, axis=0)
     np.testing.assert_allclose(c2, c1, rtol=1e-3)          # the same errors subtracted a second time
     assert correction_of(twice)["previously"]["file"] == str(tables["json"].resolve())
+
+
+# ---------------------------------------------------------------------------
+# the table on the campaign's validation record
+# ---------------------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def validated(tmp_path_factory):
+    """A campaign validated on an independent record, run through the CLI: the worked example of
+    docs/compensation.md (``nav-campaign --hours 0.05 --seed 3``, factor graph) with a 2 h record at 10 Hz
+    sweeping the whole range (``simulate_validation_record``, seed 4, its truth as the reference).
+
+    Returns ``{"record", "camp", "entry"}``: the record's path, the campaign folder, campaign.json's
+    ``validation[0]``.
+    """
+    from graph_calib.simulation import simulate, write_simulation
+    from graph_calib.validation import simulate_validation_record
+
+    root = tmp_path_factory.mktemp("validated")
+    sim_dir, camp = root / "sim", root / "camp"
+    sim = simulate("nav-campaign", rng=np.random.default_rng(3), hours=0.05, tag="seed 3")  # = simulate --seed 3
+    write_simulation(sim, sim_dir, tag="seed 3")
+    se = simulate_validation_record(sim, hours=2.0, rate_hz=10.0, seed=4)
+    record = sim_dir / "validation.h5"
+    io.write_experiment(se.experiment, record)
+    io.write_result(se.truth, sim_dir / "validation.truth.json")
+    assert cli.main(["campaign", str(sim_dir / "campaign.toml"), "--out", str(camp), "--workers", "0",
+                     "--solver", "factor-graph", "--no-report", "--quiet", "--validate", str(record)]) == 0
+    entry = json.loads((camp / "campaign.json").read_text())["validation"][0]
+    assert entry["reference_kind"] == "truth"
+    return {"record": record, "camp": camp, "entry": entry}
+
+
+def _figures(summary):
+    """The headline figures of a validation summary, per axis: largest static gyro error (rad/s), largest
+    accelerometer error over all windows (m/s^2), the verdict."""
+    return (np.array(summary["gyro_radps"]["static"]["max"]), np.array(summary["accel_mps2"]["all"]["max"]),
+            summary["pass"])
+
+
+def _propagated(table, windows):
+    """The table's stated interpolation errors through the sensor errors, per window, (W, 3) per triad:
+    ``sum |d element| |feature|`` with ``|d element|`` each temperature-dependent element's
+    ``interpolation_error.max_abs`` (constants hold the stitched values exactly), widened by 1 %: the stated
+    error is the largest over 16 points per grid interval, which the departure between them exceeds by up to
+    0.08 % on this record (docs/compensation.md)."""
+    from graph_calib.validation import sensor_errors
+
+    dx = {n: 1.01 * c.interpolation_error["max_abs"] for n, c in table.curves.items()}
+    return sensor_errors(dx, np.abs(windows["omega"]), np.abs(windows["f"]))
+
+
+def test_the_exported_table_reproduces_the_campaigns_validation_figures(validated, tmp_path, capsys):
+    """validate(record, table, reference) against campaign.json's validation summary: the same windows, the
+    largest errors per axis within the table's stated interpolation error propagated, the same verdict."""
+    from graph_calib.validation import ResultCalibration, validate, window_means
+
+    entry = validated["entry"]
+    doc = json.loads((validated["camp"] / "campaign.json").read_text())
+    solver, model = doc["primary_solver"], doc["stitch_model"]
+    campaign_summary = entry["results"][solver][model]
+    record = io.read_experiment(validated["record"])
+    reference = ResultCalibration(io.read_result(entry["reference"]))
+    w = window_means(record)
+    # the campaign's figures come back bit for bit from the stitching export recomputes
+    st = validate(record, StitchedCalibration.from_campaign(validated["camp"]).stitched, reference, model=model,
+                  windows=w, record_name=validated["record"].name)
+    assert json.loads(json.dumps(st.summary())) == campaign_summary
+    g_c, a_c, pass_c = _figures(campaign_summary)
+    diffs = {}
+    for step in (1.0, 10.0):
+        out = tmp_path / f"table-{step:g}.json"
+        assert _cli(["export", validated["camp"], "--out", out, "--step-degC", step], capsys)[0] == 0
+        table = read_table(out)
+        v = validate(record, table, reference, model=model, windows=w, record_name=validated["record"].name)
+        s = v.summary()
+        for key in ("record", "reference", "model", "window_s", "temperature_range_degC", "calibrated_range_degC",
+                    "sensor_calibrated_range_degC", "fraction_inside", "thresholds", "gyro_criterion"):
+            assert s[key] == campaign_summary[key], key                  # the same windows, selected alike
+        assert s["gyro_radps"]["static"]["windows_per_axis"] == campaign_summary["gyro_radps"]["static"][
+            "windows_per_axis"]
+        # per window on the grid, the table's remaining error departs from the stitched one by at most the
+        # propagated bound (beyond the grid the table holds its end values, the stitched curve extrapolates;
+        # every window the figures count lies inside the calibrated range, so on the grid)
+        bg, ba = _propagated(table, w)
+        on_grid = (w["T"] >= table.grid_degC[0]) & (w["T"] <= table.grid_degC[-1])
+        assert np.all(on_grid[v.inside]) and not np.all(on_grid)
+        assert np.all((np.abs(v.de_gyro - st.de_gyro) <= bg)[on_grid[:, :3]])
+        assert np.all((np.abs(v.de_accel - st.de_accel) <= ba)[on_grid[:, 3:]])
+        # and so the largest per axis (a largest |x| moves by at most the largest change of x)
+        g, a, passed = _figures(s)
+        sel_g = w["static"][:, None] & v.inside[:, :3]
+        sel_a = v.inside[:, 3:]
+        bound_g = np.array([bg[sel_g[:, i], i].max() for i in range(3)])
+        bound_a = np.array([ba[sel_a[:, i], i].max() for i in range(3)])
+        assert np.all(np.abs(g - g_c) <= bound_g)
+        assert np.all(np.abs(a - a_c) <= bound_a)
+        assert passed == pass_c
+        diffs[step] = (np.abs(g - g_c).max(), np.abs(a - a_c).max(), bound_g.max(), bound_a.max())
+        if step == 1.0:                      # docs/compensation.md: gyro 9.6e-6 deg/h, accel 7.1e-9 m/s^2
+            assert diffs[step][0] < 2e-5 * DH_TO_RS and diffs[step][1] < 2e-8
+            assert abs(s["largest_z"]["gyro"] - campaign_summary["largest_z"]["gyro"]) < 0.01
+            with pytest.raises(ValueError, match="holds the cubic stitched model"):
+                validate(record, table, reference, model="linear", windows=w)
+    assert 0 < diffs[1.0][0] < diffs[10.0][0] and 0 < diffs[1.0][1] < diffs[10.0][1]   # not vacuous: h^2
+    assert diffs[10.0][2] > 50 * diffs[1.0][2]
+
+
+def _window_average(x, experiment):
+    """Mean of per-sample ``x`` (N, k) over the windows of :func:`graph_calib.validation.window_means` (1 s),
+    weighted by the sample intervals as its rates are."""
+    m = round(float(experiment.rate_hz))
+    W = experiment.n_samples // m
+    dt = experiment.dt[:W * m].reshape(W, m, 1)
+    return (x[:W * m].reshape(W, m, -1) * dt).sum(axis=1) / dt.sum(axis=1)
+
+
+def test_applying_the_table_and_measuring_against_the_reference_gives_the_same_figures(validated, tmp_path,
+                                                                                         capsys):
+    """The INS path: ``graph-calib apply TABLE RECORD`` writes corrected increments; the remaining error of the
+    corrected record is its window means less those of the record corrected with the reference (the truth, in
+    the same sensor model).  Per window this is validate's ``e_ref - e_table``, except for products of two small
+    errors (exactly: ``(u_t - u_r) - de = -D_t (u_t - u_r) + (D_r - D_t)(u_r - m)`` per sample, ``D`` the
+    scale-and-misalignment matrix, ``u`` the corrected and ``m`` the measured signal); the figures agree."""
+    from graph_calib.validation import ResultCalibration, Validation, sensor_errors, validate, window_means
+
+    entry = validated["entry"]
+    campaign_summary = entry["results"]["factor-graph"]["cubic"]
+    table_file = tmp_path / "table.json"
+    corrected_file = tmp_path / "validation.corrected.h5"
+    assert _cli(["export", validated["camp"], "--out", table_file], capsys)[0] == 0
+    assert _cli(["apply", table_file, validated["record"], "--out", corrected_file], capsys)[0] == 0
+    raw = io.read_experiment(validated["record"])
+    corrected = io.read_experiment(corrected_file)
+    reference = ResultCalibration(io.read_result(entry["reference"]))
+    by_reference = reference.calibration.corrected(raw)
+    w = window_means(raw)                              # the campaign's windows: static ones, temperatures
+    wc, wr = window_means(corrected), window_means(by_reference)
+    de_g, de_a = wc["omega"] - wr["omega"], wc["f"] - wr["f"]
+    table = read_table(table_file)
+    v = validate(raw, table, reference, model="cubic", windows=w, record_name=validated["record"].name)
+    # the second-order terms, per sample, window-averaged
+    T = raw.sensor_temperatures()
+    dt = raw.dt[:, None]
+    m_g, m_a = raw.dtheta / dt, raw.dv / dt
+    u_t = (corrected.dtheta / dt, corrected.dv / dt)
+    u_r = (by_reference.dtheta / dt, by_reference.dv / dt)
+    vt, vr = table.evaluate(T), reference.evaluate(T)
+    slopes = {n: x for n, x in vt.items() if ".bias." not in n}
+    ones = np.ones_like(m_g)
+    d_t = [np.max(e, axis=1) for e in sensor_errors({n: np.abs(x) for n, x in slopes.items()}, ones, ones)]
+    d_d = [np.max(e, axis=1) for e in sensor_errors({n: np.abs(vr[n] - x) for n, x in slopes.items()}, ones, ones)]
+    bounds = []
+    for i, (de, de_v, m) in enumerate(((de_g, v.de_gyro, m_g), (de_a, v.de_accel, m_a))):
+        per_sample = d_t[i] * np.abs(u_t[i] - u_r[i]).max(axis=1) + d_d[i] * np.abs(u_r[i] - m).max(axis=1)
+        bound = 1.02 * np.broadcast_to(_window_average(per_sample[:, None], raw), de.shape)
+        inside = v.inside[:, 3 * i:3 * i + 3]
+        # on the windows the figures count (inside the calibrated range; outside, a sensor temperature can
+        # straddle the grid's end, where the table's held end value kinks, within one window): the measured
+        # ratio to the bound is at most 0.97 (gyro), 0.996 (accel); 2 % allowed for the window means
+        assert np.all((np.abs(de - de_v) <= bound)[inside])
+        assert np.abs(de - de_v).max() < 1e-3 * np.abs(de_v).max()        # 1.9e-4 (gyro), 3.2e-4 (accel) measured
+        bounds.append(bound)
+    e2e = Validation(record=validated["record"].name, reference=reference.label, model="cubic", windows=w,
+                     de_gyro=de_g, de_accel=de_a, inside=v.inside).summary()
+    g, a, passed = _figures(e2e)
+    g_v, a_v, passed_v = _figures(v.summary())
+    g_c, a_c, passed_c = _figures(campaign_summary)
+    sel_g = w["static"][:, None] & v.inside[:, :3]
+    sel_a = v.inside[:, 3:]
+    second_g = np.array([bounds[0][sel_g[:, i], i].max() for i in range(3)])
+    second_a = np.array([bounds[1][sel_a[:, i], i].max() for i in range(3)])
+    assert np.all(np.abs(g - g_v) <= second_g) and np.all(np.abs(a - a_v) <= second_a)
+    assert np.abs(g - g_v).max() < 3e-5 * DH_TO_RS and np.abs(a - a_v).max() < 2e-6   # 1.1e-5 deg/h, 9.6e-7 m/s^2
+    assert passed == passed_v == passed_c
+    bg, ba = _propagated(table, w)
+    interp_g = np.array([bg[sel_g[:, i], i].max() for i in range(3)])
+    interp_a = np.array([ba[sel_a[:, i], i].max() for i in range(3)])
+    assert np.all(np.abs(g - g_c) <= interp_g + second_g) and np.all(np.abs(a - a_c) <= interp_a + second_a)
 
 
 # ---------------------------------------------------------------------------

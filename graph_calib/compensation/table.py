@@ -91,6 +91,13 @@ class TableCurve:
     calibrated_range_degC: tuple = (float("nan"), float("nan"))
     interpolation_error: dict = field(default_factory=dict)
 
+    @property
+    def t_span(self):
+        """:attr:`calibrated_range_degC`, under the name :func:`graph_calib.validation.validate` reads (the
+        stitched curves' ``t_span``): a window counts as inside where its sensor temperature lies in it (none
+        does when the table states no range)."""
+        return self.calibrated_range_degC
+
 
 @dataclass(frozen=True, eq=False)
 class CompensationTable(ElementCompensation):
@@ -167,6 +174,39 @@ class CompensationTable(ElementCompensation):
         what = f"{i.get('solver', '?')} {i.get('stitch_model', '?')}"
         return (f"corrected with the compensation table of {i.get('imu_id') or 'an unnamed IMU'} ({what}, "
                 f"{self.grid_degC[0]:g}..{self.grid_degC[-1]:g} degC, from {i.get('source') or '?'})")
+
+    # -- what graph_calib.validation.validate reads ----------------------------------------
+
+    def evaluate(self, T_sensors, model=None):
+        """Every element at the sensor temperatures of each row, ``{flat element: (N,)}``, SI: the table as
+        :func:`graph_calib.validation.validate` evaluates a calibration.
+
+        The values :meth:`element_values` gives, which are those :meth:`correct` (``graph-calib apply``)
+        uses: each element interpolated (:func:`interpolate`) at its own sensor's temperature of the row,
+        end values held outside the grid; constants as they are.
+
+        Parameters
+        ----------
+        T_sensors : array_like, shape (N, 6)
+            Temperatures of gyro x, y, z and accel x, y, z, degC (a validation window's means).
+        model : str, optional
+            The stitched model; a table holds one (``info["stitch_model"]``), and asking for
+            another is a ``ValueError`` rather than a silent substitute.
+        """
+        self._check_model(model)
+        return self.element_values(T_sensors)
+
+    def element_sigmas(self, T_sensors, model=None):
+        """One sigma of every element at the sensor temperatures of each row, ``{flat element: (N,)}``
+        (the bands interpolated as the values are; ``model`` as in :meth:`evaluate`)."""
+        self._check_model(model)
+        return super().element_sigmas(T_sensors)
+
+    def _check_model(self, model):
+        held = self.info.get("stitch_model")
+        if model is not None and held is not None and model != held:
+            raise ValueError(f"this table holds the {held} stitched model, not {model!r} "
+                             "(export the campaign again with --model)")
 
     # -- the document ------------------------------------------------------------------
 
