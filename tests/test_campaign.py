@@ -131,6 +131,74 @@ def test_rerun_does_nothing(campaign_run, simulated):
 # ---------------------------------------------------------------------------
 
 
+def test_workers_load_the_kernels_the_warm_up_compiled(campaign_run):
+    """The numba kernels are warmed in the main process before the Dask workers start; the workers load them
+    from numba's on-disk cache, so no task compiles (a fresh clone used to compile in every worker's first job,
+    and it showed as that job's seconds)."""
+    tim = campaign_run.document["timing"]
+    for k in ("warmup_seconds", "compile_seconds", "compiled_signatures", "tasks_seconds", "tasks_compile_seconds"):
+        assert k in tim, k
+    assert tim["compile_seconds"] <= tim["warmup_seconds"]
+    assert tim["tasks_compile_seconds"] == 0.0
+    for e in campaign_run.document["experiments"]:
+        for s, info in e["results"].items():
+            assert info["compile_seconds"] == 0.0, (e["name"], s)
+            assert 0.0 < info["seconds"] < 120.0, (e["name"], s, info["seconds"])
+
+
+def test_task_seconds_leave_numba_compiling_out(simulated, tmp_path, monkeypatch):
+    """A task that compiles a kernel reports the compile time apart: its ``seconds`` are calibration time."""
+    import numba
+
+    from graph_calib.campaign import execution
+
+    real_solve = execution.solve
+    seen = {}
+
+    def solve_after_compiling(name, problem, **kw):
+        t0 = time.perf_counter()
+        if not seen:
+            @numba.njit(cache=False)
+            def fresh(a):          # a kernel nobody has compiled: compiled here, inside the task
+                out = 0.0
+                for v in a:
+                    out += np.sin(v) * np.cos(v) ** 2
+                return out
+            t1 = time.perf_counter()
+            fresh(np.arange(3.0))
+            seen["compile"] = time.perf_counter() - t1
+        out = real_solve(name, problem, **kw)
+        seen.setdefault("solve", time.perf_counter() - t0)
+        return out
+
+    monkeypatch.setattr(execution, "solve", solve_after_compiling)
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    run = run_campaign(manifest, tmp_path / "out", options=CampaignOptions(workers=0, report=False, progress=False))
+    first = run.document["experiments"][0]
+    extra = run.results[first["name"]]["factor-graph"].extra["campaign"]
+    assert 0.5 * seen["compile"] <= extra["compile_seconds"] <= seen["compile"] + 0.05
+    assert extra["solve_seconds"] + extra["compile_seconds"] >= 0.99 * seen["solve"]
+    assert extra["solve_seconds"] <= seen["solve"] - 0.5 * seen["compile"] + 0.5
+    assert first["results"]["factor-graph"]["compile_seconds"] == extra["compile_seconds"]
+    assert run.document["timing"]["tasks_compile_seconds"] == pytest.approx(extra["compile_seconds"])
+    for e in run.document["experiments"][1:]:
+        assert e["results"]["factor-graph"]["compile_seconds"] == 0.0
+
+
+def test_a_failed_warm_up_does_not_stop_the_campaign(simulated, tmp_path, monkeypatch, capsys):
+    from graph_calib.campaign import execution
+
+    def broken():
+        raise OSError("no space left on device")
+
+    monkeypatch.setattr(execution, "warm_kernels", broken)
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    run = run_campaign(manifest, tmp_path / "out", options=CampaignOptions(workers=0, report=False))
+    assert run.document["timing"]["tasks_computed"] == 3 and not run.failed
+    assert run.document["timing"]["compiled_signatures"] == 0
+    assert "warning: warming the numba kernels failed (OSError: no space left on device)" in capsys.readouterr().err
+
+
 def _small_manifest(simulated, folder, t_ref=None):
     folder.mkdir(parents=True, exist_ok=True)
     lines = ['[imu]', 'id = "SIM-NAV 0001"', 'grade = "navigation"', '', '[solver]', 'solvers = "factor-graph"', '']

@@ -5,7 +5,10 @@
   is its ``summary.json``);
 - :func:`execute`: every job, one after the other in this process (``workers=0``), on a local Dask
   cluster of processes with one thread each, or on an existing cluster given by its scheduler address;
-  a tqdm bar and a line per finished task on stderr.
+  a tqdm bar and a line per finished task on stderr.  Before any job it warms the numba kernels in this
+  process (:func:`graph_calib.warmup.warm_kernels`): compiled once per machine into numba's on-disk cache,
+  which the workers then load instead of each compiling them inside its first job.  Numba compile time
+  that still happens inside a job is measured and kept out of the job's seconds.
 
 ``distributed`` is imported inside the function that starts or joins a cluster: importing it takes
 seconds and a campaign run in this process (``workers=0``) never needs it.
@@ -30,6 +33,7 @@ from graph_calib.problem import build_problem
 from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import to_result
 from graph_calib.stitching import SENSORS
+from graph_calib.warmup import CompileClock, cache_present, warm_kernels
 
 
 # ---------------------------------------------------------------------------
@@ -69,7 +73,8 @@ def run_tasks(tasks):
     list of dict
         Per task ``name``, ``solver``, ``status`` (``"computed"`` or ``"failed"`` with ``error``; an
         ``input_error`` when the experiment file breaks a rule), ``seconds`` (its share of the set-up
-        plus its solve).
+        plus its solve, numba compiling left out) and ``compile_seconds`` (numba compiling during its
+        share of the set-up and its solve: 0 when the warm-up compiled every kernel this job needs).
     """
     tasks = list(tasks)
     if not tasks:
@@ -82,31 +87,37 @@ def run_tasks(tasks):
             pass
     t0 = time.perf_counter()
     try:
-        Path(first.out_dir).mkdir(parents=True, exist_ok=True)
-        exp = io.read_experiment(first.file)
-        problem = build_problem(exp, options=first.options)
-        io.atomic_write_json(first.summary_path, experiment_summary(exp, t_ref_degC=problem.model.t_ref_degC))
+        with CompileClock() as build_clock:
+            Path(first.out_dir).mkdir(parents=True, exist_ok=True)
+            exp = io.read_experiment(first.file)
+            problem = build_problem(exp, options=first.options)
+            io.atomic_write_json(first.summary_path,
+                                 experiment_summary(exp, t_ref_degC=problem.model.t_ref_degC))
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - reported per task
         return [_failure(t, exc) for t in tasks]
-    build_seconds = time.perf_counter() - t0
+    build_seconds = time.perf_counter() - t0 - build_clock.seconds
     outcomes = []
     for task in tasks:
         t1 = time.perf_counter()
         try:
-            output = solve(task.solver, problem, options=task.options)
-            result = to_result(problem.model, output)
-            solve_seconds = time.perf_counter() - t1
+            with CompileClock() as clock:
+                output = solve(task.solver, problem, options=task.options)
+                result = to_result(problem.model, output)
+            solve_seconds = time.perf_counter() - t1 - clock.seconds
             io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
                                source=Path(task.file).name, kind=output.residual_quantity)
             seconds = build_seconds / len(tasks) + solve_seconds
+            compile_seconds = build_clock.seconds / len(tasks) + clock.seconds
             extra = dict(result.extra)
             extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
                                  "options_sha256": task.options_sha256, "experiment": task.name,
-                                 "seconds": seconds, "setup_seconds": build_seconds, "solve_seconds": solve_seconds}
+                                 "seconds": seconds, "setup_seconds": build_seconds, "solve_seconds": solve_seconds,
+                                 "compile_seconds": compile_seconds}
             io.write_result(replace(result, extra=extra), task.result_path)
-            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds})
+            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
+                             "compile_seconds": compile_seconds})
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001
@@ -154,16 +165,51 @@ def _groups(tasks):
     return list(groups.values())
 
 
-def execute(tasks, *, options, on_done=None):
+def warm_up(*, progress):
+    """Warm the numba kernels in this process (:func:`graph_calib.warmup.warm_kernels`); its ``WarmUp``.
+
+    With ``progress`` one line on stderr before (when the cache is missing: the compile takes minutes)
+    and one after.  The warm-up only saves time: when it fails, one line says so and the run goes on (each
+    worker then compiles what it needs, its compile time still kept apart); None is returned.
+    """
+    cold = not cache_present()
+    if progress and cold:
+        print("compiling the numba kernels once for this machine (a few minutes on a fresh clone; later runs "
+              "and every Dask worker load them from the cache) ...", file=sys.stderr, flush=True)
+    try:
+        w = warm_kernels()
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - an optimisation only
+        print(f"warning: warming the numba kernels failed ({_one_line(exc)}); each worker compiles them",
+              file=sys.stderr, flush=True)
+        return None
+    if progress and (cold or w.compile_seconds > 1.0):
+        print(f"numba kernels ready in {w.seconds:.0f} s ({w.compile_seconds:.0f} s compiling, {w.compiled} "
+              f"signature(s))", file=sys.stderr, flush=True)
+    return w
+
+
+def execute(tasks, *, options, on_done=None, timing=None):
     """Run ``tasks`` (Dask or in-process), one job per experiment; ``{(name, solver): outcome dict}``.
 
-    ``on_done(outcome)`` is called in the main process as each task's outcome
-    arrives (its exception, e.g. ``KeyboardInterrupt``, stops the run; finished
-    tasks stay on disk).
+    First the numba kernels are warmed in this process (:func:`warm_up`).  ``on_done(outcome)`` is called
+    in the main process as each task's outcome arrives (its exception, e.g. ``KeyboardInterrupt``, stops
+    the run; finished tasks stay on disk).  ``timing``, a dict, receives ``warmup_seconds`` (the
+    warm-up's wall time), ``compile_seconds`` (numba compiling during the warm-up) and
+    ``compiled_signatures``; the tasks' own seconds leave numba compiling out (:func:`run_tasks`).
     """
     outcomes = {}
+    if timing is None:
+        timing = {}
+    timing.update({"warmup_seconds": 0.0, "compile_seconds": 0.0, "compiled_signatures": 0})
     if not tasks:
         return outcomes
+    t_warm = time.perf_counter()
+    w = warm_up(progress=options.progress)
+    timing.update({"warmup_seconds": time.perf_counter() - t_warm,
+                   "compile_seconds": 0.0 if w is None else w.compile_seconds,
+                   "compiled_signatures": 0 if w is None else w.compiled})
     bar = _progress_bar(len(tasks), options.progress)
 
     def finish(task, outcome):
@@ -173,7 +219,9 @@ def execute(tasks, *, options, on_done=None):
         if outcome["status"] == "failed":
             _say(bar, f"  {task.name} {task.solver}: FAILED: {outcome['error']}", options.progress)
         else:
-            _say(bar, f"  {task.name} {task.solver}: done in {outcome['seconds']:.1f} s", options.progress)
+            cs = outcome.get("compile_seconds", 0.0)
+            note = f" (and {cs:.0f} s compiling numba kernels)" if cs >= 0.5 else ""
+            _say(bar, f"  {task.name} {task.solver}: done in {outcome['seconds']:.1f} s{note}", options.progress)
         if on_done is not None:
             on_done(outcome)
 
@@ -230,4 +278,4 @@ def _run_dask(tasks, *, options, finish, bar):
                 cluster.close()
 
 
-__all__ = ["experiment_summary", "run_tasks", "execute"]
+__all__ = ["experiment_summary", "run_tasks", "warm_up", "execute"]

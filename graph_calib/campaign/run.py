@@ -2,7 +2,8 @@
 
 1. read and plan: the manifest read, the inputs checked, every task listed as to compute or cached
    (:func:`graph_calib.campaign.planning.plan_campaign`);
-2. compute: the tasks run (:func:`graph_calib.campaign.execution.execute`), the cached ones counted;
+2. compute: the numba kernels warmed in this process, the tasks run
+   (:func:`graph_calib.campaign.execution.execute`), the cached ones counted;
 3. collect: the tasks' files read back per experiment, ``comparison.json`` written where both solvers
    finished, each experiment's verdict (converged, solvers agree, residuals consistent) in
    ``campaign.json`` and its ``comparison.json``, the truth files read;
@@ -122,7 +123,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     """
     t_start = time.perf_counter()
     planned = _read_and_plan(manifest, out, options=options)
-    outcomes, tasks_seconds = _compute(planned, options=options, on_done=on_done)
+    outcomes, compute_timing = _compute(planned, options=options, on_done=on_done)
     collected = _collect(planned, outcomes)
     stitched = _stitch(planned, collected)
     truth_doc = _check_truth(stitched, collected.truths)
@@ -130,7 +131,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     validations, validation_doc = _validate(planned, stitched, outcomes, primary=primary,
                                             stitch_model=options.stitch_model)
     document = _document(planned, collected, stitched, outcomes, primary=primary, stitch_model=options.stitch_model,
-                         truth_doc=truth_doc, validation_doc=validation_doc, tasks_seconds=tasks_seconds)
+                         truth_doc=truth_doc, validation_doc=validation_doc, compute_timing=compute_timing)
     run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
                       truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed)
     _write_report_and_document(run, report=options.report, t_start=t_start)
@@ -148,7 +149,11 @@ def _read_and_plan(manifest, out, *, options):
 
 
 def _compute(planned, *, options, on_done):
-    """Phase 2: the tasks run; ``({(name, solver): outcome dict}, seconds)`` with the cached tasks' outcomes.
+    """Phase 2: the tasks run; ``({(name, solver): outcome dict}, timing dict)`` with the cached tasks' outcomes.
+
+    The timing holds ``tasks_seconds`` (wall time of the tasks, the warm-up left out), ``warmup_seconds``,
+    ``compile_seconds`` and ``compiled_signatures`` of the warm-up, and ``tasks_compile_seconds`` (numba
+    compiling inside the tasks, already left out of their seconds; 0 when the warm-up covered them).
 
     Raises
     ------
@@ -156,14 +161,16 @@ def _compute(planned, *, options, on_done):
         A worker found an experiment file breaking a rule of the format (finished tasks stay cached).
     """
     t_tasks = time.perf_counter()
-    outcomes = execute(planned.to_compute, options=options, on_done=on_done)
-    tasks_seconds = time.perf_counter() - t_tasks
+    timing = {}
+    outcomes = execute(planned.to_compute, options=options, on_done=on_done, timing=timing)
+    timing["tasks_seconds"] = time.perf_counter() - t_tasks - timing["warmup_seconds"]
+    timing["tasks_compile_seconds"] = sum(o.get("compile_seconds", 0.0) for o in outcomes.values())
     for t in planned.from_cache:
         outcomes[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}
     bad = [o for o in outcomes.values() if o.get("input_error")]
     if bad:  # bad input found by a worker: one clear message, exit code 2 (finished tasks stay cached)
         raise InputError(bad[0]["input_error"])
-    return outcomes, tasks_seconds
+    return outcomes, timing
 
 
 def _collect(planned, outcomes):
@@ -191,6 +198,8 @@ def _collect(planned, outcomes):
                 r = io.read_result(p)
                 res[s] = r
                 info["seconds"] = (r.extra.get("campaign") or {}).get("seconds")
+                if "compile_seconds" in (r.extra.get("campaign") or {}):
+                    info["compile_seconds"] = r.extra["campaign"]["compile_seconds"]
             entry["results"][s] = info
         cmp_ = compare(res["sqrt-kf"], res["factor-graph"]) if "sqrt-kf" in res and "factor-graph" in res else None
         if res:
@@ -275,7 +284,7 @@ def _validate(planned, stitched, outcomes, *, primary, stitch_model):
 
 
 def _document(planned, collected, stitched, outcomes, *, primary, stitch_model, truth_doc, validation_doc,
-              tasks_seconds):
+              compute_timing):
     """Phase 7a: the content of ``campaign.json`` (its timing completed by :func:`_write_report_and_document`)."""
     campaign, failed = planned.campaign, collected.failed
     n_computed = sum(1 for o in outcomes.values() if o["status"] == "computed")
@@ -294,7 +303,7 @@ def _document(planned, collected, stitched, outcomes, *, primary, stitch_model, 
         "validation": validation_doc,
         "failed": failed,
         "timing": {"tasks_computed": n_computed, "tasks_cached": len(outcomes) - n_computed
-                   - len(failed), "tasks_failed": len(failed), "tasks_seconds": tasks_seconds},
+                   - len(failed), "tasks_failed": len(failed), **compute_timing},
     }
 
 
