@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test env bench clean
+.PHONY: demo test env bench clean clean-cache
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -25,3 +25,8 @@ bench: $(STAMP)
 
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache build *.egg-info
+
+# numba's compiled kernels (docs/performance.md): a cached kernel is checked against its own file only, so
+# after editing a module whose kernels others inline (sensor_model.py, rotations.py), delete them all.
+clean-cache:
+	find graph_calib kf_reference \( -name '*.nbi' -o -name '*.nbc' \) -delete
