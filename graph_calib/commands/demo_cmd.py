@@ -197,7 +197,8 @@ def run(args):
     result = run_campaign(manifest, out / "campaign", options=options)
     print_summary(result)
     t_diag = time.monotonic()
-    rc = 1 if result.failed else 0
+    # cli.md: 1 an internal failure, 3 a failed verdict (of the campaign or the diagnosis), 0 otherwise
+    rc = 1 if result.failed else (3 if result.verdict_failed else 0)
     if not args.no_diagnose:
         names = [e["name"] for e in result.document["experiments"]]
         name = args.diagnose or next((n for n in names if "20_30" in n), names[len(names) // 2])
@@ -213,10 +214,13 @@ def run(args):
         else:
             _say(f"diagnosing {name} ...")
         drc = run_diagnosis(file, out / "diagnosis")
-        if drc != 0:
+        if drc not in (0, 3):
             print(f"  diagnose: exited with code {drc}")
-            rc = rc or 1
+            rc = 1
         else:
+            if drc == 3:
+                print("  diagnose: its verdict failed (see diagnosis.json)")
+                rc = rc if rc == 1 else 3
             line, found = diagnosis_line(out / "diagnosis" / "diagnosis.json", planted=planted)
             print(line)
             print(f"  diagnose: -> {out / 'diagnosis'}")
