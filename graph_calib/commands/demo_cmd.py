@@ -229,8 +229,10 @@ def run(args):
     t_end = time.monotonic()
     tim = result.document["timing"]
     rest = tim["total_seconds"] - tim["warmup_seconds"] - tim["tasks_seconds"] - tim.get("report_seconds", 0.0)
+    kernels = (f"{tim['compile_seconds']:.0f} s compiling, once per machine" if tim["compile_seconds"] >= 0.5
+               else "from the cache")
     print(f"demo finished in {t_end - t0:.0f} s: simulation {t_sim:.0f} s, numba kernels {tim['warmup_seconds']:.0f} s "
-          f"({tim['compile_seconds']:.0f} s compiling, once per machine), calibration {tim['tasks_seconds']:.0f} s, "
+          f"({kernels}), calibration {tim['tasks_seconds']:.0f} s, "
           f"report {tim.get('report_seconds', 0.0):.0f} s, hashing, stitching and validation {rest:.0f} s"
           + ("" if args.no_diagnose else f", diagnosis {t_end - t_diag:.0f} s")
           + f"; open {out / 'campaign' / 'report.html'}")
