@@ -458,12 +458,17 @@ def test_existing_dask_cluster_by_address(simulated, tmp_path):
     assert run.document["timing"]["tasks_computed"] == 3 and not run.failed
 
 
-def test_unreachable_scheduler_is_an_input_error(simulated, tmp_path, capsys):
+def test_unreachable_scheduler_is_an_input_error(simulated, tmp_path, capsys, monkeypatch):
+    from graph_calib.campaign import execution
+
+    warmed = []
+    monkeypatch.setattr(execution, "warm_kernels", lambda: warmed.append(1))
     manifest = _small_manifest(simulated, tmp_path / "m")
     rc = main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--scheduler", "tcp://127.0.0.1:9",
                "--quiet"])
     err = capsys.readouterr().err
     assert rc == 2 and "--scheduler: cannot connect to the Dask scheduler" in err
+    assert not warmed   # the address is tried first: a wrong one does not wait for a warm-up (minutes when cold)
 
 
 def test_validation_record_without_truth_is_checked_against_its_own_calibration(simulated, tmp_path):

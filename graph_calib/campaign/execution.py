@@ -193,7 +193,8 @@ def warm_up(*, progress):
 def execute(tasks, *, options, on_done=None, timing=None):
     """Run ``tasks`` (Dask or in-process), one job per experiment; ``{(name, solver): outcome dict}``.
 
-    First the numba kernels are warmed in this process (:func:`warm_up`).  ``on_done(outcome)`` is called
+    First the numba kernels are warmed in this process (:func:`warm_up`; with ``options.scheduler`` after
+    connecting to it, so that a wrong address fails at once).  ``on_done(outcome)`` is called
     in the main process as each task's outcome arrives (its exception, e.g. ``KeyboardInterrupt``, stops
     the run; finished tasks stay on disk).  ``timing``, a dict, receives ``warmup_seconds`` (the
     warm-up's wall time), ``compile_seconds`` (numba compiling during the warm-up) and
@@ -205,11 +206,17 @@ def execute(tasks, *, options, on_done=None, timing=None):
     timing.update({"warmup_seconds": 0.0, "compile_seconds": 0.0, "compiled_signatures": 0})
     if not tasks:
         return outcomes
-    t_warm = time.perf_counter()
-    w = warm_up(progress=options.progress)
-    timing.update({"warmup_seconds": time.perf_counter() - t_warm,
-                   "compile_seconds": 0.0 if w is None else w.compile_seconds,
-                   "compiled_signatures": 0 if w is None else w.compiled})
+    client = _connect(options.scheduler) if options.scheduler else None
+    try:
+        t_warm = time.perf_counter()
+        w = warm_up(progress=options.progress)
+        timing.update({"warmup_seconds": time.perf_counter() - t_warm,
+                       "compile_seconds": 0.0 if w is None else w.compile_seconds,
+                       "compiled_signatures": 0 if w is None else w.compiled})
+    except BaseException:
+        if client is not None:
+            client.close()
+        raise
     bar = _progress_bar(len(tasks), options.progress)
 
     def finish(task, outcome):
@@ -231,24 +238,30 @@ def execute(tasks, *, options, on_done=None, timing=None):
                 for t, outcome in zip(group, run_tasks(group)):
                     finish(t, outcome)
         else:
-            _run_dask(tasks, options=options, finish=finish, bar=bar)
+            _run_dask(tasks, options=options, finish=finish, bar=bar, client=client)
     finally:
         if bar is not None:
             bar.close()
     return outcomes
 
 
-def _run_dask(tasks, *, options, finish, bar):
+def _connect(scheduler):
+    """A Dask client of the cluster at ``scheduler``; InputError when it cannot be reached."""
+    from distributed import Client  # seconds to import: only here (module docstring)
+
+    try:
+        return Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
+
+
+def _run_dask(tasks, *, options, finish, bar, client=None):
+    """The jobs on ``client`` (an existing cluster's) or on a local cluster started here."""
     from distributed import Client, LocalCluster, as_completed  # seconds to import: only here (module docstring)
 
     groups = _groups(tasks)
     cluster = None
-    if options.scheduler:
-        try:
-            client = Client(options.scheduler, timeout="10s")
-        except (OSError, TimeoutError) as exc:
-            raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
-    else:
+    if client is None:
         n = options.workers if options.workers else min(os.cpu_count() or 1, len(groups))
         n = max(1, min(n, len(groups)))
         _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
