@@ -54,7 +54,7 @@ True
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -251,8 +251,6 @@ def corrected_experiment(experiment, omega_ib_b, f_b, *, note=""):
     without their errors: calibrating them again finds (near) zero sensor errors,
     and correcting them again subtracts the errors a second time.
     """
-    from dataclasses import replace
-
     dt = experiment.dt[:, None]
     omega_ib_b = np.asarray(omega_ib_b, dtype=float)
     f_b = np.asarray(f_b, dtype=float)
