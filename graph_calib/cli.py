@@ -23,6 +23,7 @@ COMMANDS = {
     "simulate": "make a synthetic experiment or campaign",
     "import": "convert a bench or third-party log into an experiment file",
     "calibrate": "calibrate one experiment with one or both solvers",
+    "predict": "predicted accuracy of an experiment's calibration (Fisher information, no solver run)",
     "campaign": "calibrate every experiment of a campaign and stitch over temperature",
     "diagnose": "the closed loop: residuals, the effect they point to, before and after",
     "apply": "correct a raw record with a result, a compensation table or a campaign's stitched calibration",

@@ -91,7 +91,7 @@ def _add_at(target, keys, values):
     target[keys[starts]] += np.add.reduceat(values, starts, axis=0)
 
 
-def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_SEGMENTS, chunk=4096):
+def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_SEGMENTS, chunk=4096, pre=None):
     """Linearise ``model`` (an extended layout) at ``(R, x)`` and eliminate the attitudes.
 
     Parameters
@@ -112,6 +112,8 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         Cubic B-spline functions of the ``time`` driver.
     chunk : int
         Factors accumulated at a time (bounds the memory of the driver columns).
+    pre : graph_calib.model.preintegration.Preintegrated, optional
+        ``model.preintegrate(x)`` when the caller has it already.
 
     Returns
     -------
@@ -122,7 +124,8 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     P = layout.size
     K = model.n_keyframes
     na = 3 * (K + 1)
-    pre = model.preintegrate(x)
+    if pre is None:
+        pre = model.preintegrate(x)
     kinds = (
         ("rotation", model.rotation_factors(R, pre, x)),
         ("gravity", model.gravity_factors(R, pre, x)),
