@@ -1,4 +1,4 @@
-"""``graph-calib simulate SCENARIO --out DIR``: make a synthetic experiment or campaign.
+"""``graph-calib simulate SCENARIO --out DIR`` or ``--program P.toml``: make a synthetic experiment or campaign.
 
 Writes one experiment file per experiment, its truth (``<stem>.truth.json``,
 the result layout with ``solver = "truth"``) and a ``campaign.toml`` manifest
@@ -17,6 +17,8 @@ from graph_calib.errors import InputError
 
 def add_arguments(parser):
     parser.add_argument("scenario", nargs="?", metavar="SCENARIO", help="scenario name (see --list)")
+    parser.add_argument("--program", metavar="PROGRAM.toml",
+                        help="run a bench program (docs/programs.md) instead of a scenario")
     parser.add_argument("--out", metavar="DIR", help="output folder (created if missing)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default 0); same seed, same files")
     parser.add_argument("--no-noise", action="store_true", help="no sensor, encoder or temperature noise")
@@ -42,13 +44,18 @@ def _print_list(out):
 
 def run(args):
     from graph_calib.simulation import SCENARIOS, simulate, write_simulation
+    from graph_calib.simulation.program import program_simulation, read_program
 
     if args.list:
         _print_list(sys.stdout)
         return 0
-    if not args.scenario:
-        raise InputError(f"SCENARIO is required; known: {', '.join(SCENARIOS)}")
-    if args.scenario not in SCENARIOS:
+    if args.program and args.scenario:
+        raise InputError(f"give a SCENARIO or --program, not both (got {args.scenario!r} and {args.program!r})")
+    if args.program and args.hours is not None:
+        raise InputError("--hours does not apply to --program: the program states its length")
+    if not args.scenario and not args.program:
+        raise InputError(f"SCENARIO or --program is required; known scenarios: {', '.join(SCENARIOS)}")
+    if args.scenario and args.scenario not in SCENARIOS:
         raise InputError(f"unknown scenario {args.scenario!r}; known: {', '.join(SCENARIOS)}")
     if not args.out:
         raise InputError("--out DIR is required")
@@ -63,14 +70,21 @@ def run(args):
         options["effects"] = tuple(args.effect)
     rng = np.random.default_rng(args.seed)
     t0 = time.monotonic()
-    sim = simulate(args.scenario, rng=rng, **options)
+    if args.program:
+        program = read_program(args.program)
+        options.pop("hours")
+        if options["effect_scale"] is None:
+            options.pop("effect_scale")
+        sim = program_simulation(program, rng=rng, **options)
+    else:
+        sim = simulate(args.scenario, rng=rng, **options)
 
     def progress(msg):
         print(msg, file=sys.stderr, flush=True)
 
     written = write_simulation(sim, args.out, progress=progress, tag=tag)
     n_exp = len(written) - 1
-    print(f"{args.scenario} ({tag}, grade {sim.grade}, {'no noise' if args.no_noise else 'with noise'}, "
+    print(f"{args.scenario or sim.scenario} ({tag}, grade {sim.grade}, {'no noise' if args.no_noise else 'with noise'}, "
           f"{'no errors' if args.no_errors else 'with errors'}): {n_exp} experiment"
           f"{'s' if n_exp != 1 else ''} in {time.monotonic() - t0:.1f} s")
     for w in written[:-1]:

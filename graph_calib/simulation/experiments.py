@@ -122,17 +122,25 @@ def _truth_result(*, file_name, imu, t_ref, T_rec_sensors, tl, x_truth, unmodell
 
 def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, start_degC, span_degC,
                            design, latitude_rad, gravity_mps2, noise, valid, encoder_rate_hz, azimuth_rad,
-                           description, tag):
+                           description, tag, program=None, thermal=None):
+    """``program`` and ``thermal`` (a bench program's, :mod:`graph_calib.simulation.program`) replace the
+    rotation design's programme and the ramped chamber; ``design``, ``duration_s``, ``start_degC`` and
+    ``span_degC`` are then unused."""
     g = params.grade(imu.grade)
     r_prog, r_therm, r_noise = _child_rngs(seed, 3)
-    program = rotation_program(rate_hz, duration_s, rng=r_prog, design=design)
+    if program is None:
+        program = rotation_program(rate_hz, duration_s, rng=r_prog, design=design)
 
-    names = tuple(c[0] for c in NAV_CHANNELS)
-    tau = np.array([c[1] for c in NAV_CHANNELS]) * 60.0 * r_therm.uniform(0.9, 1.1, len(names))
-    offset = np.array([c[2] for c in NAV_CHANNELS]) + np.where(tau > 0, r_therm.normal(0.0, 0.1, len(names)), 0.0)
-    pattern = np.array([1.0, 0.55, 1.4]) * r_therm.uniform(0.85, 1.15, 3)
-    thermal = ramp_chamber(duration=program.duration, start_degC=start_degC, span_degC=span_degC, names=names,
-                           tau=tau, offset=offset, temperature_map=NAV_TEMPERATURE_MAP, pattern=tuple(pattern))
+    if thermal is None:
+        names = tuple(c[0] for c in NAV_CHANNELS)
+        tau = np.array([c[1] for c in NAV_CHANNELS]) * 60.0 * r_therm.uniform(0.9, 1.1, len(names))
+        offset = np.array([c[2] for c in NAV_CHANNELS]) + np.where(tau > 0, r_therm.normal(0.0, 0.1, len(names)),
+                                                                   0.0)
+        pattern = np.array([1.0, 0.55, 1.4]) * r_therm.uniform(0.85, 1.15, 3)
+        thermal = ramp_chamber(duration=program.duration, start_degC=start_degC, span_degC=span_degC, names=names,
+                               tau=tau, offset=offset, temperature_map=NAV_TEMPERATURE_MAP, pattern=tuple(pattern))
+    names = tuple(thermal.names)
+    tau, offset = np.asarray(thermal.tau), np.asarray(thermal.offset)
 
     n = program.n_ticks
     t = np.arange(1, n + 1) / rate_hz
