@@ -25,7 +25,7 @@ LAYERS = {
     "graph_calib.solvers": 6,
     "graph_calib.factor_graph": 7, "kf_reference": 7,
     "graph_calib.calibrate": 8, "graph_calib.diagnosis": 8, "graph_calib.stitching": 8, "graph_calib.validation": 8,
-    "graph_calib.prediction": 8,
+    "graph_calib.prediction": 8, "graph_calib.program_design": 8,
     "graph_calib.simulation": 8, "graph_calib.importers": 8, "graph_calib.compensation": 8,
     "graph_calib.warmup": 8,
     "graph_calib.reports": 9,
