@@ -65,6 +65,8 @@ class ErrorBound:
     static : ndarray of bool (W,)
         Static windows (:func:`graph_calib.validation.window_means`).
     confidence_sigma : float
+    gyro_target_radps, accel_target_mps2 : float
+        What the bound is compared with (default the published accuracy of :mod:`graph_calib.validation`).
     """
 
     window_s: float
@@ -72,6 +74,8 @@ class ErrorBound:
     accel_sigma_mps2: np.ndarray
     static: np.ndarray
     confidence_sigma: float = CONFIDENCE_SIGMA
+    gyro_target_radps: float = GYRO_ACCURACY_RADPS
+    accel_target_mps2: float = ACCEL_ACCURACY_MPS2
 
     @property
     def gyro_criterion(self):
@@ -87,15 +91,15 @@ class ErrorBound:
         """JSON-ready: largest sigma and bound per axis, thresholds, whether the bound meets them."""
         g, a = self.largest_sigma()
         k = self.confidence_sigma
-        gyro_ok = bool(np.all(k * g < GYRO_ACCURACY_RADPS))
-        accel_ok = bool(np.all(k * a < ACCEL_ACCURACY_MPS2))
+        gyro_ok = bool(np.all(k * g < self.gyro_target_radps))
+        accel_ok = bool(np.all(k * a < self.accel_target_mps2))
         return {
             "confidence_sigma": k,
             "window_s": self.window_s,
             "gyro_criterion": self.gyro_criterion,
             "gyro_radps": {"largest_sigma": g.tolist(), "bound": (k * g).tolist()},
             "accel_mps2": {"largest_sigma": a.tolist(), "bound": (k * a).tolist()},
-            "thresholds": {"gyro_radps": GYRO_ACCURACY_RADPS, "accel_mps2": ACCEL_ACCURACY_MPS2},
+            "thresholds": {"gyro_radps": self.gyro_target_radps, "accel_mps2": self.accel_target_mps2},
             "meets": {"gyro": gyro_ok, "accel": accel_ok, "all": gyro_ok and accel_ok},
         }
 
@@ -177,17 +181,23 @@ def error_jacobians(layout, windows, t_ref_degC):
     return Pg, Pa
 
 
-def error_bound(layout, covariance, experiment, *, t_ref_degC, window_s=1.0, confidence_sigma=CONFIDENCE_SIGMA):
-    """Predicted one sigma of the remaining sensor errors in every window of ``experiment`` (:class:`ErrorBound`)."""
+def error_bound(layout, covariance, experiment, *, t_ref_degC, window_s=1.0, confidence_sigma=CONFIDENCE_SIGMA,
+                targets=None):
+    """Predicted one sigma of the remaining sensor errors in every window of ``experiment`` (:class:`ErrorBound`).
+
+    ``targets``: ``(gyro rad/s, accel m/s^2)`` to compare with; default the published accuracy.
+    """
+    tg, ta = targets if targets is not None else (GYRO_ACCURACY_RADPS, ACCEL_ACCURACY_MPS2)
     w = window_means(experiment, window_s=window_s)
     Pg, Pa = error_jacobians(layout, w, t_ref_degC)
     sg = np.sqrt(np.clip(np.einsum("wip,pq,wiq->wi", Pg, covariance, Pg), 0.0, None))
     sa = np.sqrt(np.clip(np.einsum("wip,pq,wiq->wi", Pa, covariance, Pa), 0.0, None))
     return ErrorBound(window_s=float(window_s), gyro_sigma_radps=sg, accel_sigma_mps2=sa, static=w["static"],
-                      confidence_sigma=float(confidence_sigma))
+                      confidence_sigma=float(confidence_sigma), gyro_target_radps=float(tg),
+                      accel_target_mps2=float(ta))
 
 
-def predict(problem, *, window_s=1.0, confidence_sigma=CONFIDENCE_SIGMA):
+def predict(problem, *, window_s=1.0, confidence_sigma=CONFIDENCE_SIGMA, targets=None):
     """Predicted covariance of the calibration of ``problem`` and the bound on the remaining errors.
 
     Parameters
@@ -197,6 +207,8 @@ def predict(problem, *, window_s=1.0, confidence_sigma=CONFIDENCE_SIGMA):
     window_s : float
         Window of the remaining-error statement, s.
     confidence_sigma : float
+    targets : (float, float), optional
+        Gyro (rad/s) and accelerometer (m/s^2) targets of the bound; default the published accuracy.
 
     Returns
     -------
@@ -208,7 +220,7 @@ def predict(problem, *, window_s=1.0, confidence_sigma=CONFIDENCE_SIGMA):
     cov = np.linalg.inv(A)
     cov = 0.5 * (cov + cov.T)
     bound = error_bound(model.layout, cov, model.experiment, t_ref_degC=model.t_ref_degC, window_s=window_s,
-                        confidence_sigma=confidence_sigma)
+                        confidence_sigma=confidence_sigma, targets=targets)
     return Prediction(names=model.layout.element_names(), covariance=cov, information=A, bound=bound,
                       seconds=time.perf_counter() - t0)
 

@@ -353,7 +353,8 @@ def full_prediction(program, spec):
     opts = replace(opts, model=replace(opts.model, grade=spec.grade, gyro_noise=spec.gyro_noise,
                                        encoder_noise=spec.encoder_noise))
     problem = build_problem(exp, options=opts)
-    return problem, predict(problem, confidence_sigma=spec.confidence_sigma)
+    return problem, predict(problem, confidence_sigma=spec.confidence_sigma,
+                            targets=(spec.gyro_target_radps, spec.accel_target_mps2))
 
 
 def _meets(bound_summary):
@@ -383,7 +384,8 @@ def design_structure(spec, n_stations, *, rounds=6, progress=None):
 
     ``eta`` scales the reduced information to what the full model finds on the last candidate (the
     variance goes as ``1 / eta``), aiming at 99 % of the target; the rounds stop once a candidate meets
-    the targets within 3 % of them.  The shortest candidate that meets them is kept.
+    the targets within 3 % of them, or meets them while another constraint (the temperature span, the
+    shortest station) holds the reduced optimum.  The shortest candidate that meets them is kept.
     """
     eta = 1.0
     history = []
@@ -401,8 +403,9 @@ def design_structure(spec, n_stations, *, rounds=6, progress=None):
         last = Candidate(n_stations, prog, red, eta, b, (), problem, pred)
         if _meets(b) and (best is None or prog.duration_s < best.program.duration_s):
             best = last
-        if _meets(b) and g_bound > 0.97 * spec.gyro_target_radps:
-            break
+        inactive = spec.confidence_sigma * max(red.reduced_sigma_radps) < 0.97 * spec.gyro_target_radps
+        if _meets(b) and (g_bound > 0.97 * spec.gyro_target_radps or inactive):
+            break                           # on the target, or held by another constraint (eta cannot help)
         eta *= 0.99 * (spec.gyro_target_radps / g_bound) ** 2
     return replace(best or last, history=tuple(history))
 
