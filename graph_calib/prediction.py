@@ -46,7 +46,7 @@ from graph_calib.rotations import quat_to_dcm
 from graph_calib.validation import ACCEL_ACCURACY_MPS2, GYRO_ACCURACY_RADPS, RESULT_PARAMETERS, window_means
 
 #: The bound on the remaining errors is this many predicted sigmas: 95.4 % of a Gaussian error, in each
-#: window and on each axis (docs/design.md: the 1.5 h ``nav-subrange`` is at 0.008 deg/h there, 0.012 at 3 sigma).
+#: window and on each axis (docs/design.md: the 1.5 h ``nav-subrange`` is at 0.0081 deg/h there, 0.0122 at 3 sigma).
 CONFIDENCE_SIGMA = 2.0
 
 #: The ``solver`` of a prediction's result file.
