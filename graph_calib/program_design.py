@@ -107,7 +107,6 @@ class DesignSpec:
     stations: tuple = (2, 3, 4)
     rate_hz: float = 100.0
     encoder_rate_hz: float = 10.0
-    extra: dict = field(default_factory=dict, compare=False)
 
 
 _SPEC_KEYS = ("grade", "gyro_noise", "encoder_noise", "start_degC", "span_degC", "max_chamber_ramp_degC_per_s",
@@ -454,7 +453,7 @@ def design_document(result, spec):
     full_sigma = b["gyro_radps"]["largest_sigma"]
     doc = {
         "format": "graph-calib-design", "version": 1,
-        "spec": {k: (list(v) if isinstance(v, tuple) else v) for k, v in spec.__dict__.items() if k != "extra"},
+        "spec": {k: (list(v) if isinstance(v, tuple) else v) for k, v in spec.__dict__.items()},
         "duration_s": best.program.duration_s,
         "targets": {"gyro_radps": spec.gyro_target_radps, "accel_mps2": spec.accel_target_mps2,
                     "confidence_sigma": spec.confidence_sigma},
