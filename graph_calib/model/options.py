@@ -30,6 +30,10 @@ class ModelOptions:
     moving_sigma : float or None
         Without a table the bench may translate: gravity measurements of keyframes
         that are not static get this sigma (m/s^2).  None: every keyframe counts.
+    sway_sigma : float or None
+        The bench's own acceleration at rest (a hand holding the unit sways it), averaged over a
+        keyframe: one sigma (m/s^2) added in quadrature to every gravity measurement.  None: zero;
+        without a table ``build_problem`` estimates it from the static intervals (docs/model.md).
     n_newton : int
         Newton steps of the sensor-model inversion.
     """
@@ -44,4 +48,5 @@ class ModelOptions:
     encoder_noise: float | None = None
     initial_attitude_sigma: float | None = None
     moving_sigma: float | None = None
+    sway_sigma: float | None = None
     n_newton: int = 2
