@@ -91,7 +91,10 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     interval = tuple(static[0]) if len(static) else None
     if interval is not None:
         model_options = _noise_from_static(experiment, interval, model_options)
-    if experiment.table is None and model_options.sway_sigma is None:
+    if isinstance(model_options.sway_sigma, str):
+        if model_options.sway_sigma != "estimate":
+            raise InputError(f"sway_sigma must be a number of m/s^2, 'estimate' or None, not "
+                             f"{model_options.sway_sigma!r}", dataset="sway_sigma")
         model_options = replace(model_options, sway_sigma=sway_from_static(
             experiment, static, keyframe_s=model_options.keyframe_s,
             accel_noise=model_options.accel_noise if model_options.accel_noise is not None

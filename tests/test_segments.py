@@ -21,7 +21,7 @@ from graph_calib.simulation import simulate
 
 @pytest.fixture(scope="module")
 def cut_session():
-    return simulate("consumer-handheld", rng=np.random.default_rng(7), cut=True, n_poses=16).run()[0]
+    return simulate("consumer-handheld", rng=np.random.default_rng(7), cut=True).run()[0]
 
 
 def _options(se):
@@ -30,7 +30,7 @@ def _options(se):
 
 def test_the_cut_scenario_marks_every_piece_with_continuous_time(cut_session):
     e = cut_session.experiment
-    assert e.n_segments == 9                        # 16 turns, every second one (8) cut out
+    assert e.n_segments == 16                       # 30 turns, every second one (15) cut out
     assert np.allclose(np.diff(e.t), 1.0 / e.rate_hz)       # no time gap: only the attitude jumps
     assert cut_session.truth.extra["simulation"]["segments"] == e.n_segments
 
@@ -52,7 +52,7 @@ def test_a_cut_record_without_segments_is_refused_naming_the_sample(cut_session)
 
 def test_the_marks_allow_the_cuts_and_a_continuous_session_passes(cut_session):
     check_continuity(cut_session.experiment)                  # marked: accepted
-    whole = simulate("consumer-handheld", rng=np.random.default_rng(7), n_poses=16).run()[0].experiment
+    whole = simulate("consumer-handheld", rng=np.random.default_rng(7)).run()[0].experiment
     assert attitude_jumps(whole)[0].size == 0              # hand turns up to 180 deg in 1 s: explained
 
 
