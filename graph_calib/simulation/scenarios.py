@@ -275,7 +275,7 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
                       imu=imu, exclude=exclude, info=info)
 
 
-def consumer_ferraris(*, rng, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
+def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                       initial_static_s=20.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
                       cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag=""):
     """A Ferraris-style session of a consumer MEMS IMU by hand, no table (about 2.5 min).
@@ -286,8 +286,10 @@ def consumer_ferraris(*, rng, noise=True, errors=True, rate_hz=100.0, effects=()
     the turns between faces are cut out (the time stamps left continuous):
     every face and every full turn a segment (``/imu/segment``), as sections of a
     session cut together.  ``pivot_m`` and ``hand_accel_mps2`` as for
-    ``consumer-handheld``.
+    ``consumer-handheld``.  The programme has its own length: ``hours`` is refused.
     """
+    if hours is not None:
+        raise InputError("consumer-ferraris has a fixed programme (six faces, three full turns): no --hours")
     _check_common(None, rate_hz, effect_scale, effects)
     exclude = ("mount", "lever_arm", "time_lag.table")
     imu_seed, seed = (int(s) for s in rng.integers(0, 2**62, size=2))
