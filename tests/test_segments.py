@@ -93,3 +93,56 @@ def test_a_cut_session_is_calibrated_with_its_segments(cut_session, cut_run):
         prior = problem.model.prior()[1]
         assert np.max(np.abs([truth.values[n] for n in names]) / prior) > 0.5
     assert run.comparison["summary"]["agree"], run.comparison["summary"]
+
+
+def test_factor_jacobians_of_a_segmented_record_match_fd():
+    """Three segments cut at samples that are no keyframe boundary of the uncut record: keyframes restart at
+    each cut, and the rotation factors kept (and the gravity factors, the last of a segment included) have
+    the Jacobians finite differences give."""
+    from graph_calib.model import CalibrationModel
+    from graph_calib.rotations import exp_so3
+
+    from _synthetic import wobbly_experiment
+
+    eps = 1e-6
+    rng = np.random.default_rng(1)
+    exp = wobbly_experiment(rng=rng)
+    n = exp.n_samples
+    seg = np.zeros(n, dtype=np.int32)
+    seg[n // 3 + 7:] = 1
+    seg[2 * n // 3 + 3:] = 2
+    model = CalibrationModel(replace(exp, segment=seg), options=ModelOptions(keyframe_s=0.5))
+    rec = model.record
+    assert np.array_equal(rec.k0[rec.segment_keys], [0, n // 3 + 7, 2 * n // 3 + 3])
+    x = rng.normal(size=model.layout.size) * 1e-3
+    preint = model.preintegrate(x)
+    R = model.propagate(np.stack([np.eye(3)] * 3), preint, x) @ exp_so3(rng.normal(size=(rec.n_keyframes + 1, 3)) * 1e-2)
+    kinds = ("rotation_factors", "gravity_factors")
+    at_x = {kind: getattr(model, kind)(R, preint, x) for kind in kinds}
+    for c in range(model.layout.size):
+        xp, xm = x.copy(), x.copy()
+        xp[c] += eps
+        xm[c] -= eps
+        pp, pm = model.preintegrate(xp), model.preintegrate(xm)
+        for kind in kinds:
+            f = getattr(model, kind)
+            fd = (f(R, pp, xp).r - f(R, pm, xm).r) / (2 * eps)
+            H = at_x[kind].H_x[:, :, c]
+            scale = np.abs(fd).max() + np.abs(H).max() + 1e-12
+            assert np.abs(fd - H).max() / scale < 1e-5, (kind, model.layout.element_names()[c])
+    res = model.rotation_factors(R, preint, x)
+    last = rec.segment_keys[1:] - 1                       # the last keyframe of each segment but the last
+    for k in np.concatenate([last, last - 1, [rec.n_keyframes - 1]]):
+        i = int(np.flatnonzero(res.key == k)[0]) if k in res.key else None
+        assert (i is None) == (k in last)
+        if i is None:
+            continue
+        for a in range(3):
+            d = np.zeros(3)
+            d[a] = eps
+            for which, H in ((k, res.H_R[i]), (k + 1, res.H_R_next[i])):
+                Rp, Rm = R.copy(), R.copy()
+                Rp[which] = R[which] @ exp_so3(d)
+                Rm[which] = R[which] @ exp_so3(-d)
+                fd = (model.rotation_factors(Rp, preint, x).r[i] - model.rotation_factors(Rm, preint, x).r[i]) / (2 * eps)
+                np.testing.assert_allclose(H[:, a], fd, atol=1e-8)
