@@ -35,6 +35,19 @@ def test_the_cut_scenario_marks_every_piece_with_continuous_time(cut_session):
     assert cut_session.truth.extra["simulation"]["segments"] == e.n_segments
 
 
+def test_the_cut_record_is_the_whole_session_less_the_cut_turns(cut_session):
+    from graph_calib.simulation.experiments import cut_out
+
+    whole = simulate("consumer-handheld", rng=np.random.default_rng(7)).run()[0]
+    keep, segment = cut_out(whole.motion, range(1, 30, 2))
+    e, w = cut_session.experiment, whole.experiment
+    # the same sensor, the same noise: equal to rounding (the truth is parametrised at another T_ref)
+    np.testing.assert_allclose(e.dv, w.dv[keep], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(e.dtheta, w.dtheta[keep], rtol=0, atol=1e-13)
+    assert np.array_equal(e.segment, segment)
+    assert cut_session.truth.t_ref_degC == pytest.approx(e.default_t_ref(), abs=1e-12)   # T_ref of what is kept
+
+
 def test_a_cut_record_without_segments_is_refused_naming_the_sample(cut_session):
     e = replace(cut_session.experiment, segment=None, source="cut.h5")
     first_cut = cut_session.experiment.segment_bounds()[1][0]

@@ -274,7 +274,14 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
     T_rec = thermal.temperature(t)
     if sig_T > 0:
         T_rec = T_rec + sig_T * r_noise.standard_normal(T_rec.shape)
-    t_ref = float(np.mean(T_rec[:, tmap]))
+    segment = None
+    if cut:
+        # every second turn cut out, the time stamps left continuous (no gap to see): one segment per piece
+        # (the Ferraris programme: the turns between faces, each face and each full turn a piece); T_ref is
+        # the mean over the samples kept, as a calibration of the cut record takes it
+        drop = [i for i in range(k) if i not in full_turns] if program == "ferraris" else range(1, k, 2)
+        keep, segment = cut_out(motion, drop)
+    t_ref = float(np.mean((T_rec[keep] if cut else T_rec)[:, tmap]))
     tl, x_truth, sl, x_sim, unmodelled = imu.at(t_ref)
     # the hand: its pivot sways (HAND_SWAY_TERMS sinusoids per axis, 0.3-3 Hz, hand_accel_mps2 rms of |a|) and
     # the sensor sits pivot_m from it in a random body direction; drawn from a generator of their own, so
@@ -296,12 +303,7 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
     if noise:
         dtheta += g.gyro_noise * np.sqrt(dt) * r_noise.standard_normal(dtheta.shape)
         dv += g.accel_noise * np.sqrt(dt) * r_noise.standard_normal(dv.shape)
-    segment = None
     if cut:
-        # every second turn cut out, the time stamps left continuous (no gap to see): one segment per piece
-        # (the Ferraris programme: the turns between faces, each face and each full turn a piece)
-        drop = [i for i in range(k) if i not in full_turns] if program == "ferraris" else range(1, k, 2)
-        keep, segment = cut_out(motion, drop)
         t, dtheta, dv, T_rec = t[: keep.sum()], dtheta[keep], dv[keep], T_rec[keep]
     experiment = Experiment(
         t=t, dtheta=dtheta, dv=dv, temperature=T_rec, temperature_names=("imu",), temperature_map=tmap,
