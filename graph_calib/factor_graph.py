@@ -171,10 +171,12 @@ def build_graph(model, cache, *, R_prior, robust=None, robust_k=3.0):
     graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
     rot_sigma = cache.rot.sigma
     grav_sigma = cache.grav.sigma
-    for i, k in enumerate(cache.rot.key.tolist()):   # every keyframe but the last of each segment
-        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(rot_sigma[i]), [X(k), X(k + 1), C(0)],
-                                     partial(_rotation_error, cache, i)))
+    rot_row = {k: i for i, k in enumerate(cache.rot.key.tolist())}   # every keyframe but the last of each segment
     for k in range(K):
+        if k in rot_row:
+            i = rot_row[k]
+            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(rot_sigma[i]), [X(k), X(k + 1), C(0)],
+                                         partial(_rotation_error, cache, i)))
         graph.add(gtsam.CustomFactor(_noise(grav_sigma[k], robust, robust_k), [X(k), C(0)],
                                      partial(_gravity_error, cache, k)))
     keys = cache.enc.key

@@ -159,3 +159,19 @@ def test_factor_jacobians_of_a_segmented_record_match_fd():
                 Rm[which] = R[which] @ exp_so3(-d)
                 fd = (model.rotation_factors(Rp, preint, x).r[i] - model.rotation_factors(Rm, preint, x).r[i]) / (2 * eps)
                 np.testing.assert_allclose(H[:, a], fd, atol=1e-8)
+
+
+def test_the_diagnosis_linearises_a_segmented_fit_at_its_optimum(cut_run):
+    """The diagnosis's reduced system (every segment's attitude prior in its attitude block) sees the
+    graph's solution as the optimum: the Gauss-Newton step from there is a small fraction of a sigma."""
+    from graph_calib.diagnosis import linearise
+
+    problem, run = cut_run
+    out = run.outputs["factor-graph"]
+    model = problem.model
+    rs, _ = linearise(model, out.attitudes, out.x, q_nb0=problem.q_nb0, null_names=model.layout.names,
+                      drivers=False)
+    step = np.linalg.solve(rs.A, rs.b)
+    sigma = np.sqrt(np.diag(np.linalg.inv(rs.A)))
+    assert np.max(np.abs(step) / sigma) < 0.05
+    np.testing.assert_allclose(sigma, np.sqrt(np.diag(out.covariance)), rtol=1e-3)   # the graph's own sigmas
