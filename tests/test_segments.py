@@ -175,3 +175,18 @@ def test_the_diagnosis_linearises_a_segmented_fit_at_its_optimum(cut_run):
     sigma = np.sqrt(np.diag(np.linalg.inv(rs.A)))
     assert np.max(np.abs(step) / sigma) < 0.05
     np.testing.assert_allclose(sigma, np.sqrt(np.diag(out.covariance)), rtol=1e-3)   # the graph's own sigmas
+
+
+def test_the_measured_sessions_are_not_taken_for_cut_records():
+    """The continuity rule judges only where both sides rest: the Xsens session ends in a shake whose gyros
+    saturate (390 deg/s) and whose window means come near gravity by chance; it is not a cut."""
+    from graph_calib.importers import import_mpu6050, import_xsens
+
+    from conftest import REAL_DATA, require_real
+
+    xsens = import_xsens(require_real(REAL_DATA / "imu_tk_xsens" / "xsens_acc.mat"),
+                         require_real(REAL_DATA / "imu_tk_xsens" / "xsens_gyro.mat"))
+    mpu = import_mpu6050(require_real(REAL_DATA / "mpu6050_uncuyo" / "example_data_calibration.csv"))
+    for e in (xsens, mpu):
+        assert attitude_jumps(e)[0].size == 0
+        check_continuity(e)
