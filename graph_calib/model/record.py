@@ -131,6 +131,11 @@ class PreparedRecord:
         ``reading_f``, ``reading_w_nb_offset``, ``reading_E``, ``reading_C_nb_nominal``, ``reading_lo``).
     static_key : ndarray of bool, shape (K,)
         Whether each keyframe is static.
+    segment_bounds : ndarray of int, shape (S, 2)
+        ``(start, stop)`` samples of each segment (``/imu/segment``; one for a record without it);
+        ``segment_keys`` (S,) the first keyframe of each (keyframes never span a boundary, and the last
+        keyframe of a segment ends at its last sample: its ``T_key`` is its own); ``rotation_keys``
+        (K - S + 1,) the keyframes whose end is the next one's start, i.e. those with a rotation factor.
     """
 
     #: A valid table reading counts as taken while the table turns above this rate
