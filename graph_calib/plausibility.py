@@ -122,41 +122,42 @@ def attitude_jumps(experiment):
     """
     n = experiment.n_samples
     W = max(3, int(round(JUMP_WINDOW_S * experiment.rate_hz)))
+    empty = np.zeros(0, dtype=np.int64), np.zeros(0)
     if n < 2 * W:
-        return np.zeros(0, dtype=np.int64), np.zeros(0)
+        return empty
+    dt = experiment.dt
     cum_v = np.vstack([np.zeros((1, 3)), np.cumsum(experiment.dv, axis=0)])
-    cum_t = np.concatenate([[0.0], np.cumsum(experiment.dt)])
+    cum_t = np.concatenate([[0.0], np.cumsum(dt)])
     cum_w = np.vstack([np.zeros((1, 3)), np.cumsum(experiment.dtheta, axis=0)])
-    j = np.arange(W, n - W + 1)                 # the jump lies between samples j - 1 and j
-    f0 = (cum_v[j] - cum_v[j - W]) / (cum_t[j] - cum_t[j - W])[:, None]
-    f1 = (cum_v[j + W] - cum_v[j]) / (cum_t[j + W] - cum_t[j])[:, None]
+    f = experiment.dv / dt[:, None]
+    cum_f2 = np.concatenate([[0.0], np.cumsum(np.einsum("ij,ij->i", f, f))])
+    # every window [s, s + W): mean specific force, its scatter, mean rate; quiet = at rest
+    span = cum_t[W:] - cum_t[:-W]
+    m_f = (cum_v[W:] - cum_v[:-W]) / span[:, None]
+    norm_f = np.sqrt(np.einsum("ij,ij->i", m_f, m_f))
+    scatter2 = (cum_f2[W:] - cum_f2[:-W]) / W - norm_f**2
+    rate = np.linalg.norm(cum_w[W:] - cum_w[:-W], axis=1) / span
     g = float(experiment.gravity_mps2)
-    n0, n1 = np.linalg.norm(f0, axis=1), np.linalg.norm(f1, axis=1)
-    rest = (np.abs(n0 - g) < JUMP_REST_FRACTION * g) & (np.abs(n1 - g) < JUMP_REST_FRACTION * g)
-    # quiet windows: scatter of f (sample values) and mean rate
-    f = experiment.dv / experiment.dt[:, None]
-    cum_f2 = np.concatenate([[0.0], np.cumsum(np.sum(f * f, axis=1))])
-    for lo, hi in ((j - W, j), (j, j + W)):
-        ms2 = (cum_f2[hi] - cum_f2[lo]) / W
-        fm = (cum_v[hi] - cum_v[lo]) / (cum_t[hi] - cum_t[lo])[:, None]
-        rest &= np.sqrt(np.maximum(ms2 - np.sum(fm * fm, axis=1), 0.0)) < JUMP_REST_SCATTER
-        rate = np.linalg.norm(cum_w[hi] - cum_w[lo], axis=1) / (cum_t[hi] - cum_t[lo])
-        rest &= rate < JUMP_REST_RATE
+    quiet = ((np.abs(norm_f - g) < JUMP_REST_FRACTION * g) & (scatter2 < JUMP_REST_SCATTER**2)
+             & (rate < JUMP_REST_RATE))
+    # the jump lies between samples j - 1 and j: windows [j - W, j) and [j, j + W), both quiet
+    j = W + np.flatnonzero(quiet[: n - 2 * W + 1] & quiet[W:])
+    if experiment.segment is not None:
+        # a window pair that touches a segment boundary is not judged
+        cuts = np.concatenate([[0], np.cumsum(np.diff(np.asarray(experiment.segment)) != 0)])
+        j = j[cuts[j - W] == cuts[j + W - 1]]
+    if j.size == 0:
+        return empty
+    f0, f1 = m_f[j - W], m_f[j]
     h = W // 2                                   # the gyros' turn between the windows' middles
     turn = np.linalg.norm(cum_w[j + h] - cum_w[j - h], axis=1)
-    cosang = np.einsum("ij,ij->i", f0, f1) / np.maximum(n0 * n1, 1e-300)
+    cosang = np.einsum("ij,ij->i", f0, f1) / np.maximum(norm_f[j - W] * norm_f[j], 1e-300)
     excess = np.arccos(np.clip(cosang, -1.0, 1.0)) - turn
-    bad = rest & (excess > JUMP_ANGLE_RAD)
-    if experiment.segment is not None:
-        seg = np.asarray(experiment.segment)
-        # a window pair that touches a segment boundary is not judged
-        cuts = np.concatenate([[0], np.cumsum(np.diff(seg) != 0)])
-        bad &= cuts[j - W] == cuts[j + W - 1]
-    # one report per jump: the sample of the largest excess in each run of flagged samples
-    idx = np.flatnonzero(bad)
-    if idx.size == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0)
-    runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+    bad = np.flatnonzero(excess > JUMP_ANGLE_RAD)
+    if bad.size == 0:
+        return empty
+    # one report per jump: the sample of the largest excess in each run of consecutive flagged samples
+    runs = np.split(bad, np.flatnonzero(np.diff(j[bad]) > 1) + 1)
     best = np.array([r[np.argmax(excess[r])] for r in runs])
     return j[best].astype(np.int64), excess[best]
 
