@@ -190,3 +190,26 @@ def test_the_measured_sessions_are_not_taken_for_cut_records():
     for e in (xsens, mpu):
         assert attitude_jumps(e)[0].size == 0
         check_continuity(e)
+
+
+def test_calibrate_on_an_unmarked_cut_record_exits_2_with_one_line_and_writes_nothing(cut_session, tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from graph_calib import io
+
+    bad = tmp_path / "CUT.h5"
+    io.write_experiment(replace(cut_session.experiment, segment=None), bad)
+    out = tmp_path / "C"
+    out.mkdir()
+    proc = subprocess.run([sys.executable, "-m", "graph_calib.cli", "calibrate", str(bad), "--out", str(out),
+                           "--grade", "consumer"], cwd=Path(__file__).resolve().parents[1], capture_output=True,
+                          text=True, timeout=300, check=False)
+    assert proc.returncode == 2, proc.stderr
+    lines = proc.stderr.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in proc.stderr, proc.stderr
+    first = cut_session.experiment.segment_bounds()[1][0]
+    assert f"CUT.h5: /imu/dv [sample {first}]: the record is discontinuous" in lines[0]
+    assert "/imu/segment" in lines[0]
+    assert list(out.iterdir()) == []
