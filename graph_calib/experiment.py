@@ -90,7 +90,7 @@ class Experiment:
     def n_segments(self):
         """Number of segments (1 without ``segment``).
 
-        The solvers do not handle more than one yet: a caller must refuse or split such a record.
+        Each segment gets its own initial attitude in the model (docs/model.md, "Segments").
         """
         if self.segment is None:
             return 1

@@ -10,6 +10,10 @@ Jacobians come from :class:`graph_calib.model.CalibrationModel`:
   table readings (stacked, 3 rows per reading),
 - priors on ``X(0)`` (the alignment) and ``C(0)`` (the grade's priors).
 
+A record cut into segments (``/imu/segment``) has no rotation factor from the last keyframe of a
+segment to the first of the next, and a prior on the first keyframe of every segment (its own
+alignment): :attr:`CalibrationModel.segment_keys`.
+
 Python factors are slow when GTSAM's own optimiser calls them
 (``shared/notes/engineering-facts.md``), so the Levenberg-Marquardt loop is our
 own around ``graph.linearize``, ``GaussianFactorGraph.optimize`` and
@@ -28,11 +32,12 @@ from functools import partial
 
 import gtsam
 import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
 from gtsam.symbol_shorthand import C, X
 
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout
-from graph_calib.rotations import quat_to_dcm
 from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, ResidualSeries, SolverOutput
 
 
@@ -160,14 +165,18 @@ def build_graph(model, cache, *, R_prior, robust=None, robust_k=3.0):
     graph = gtsam.NonlinearFactorGraph()
     K = model.n_keyframes
     x_prior, x_sigma = model.prior()
-    graph.add(gtsam.PriorFactorRot3(X(0), gtsam.Rot3(R_prior),
-                                    gtsam.noiseModel.Isotropic.Sigma(3, model.initial_attitude_sigma)))
+    for k, Rp in zip(model.segment_keys, np.asarray(R_prior, dtype=float).reshape(-1, 3, 3)):
+        graph.add(gtsam.PriorFactorRot3(X(int(k)), gtsam.Rot3(Rp),
+                                        gtsam.noiseModel.Isotropic.Sigma(3, model.initial_attitude_sigma)))
     graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
     rot_sigma = cache.rot.sigma
     grav_sigma = cache.grav.sigma
+    rot_row = {k: i for i, k in enumerate(cache.rot.key.tolist())}   # every keyframe but the last of each segment
     for k in range(K):
-        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(rot_sigma[k]), [X(k), X(k + 1), C(0)],
-                                     partial(_rotation_error, cache, k)))
+        if k in rot_row:
+            i = rot_row[k]
+            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(rot_sigma[i]), [X(k), X(k + 1), C(0)],
+                                         partial(_rotation_error, cache, i)))
         graph.add(gtsam.CustomFactor(_noise(grav_sigma[k], robust, robust_k), [X(k), C(0)],
                                      partial(_gravity_error, cache, k)))
     keys = cache.enc.key
@@ -211,6 +220,34 @@ def _damped(gfg, values_keys, lam, dims):
     return damped
 
 
+def _calibration_covariance(graph, values, P):
+    """Marginal covariance of ``C(0)`` (P, P) at ``values``.
+
+    GTSAM's ``Marginals`` first.  Its Cholesky calls a system indeterminate when a direction is held
+    a billion times more loosely than the rest: the heading of a short segment of a record cut
+    together (``/imu/segment``), known only through its prior (pi for consumer MEMS) against rotation
+    factors of 1e8 in information.  Then the same linearised system is solved as the diagnosis does
+    (``graph_calib.diagnosis.reduced_system``): the attitudes eliminated with a sparse LU of their
+    block, the calibration's information the Schur complement, inverted.
+    """
+    try:
+        return np.asarray(gtsam.Marginals(graph, values).marginalCovariance(C(0)))
+    except RuntimeError:
+        pass
+    ijv = np.asarray(graph.linearize(values).sparseJacobian_())
+    i, j, v = ijv[0].astype(np.int64) - 1, ijv[1].astype(np.int64) - 1, ijv[2]
+    n = values.size() - 1             # the attitudes X(0..K)
+    cols = P + 3 * n                  # C(0) first (key order), then X(0..K); the last column is b
+    keep = j < cols
+    A = sp.csc_matrix((v[keep], (i[keep], j[keep])), shape=(int(i.max()) + 1, cols))
+    H = (A.T @ A).tocsc()
+    Hxx = H[:P, :P].toarray()
+    Hax = H[P:, :P].toarray()
+    Haa = H[P:, P:].tocsc()
+    info = Hxx - Hax.T @ spla.splu(Haa).solve(Hax)
+    return np.linalg.inv(0.5 * (info + info.T))
+
+
 #: Attitude-only Gauss-Newton passes at most, before the first joint iteration (see :func:`_fit_attitudes`).
 ATTITUDE_FIT_ITERATIONS = 10
 #: ... until no keyframe attitude moves by more than this, rad.
@@ -251,8 +288,9 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     Parameters
     ----------
     model : graph_calib.model.CalibrationModel
-    q_nb0 : ndarray, shape (4,)
-        Prior attitude at the start of the record (alignment), scalar first.
+    q_nb0 : ndarray, shape (4,) or (S, 4)
+        Prior attitude at the start of the record (alignment), scalar first; one per segment for a
+        record of ``S`` segments.
     options : GraphOptions
     progress : callable, optional
         Called with a :class:`graph_calib.solvers.interface.ProgressEvent` after each iteration.
@@ -267,7 +305,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     """
     t0 = time.perf_counter()
     x_prior, x_sigma = model.prior()
-    R_prior = quat_to_dcm(q_nb0)
+    R_prior = model.segment_priors(q_nb0)
     if initial is None:
         x = x_prior.copy()
         preint = model.preintegrate(x)
@@ -342,11 +380,10 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     x = np.asarray(values.atVector(C(0)), dtype=float)
     cache.preint = model.preintegrate(x)
     cache.invalidate()
-    marginals = gtsam.Marginals(graph, values)
-    cov = np.asarray(marginals.marginalCovariance(C(0)))
+    cov = _calibration_covariance(graph, values, P)
     cache.ensure(values)
     residuals = {
-        "rotation": (model.t_key[1:], cache.rot.whitened()),
+        "rotation": (model.t_key[cache.rot.key + 1], cache.rot.whitened()),
         "gravity": (model.t_key[:-1], cache.grav.whitened()),
         "encoder": (model.record.reading_t, cache.enc.whitened()),
     }

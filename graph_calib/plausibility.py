@@ -38,6 +38,18 @@ Static rule (a record without a table, or whose table shows no turn)
     bound: quiet accelerometers are not enough, since a turn about the vertical at a constant rate leaves
     the specific force unchanged.  On a table with turns the turn rule decides alone.
 
+Continuity rule (every record)
+    A record cut together from pieces (sections of a session with the motion between them removed)
+    without ``/imu/segment`` is refused at the first cut, naming the sample
+    (:func:`check_continuity`): where the :data:`JUMP_WINDOW_S` before a sample and the same length
+    after it are both at rest (mean ``|f|`` within :data:`JUMP_REST_FRACTION` of gravity, scatter of
+    ``f`` below :data:`JUMP_REST_SCATTER`, mean rate below :data:`JUMP_REST_RATE`) and their mean
+    specific forces differ in direction by more than :data:`JUMP_ANGLE_RAD` beyond what the gyros
+    turned between the two windows' middles.  A hand's acceleration tilts a window mean by a degree
+    or two (0.2 m/s^2), a tap by a few: far below the bound.  A cut between two moving sections is
+    not seen by this rule (nor is a saturated gyro in violent motion taken for a cut); the io reader's
+    gap rule still sees a cut whose time stamps jump.
+
 Examples
 --------
 >>> from graph_calib.simulation import simulate                              # doctest: +SKIP
@@ -79,11 +91,101 @@ STATIC_RATE_FACTOR = 20.0
 #: How close (as a factor) a ratio must be to a named cause to be called that cause.
 CAUSE_FACTOR = 1.3
 
+#: Length of the windows either side of a sample whose mean specific forces are compared, s.
+JUMP_WINDOW_S = 0.1
+#: Direction change of the mean specific force, beyond the gyros' turn, that counts as a cut, rad.
+JUMP_ANGLE_RAD = 15.0 * c.DEG_TO_RAD
+#: Both windows count as at rest when their mean |f| is within this fraction of gravity ...
+JUMP_REST_FRACTION = 0.1
+#: ... the scatter of f inside each (root of the summed per-axis variances) is below this, m/s^2 ...
+JUMP_REST_SCATTER = 0.5
+#: ... and the magnitude of each one's mean angular rate is below this, rad/s (about 17 deg/s).
+JUMP_REST_RATE = 0.3
+
 _DTHETA = "/imu/dtheta"
+_DV = "/imu/dv"
+
+
+def attitude_jumps(experiment):
+    """Samples where the specific force turns more than the gyros explain (the continuity rule).
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+
+    Returns
+    -------
+    index : ndarray of int, shape (J,)
+        First sample after each jump (inside one segment; a boundary of ``/imu/segment`` is allowed).
+    excess : ndarray, shape (J,)
+        Angle between the windows' mean specific forces less the gyros' turn between them, rad.
+    """
+    n = experiment.n_samples
+    W = max(3, int(round(JUMP_WINDOW_S * experiment.rate_hz)))
+    empty = np.zeros(0, dtype=np.int64), np.zeros(0)
+    if n < 2 * W:
+        return empty
+    dt = experiment.dt
+    cum_v = np.vstack([np.zeros((1, 3)), np.cumsum(experiment.dv, axis=0)])
+    cum_t = np.concatenate([[0.0], np.cumsum(dt)])
+    cum_w = np.vstack([np.zeros((1, 3)), np.cumsum(experiment.dtheta, axis=0)])
+    f = experiment.dv / dt[:, None]
+    cum_f2 = np.concatenate([[0.0], np.cumsum(np.einsum("ij,ij->i", f, f))])
+    # every window [s, s + W): mean specific force, its scatter, mean rate; quiet = at rest
+    span = cum_t[W:] - cum_t[:-W]
+    m_f = (cum_v[W:] - cum_v[:-W]) / span[:, None]
+    norm_f = np.sqrt(np.einsum("ij,ij->i", m_f, m_f))
+    scatter2 = (cum_f2[W:] - cum_f2[:-W]) / W - norm_f**2
+    rate = np.linalg.norm(cum_w[W:] - cum_w[:-W], axis=1) / span
+    g = float(experiment.gravity_mps2)
+    quiet = ((np.abs(norm_f - g) < JUMP_REST_FRACTION * g) & (scatter2 < JUMP_REST_SCATTER**2)
+             & (rate < JUMP_REST_RATE))
+    # the jump lies between samples j - 1 and j: windows [j - W, j) and [j, j + W), both quiet
+    j = W + np.flatnonzero(quiet[: n - 2 * W + 1] & quiet[W:])
+    if experiment.segment is not None:
+        # a window pair that touches a segment boundary is not judged
+        cuts = np.concatenate([[0], np.cumsum(np.diff(np.asarray(experiment.segment)) != 0)])
+        j = j[cuts[j - W] == cuts[j + W - 1]]
+    if j.size == 0:
+        return empty
+    f0, f1 = m_f[j - W], m_f[j]
+    h = W // 2                                   # the gyros' turn between the windows' middles
+    turn = np.linalg.norm(cum_w[j + h] - cum_w[j - h], axis=1)
+    cosang = np.einsum("ij,ij->i", f0, f1) / np.maximum(norm_f[j - W] * norm_f[j], 1e-300)
+    excess = np.arccos(np.clip(cosang, -1.0, 1.0)) - turn
+    bad = np.flatnonzero(excess > JUMP_ANGLE_RAD)
+    if bad.size == 0:
+        return empty
+    # one report per jump: the sample of the largest excess in each run of consecutive flagged samples
+    runs = np.split(bad, np.flatnonzero(np.diff(j[bad]) > 1) + 1)
+    best = np.array([r[np.argmax(excess[r])] for r in runs])
+    return j[best].astype(np.int64), excess[best]
+
+
+def check_continuity(experiment):
+    """Refuse a record cut together without ``/imu/segment`` (the module docstring's continuity rule).
+
+    Raises
+    ------
+    InputError
+        Naming the file, ``/imu/dv``, the sample after the first cut and the angles found.
+    """
+    index, excess = attitude_jumps(experiment)
+    if index.size == 0:
+        return
+    k = int(index[0])
+    more = f" ({index.size} such places in all)" if index.size > 1 else ""
+    raise InputError(
+        f"the record is discontinuous before this sample: the specific force turns "
+        f"{excess[0] * c.RAD_TO_DEG:.1f} deg more than the gyros between the {JUMP_WINDOW_S:g} s before and "
+        f"after it, both at rest{more}; a record cut together from pieces needs /imu/segment marking each "
+        f"piece (the CSV importer's segment column)", path=experiment.source or None, dataset=_DV, index=k)
 
 
 def check_record(experiment):
-    """Refuse a record whose gyro increments cannot be in radians (the module docstring's two rules).
+    """Refuse a record cut together without ``/imu/segment``, or whose gyro increments cannot be in radians.
+
+    The module docstring's continuity rule first (:func:`check_continuity`), then its turn or static rule.
 
     Parameters
     ----------
@@ -95,6 +197,7 @@ def check_record(experiment):
     InputError
         Naming the file, ``/imu/dtheta``, the ratio found and its likely cause.
     """
+    check_continuity(experiment)
     ratio, n, typical = turn_ratio(experiment, details=True)
     if ratio is not None:
         lo, hi = TURN_RATIO_RANGE
@@ -252,6 +355,13 @@ __all__ = [
     "REST_TURN_RAD",
     "STATIC_RATE_FACTOR",
     "TURN_RATIO_RANGE",
+    "JUMP_ANGLE_RAD",
+    "JUMP_REST_FRACTION",
+    "JUMP_REST_RATE",
+    "JUMP_REST_SCATTER",
+    "JUMP_WINDOW_S",
+    "attitude_jumps",
+    "check_continuity",
     "check_record",
     "static_rate_bound",
     "turn_ratio",

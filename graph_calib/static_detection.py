@@ -17,6 +17,7 @@ import numpy as np
 from graph_calib.errors import InputError
 
 __all__ = [
+    "accelerometer_threshold",
     "detect_static",
     "static_means",
 ]
@@ -255,6 +256,27 @@ def detect_static(experiment, *, window_s=1.0, min_duration_s=2.0, threshold=Non
         lower = np.concatenate([[0], poses[:-1, 1]])
         poses[:, 0] = _settled_starts(_quiet(*_stats(h_e)), poses[:, 0], lower, h_e)
     return poses.astype(np.int64)
+
+
+def accelerometer_threshold(experiment, *, window_s=1.0, init_static_s=10.0, threshold_mult=2.0):
+    """The accelerometer threshold :func:`detect_static` sets by default, m/s^2 (None if too short).
+
+    ``threshold_mult`` times the median moving-window scatter of ``f`` over the first
+    ``init_static_s`` seconds.  A record cut into segments is detected segment by segment with one
+    threshold: the smallest of the segments' own (a segment may start with a motion, which inflates
+    its own median; at least one starts at rest).
+    """
+    rate = float(experiment.rate_hz)
+    n = experiment.n_samples
+    h = max(1, int(round(window_s * rate / 2.0)))
+    if n < 2 * h + 1:
+        return None
+    n_init = min(n, max(2 * h + 1, int(round(init_static_s * rate))))
+    f = experiment.dv[:n_init] / experiment.dt[:n_init, None]
+    m = float(np.median(_moving_stats(f, h)[0][h:n_init - h]))
+    if not np.isfinite(m):
+        return None
+    return threshold_mult * m if m > 0 else float(np.finfo(float).tiny)
 
 
 def static_means(experiment, intervals):

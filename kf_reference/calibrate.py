@@ -10,6 +10,13 @@ the new linearisation point until both stop moving: each pass is one
 Gauss-Newton step of the batch problem.  ``docs/kf_reference.md`` gives the
 derivation and why the fixed point is the batch (factor-graph) solution.
 
+Segments (``/imu/segment``)
+    At the first keyframe of a segment after the first the attitude restarts: the time update into
+    it is ``delta = m + L w`` with ``m``, ``L L^T`` the mean and covariance of that segment's
+    attitude prior (its alignment), independent of the previous attitude and of the calibration,
+    so the calibration state and its covariance are kept while the attitude and its cross
+    covariance start again (``B = 0``, ``A = 0``); the smoother's gain through that step is zero.
+
 Factor conventions (``graph_calib.model.Residuals``)
     rotation ``k``: ``0 = r + H_R delta_k + H_R_next delta_{k+1} + H_x dx - w``;
     gravity and encoder: ``0 = r + H_R delta_key + H_x dx + v``, so the filter's
@@ -24,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.params import Layout
-from graph_calib.rotations import exp_so3, quat_to_dcm
+from graph_calib.rotations import exp_so3
 from graph_calib.solvers.interface import ProgressEvent
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
@@ -161,18 +168,28 @@ class FilterResult:
 # ---------------------------------------------------------------------------
 
 
-def _transition(rot):
-    """``B, A, G, c`` of ``delta_{k+1} = B delta_k + A dx + c + G w`` from the rotation factors."""
+def _transition(rot, *, K, restarts=()):
+    """``B, A, G, c`` of ``delta_{k+1} = B delta_k + A dx + c + G w`` for ``k < K``.
+
+    From the rotation factors (their ``key``), and at a segment boundary (``restarts``: ``(k, mean,
+    Ut)`` with ``k + 1`` the first keyframe of a segment and ``mean``, ``Ut`` from
+    :func:`_prior_state` of its attitude prior) the restart ``delta_{k+1} = mean + Ut^T w``.
+    """
     N_inv = np.linalg.inv(rot.H_R_next)
+    P = rot.H_x.shape[2]
+    B, A, G, c = np.zeros((K, 3, 3)), np.zeros((K, 3, P)), np.zeros((K, 3, 3)), np.zeros((K, 3))
+    k = rot.key
     if rot.sigma.ndim == 2:
-        G = N_inv * rot.sigma[:, None, :]
+        G[k] = N_inv * rot.sigma[:, None, :]
     else:
-        G = N_inv @ np.linalg.cholesky(rot.sigma)
-    B = -N_inv @ rot.H_R
-    A = -N_inv @ rot.H_x
-    c = -np.einsum("kij,kj->ki", N_inv, rot.r)
-    return (np.ascontiguousarray(B), np.ascontiguousarray(A), np.ascontiguousarray(G),
-            np.ascontiguousarray(c))
+        G[k] = N_inv @ np.linalg.cholesky(rot.sigma)
+    B[k] = -N_inv @ rot.H_R
+    A[k] = -N_inv @ rot.H_x
+    c[k] = -np.einsum("kij,kj->ki", N_inv, rot.r)
+    for kr, mean, Ut in restarts:
+        c[kr] = mean
+        G[kr] = Ut.T
+    return B, A, G, c
 
 
 def _measurements(model, grav, enc):
@@ -238,22 +255,27 @@ def _prior_state(prior):
 
 
 def _linearise(model, preint, R_lin, x_lin, *, R_prior):
-    """Every factor at ``(R_lin, x_lin)`` (``preint`` preintegrated at ``x_lin``), as a :class:`_Linearised`."""
+    """Every factor at ``(R_lin, x_lin)`` (``preint`` preintegrated at ``x_lin``), as a :class:`_Linearised`.
+
+    ``R_prior`` (S, 3, 3): the segments' alignments (:meth:`CalibrationModel.segment_priors`).
+    """
     rot = model.rotation_factors(R_lin, preint, x_lin)
     grav = model.gravity_factors(R_lin, preint, x_lin)
     enc = model.encoder_factors(R_lin, preint, x_lin)
-    B, A, G, c = _transition(rot)
+    att_priors = model.attitude_priors(R_lin, R_priors=R_prior)
+    restarts = [(k - 1, *_prior_state(pr)) for k, pr in att_priors[1:]]
+    B, A, G, c = _transition(rot, K=model.n_keyframes, restarts=restarts)
     key, H, z, sig, t, kind, axis = _measurements(model, grav, enc)
     lo = np.searchsorted(key, np.arange(model.n_keyframes + 2)).astype(np.int64)
     CAL = sqrt_kf.cal_slice(x_lin.size)
-    att_prior = model.attitude_prior(R_lin[0], R_prior=R_prior)
+    att_prior = att_priors[0][1]
     cal_prior = model.calibration_prior(x_lin)
     s0 = np.zeros(sqrt_kf.N_ATT + x_lin.size)
     Ut0 = np.zeros((s0.size, s0.size))
     s0[ATT], Ut0[ATT, ATT] = _prior_state(att_prior)
     s0[CAL], Ut0[CAL, CAL] = _prior_state(cal_prior)
     cost = (float(np.sum(rot.whitened() ** 2)) + float(np.sum((z / sig) ** 2))
-            + 2.0 * (cal_prior.cost + att_prior.cost))
+            + 2.0 * (cal_prior.cost + sum(pr.cost for _, pr in att_priors)))
     return _Linearised(B=B, A=A, G=G, c=c, H=H, z=z, sigma=sig, lo=lo, t=t, kind=kind, axis=axis, s0=s0, Ut0=Ut0,
                        cost=cost)
 
@@ -299,9 +321,9 @@ def filter_pass(model, R_lin, x_lin, *, R_prior, preint=None):
         Linearisation attitudes ``C_nb`` at the keyframe boundaries.
     x_lin : ndarray, shape (P,)
         Linearisation calibration.
-    R_prior : ndarray, shape (3, 3)
-        Prior attitude at the first boundary (the model's attitude prior residual is centred there;
-        the calibration prior is the model's too).
+    R_prior : ndarray, shape (S, 3, 3)
+        Prior attitude at the first boundary of each segment (the model's attitude prior residuals are
+        centred there; the calibration prior is the model's too).
     preint : graph_calib.model.Preintegrated, optional
         The preintegration at ``x_lin``; computed here when not given.
 
@@ -352,8 +374,8 @@ def initial_attitudes(model, *, q_nb0, preint=None, max_iterations=10, tol_rad=1
     Parameters
     ----------
     model : graph_calib.model.CalibrationModel
-    q_nb0 : array_like, shape (4,)
-        Prior attitude ``q_nb`` (scalar first) at the start of the record.
+    q_nb0 : array_like, shape (4,) or (S, 4)
+        Prior attitude ``q_nb`` (scalar first) at the start of the record (of each segment).
     preint : graph_calib.model.Preintegrated, optional
         The preintegration at the prior calibration; computed here when not given.
     max_iterations : int
@@ -365,7 +387,7 @@ def initial_attitudes(model, *, q_nb0, preint=None, max_iterations=10, tol_rad=1
     C_nb : ndarray, shape (K+1, 3, 3)
     iterations : int
     """
-    R_prior = quat_to_dcm(np.asarray(q_nb0, dtype=float))
+    R_prior = model.segment_priors(q_nb0)
     x_prior, x_sigma = model.prior()
     if preint is None:
         preint = model.preintegrate(x_prior)
@@ -400,8 +422,9 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     Parameters
     ----------
     model : graph_calib.model.CalibrationModel
-    q_nb0 : array_like, shape (4,)
-        Prior attitude ``q_nb`` (scalar first) at the start of the record, ``t[0] - 1/rate``.
+    q_nb0 : array_like, shape (4,) or (S, 4)
+        Prior attitude ``q_nb`` (scalar first) at the start of the record, ``t[0] - 1/rate`` (at the
+        start of each segment, for a record of ``S`` segments).
     max_passes : int
         Largest number of passes over the record.
     x_tol : float
@@ -420,7 +443,7 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     """
     if max_passes < 1:
         raise ValueError(f"max_passes must be at least 1, not {max_passes}")
-    R_prior = quat_to_dcm(np.asarray(q_nb0, dtype=float))
+    R_prior = model.segment_priors(q_nb0)
     x_prior, x_sigma = model.prior()
     if initial is None:
         x_lin = x_prior.copy()

@@ -375,7 +375,7 @@ def test_noise_density_and_independence():
 
 def test_registry_has_every_effect():
     names = scenario_names()
-    for required in ("nav-subrange", "nav-subrange-short", "nav-campaign", "consumer-handheld"):
+    for required in ("nav-subrange", "nav-subrange-short", "nav-campaign", "consumer-handheld", "consumer-ferraris"):
         assert required in names
     for effect in effects.FURTHER_EFFECTS:
         assert f"effect-{effect}" in names
@@ -383,7 +383,8 @@ def test_registry_has_every_effect():
 
 @pytest.mark.parametrize("name", [n for n in SCENARIOS if not n.startswith("effect-")])
 def test_scenario_writes_valid_files(name, tmp_path):
-    sim = simulate(name, rng=np.random.default_rng(1), hours=SHORT if name != "consumer-handheld" else 0.01)
+    hours = {"consumer-handheld": 0.01, "consumer-ferraris": None}.get(name, SHORT)
+    sim = simulate(name, rng=np.random.default_rng(1), hours=hours)
     written = write_simulation(sim, tmp_path)
     campaign = io.read_manifest(tmp_path / "campaign.toml")
     assert campaign.grade == sim.grade and len(campaign.experiments) == len(sim.plans)
@@ -397,7 +398,7 @@ def test_scenario_writes_valid_files(name, tmp_path):
         T = exp.sensor_temperatures()
         assert lo == T.min() and hi == T.max()
         assert set(truth.effects) <= set(campaign.layout().names) | set(effects.FURTHER_EFFECTS)
-        if name == "consumer-handheld":
+        if name.startswith("consumer-"):
             assert exp.table is None and "lever_arm" not in truth.effects
             assert {"mount", "lever_arm", "time_lag.table"} == set(campaign.exclude)
         else:

@@ -30,6 +30,12 @@ def add_arguments(parser):
                         help="switch a further effect of model.md on (repeatable)")
     parser.add_argument("--effect-scale", type=float, metavar="S",
                         help="multiply the size of every switched-on effect (default 1)")
+    parser.add_argument("--cut", action="store_true",
+                        help="hand-held scenarios: cut turns out and mark the pieces in /imu/segment")
+    parser.add_argument("--hand-accel", type=float, metavar="A",
+                        help="hand-held scenarios: the pivot's sway, m/s^2 rms (default 0)")
+    parser.add_argument("--pivot", type=float, metavar="M",
+                        help="hand-held scenarios: distance of the sensor from the hand's pivot, m (default 0)")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
 
 
@@ -68,6 +74,9 @@ def run(args):
                "effect_scale": args.effect_scale}
     if args.effect:
         options["effects"] = tuple(args.effect)
+    for key, value in (("cut", args.cut or None), ("hand_accel_mps2", args.hand_accel), ("pivot_m", args.pivot)):
+        if value is not None:
+            options[key] = value
     rng = np.random.default_rng(args.seed)
     t0 = time.monotonic()
     if args.program:

@@ -28,7 +28,6 @@ from graph_calib.diagnosis.drivers import (
     interval_means,
 )
 from graph_calib.params import Layout
-from graph_calib.rotations import quat_to_dcm
 
 
 @dataclass(frozen=True)
@@ -201,9 +200,10 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     gx[null_idx] += h * cal_prior.r[null_idx]
     # attitude prior on the first keyframe (as factor_graph.build_graph)
     # (the alignment prior: its residual at the solution is part of the current fit)
-    att_prior = model.attitude_prior(R[0], R_prior=quat_to_dcm(q_nb0))
-    Hdiag[0] += att_prior.H.T @ att_prior.H
-    ga[0] += att_prior.H.T @ att_prior.r
+    # (one per segment of a record cut together, /imu/segment)
+    for k, att_prior in model.attitude_priors(R, R_priors=model.segment_priors(q_nb0)):
+        Hdiag[k] += att_prior.H.T @ att_prior.H
+        ga[k] += att_prior.H.T @ att_prior.r
     # eliminate the attitudes
     rows, cols, vals = [], [], []
     base = np.arange(3)

@@ -37,7 +37,8 @@ def factor_residuals(model, R, x):
     """
     pre = model.preintegrate(x)
     out = {}
-    for kind, res, t in (("rotation", model.rotation_factors(R, pre, x), model.t_key[1:]),
+    rot = model.rotation_factors(R, pre, x)
+    for kind, res, t in (("rotation", rot, model.t_key[rot.key + 1]),
                          ("gravity", model.gravity_factors(R, pre, x), model.t_key[:-1]),
                          ("encoder", model.encoder_factors(R, pre, x), model.record.reading_t)):
         w = res.whitened()

@@ -19,6 +19,7 @@ from graph_calib.model.options import ModelOptions
 from graph_calib.model.preintegration import SensorTerms, preintegrate
 from graph_calib.model.record import PreparedRecord
 from graph_calib.params import Layout, grade as _grade
+from graph_calib.rotations import quat_to_dcm
 
 #: Prior sigma of the first attitude when valid table readings give it (faceplate
 #: attitude through the nominal mounting; the mounting error is estimated), rad.
@@ -181,6 +182,44 @@ class CalibrationModel:
         """The first keyframe attitude's prior residual (:func:`graph_calib.model.factors.attitude_prior`)."""
         return factors.attitude_prior(R0, R_prior=R_prior, sigma=self.initial_attitude_sigma)
 
+    @property
+    def segment_keys(self):
+        """Keyframe index of each segment's first keyframe (``/imu/segment``), shape (S,); ``[0]`` for one."""
+        return self.record.segment_keys
+
+    def segment_priors(self, q_nb0):
+        """The prior attitudes ``C_nb`` of the segments' first keyframes, shape (S, 3, 3).
+
+        Parameters
+        ----------
+        q_nb0 : array_like, shape (4,) or (S, 4)
+            The alignment of each segment (scalar first); one quaternion for a record of one segment.
+        """
+        q = np.atleast_2d(np.asarray(q_nb0, dtype=float))
+        S = self.segment_keys.size
+        if q.shape != (S, 4):
+            raise ValueError(f"the record has {S} segment(s): q_nb0 must be of shape ({S}, 4)"
+                             + (" or (4,)" if S == 1 else "") + f", not {np.shape(q_nb0)}")
+        return quat_to_dcm(q)
+
+    def attitude_priors(self, R, *, R_priors):
+        """The prior residual of every segment's first keyframe attitude.
+
+        Parameters
+        ----------
+        R : ndarray, shape (K+1, 3, 3)
+            Keyframe attitudes.
+        R_priors : ndarray, shape (S, 3, 3)
+            The segments' alignments (:meth:`segment_priors`).
+
+        Returns
+        -------
+        list of (int, graph_calib.model.factors.PriorResidual)
+            ``(keyframe, prior residual)`` per segment, in order.
+        """
+        R_priors = np.asarray(R_priors, dtype=float).reshape(-1, 3, 3)
+        return [(int(k), self.attitude_prior(R[k], R_prior=Rp)) for k, Rp in zip(self.segment_keys, R_priors)]
+
     def calibration_prior(self, x):
         """The calibration vector's prior residual (:func:`graph_calib.model.factors.calibration_prior`)."""
         mean, sigma = self.prior()
@@ -193,13 +232,19 @@ class CalibrationModel:
         return preintegrate(self.record, self.terms, x, layout=self.layout, n_newton=self.options.n_newton)
 
     def propagate(self, R0, preint, x):
-        """Dead-reckoned attitude at every keyframe boundary from ``R0``, shape (K+1, 3, 3)."""
+        """Dead-reckoned attitude at every keyframe boundary, shape (K+1, 3, 3).
+
+        ``R0`` (3, 3), or (S, 3, 3) with one attitude per segment: each segment starts again from its
+        own (:attr:`segment_keys`).
+        """
         dR = preint.corrected(x).dR
         E = self.record.earth_turn(self.record.T_key)
+        R0 = np.asarray(R0, dtype=float).reshape(-1, 3, 3)
+        starts = dict(zip(self.segment_keys.tolist(), R0))
         R = np.empty((self.n_keyframes + 1, 3, 3))
-        R[0] = R0
+        R[0] = R0[0]
         for k in range(self.n_keyframes):  # keyframe rate, not sample rate
-            R[k + 1] = E[k] @ R[k] @ dR[k]
+            R[k + 1] = starts[k + 1] if k + 1 in starts else E[k] @ R[k] @ dR[k]
         return R
 
     # -- factors --------------------------------------------------------------
@@ -211,7 +256,8 @@ class CalibrationModel:
     def gravity_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.gravity_factors` of this model."""
         return factors.gravity_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise,
-                                       moving_sigma=self.options.moving_sigma)
+                                       moving_sigma=self.options.moving_sigma,
+                                       sway_sigma=self.options.sway_sigma)
 
     def encoder_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.encoder_factors` of this model."""

@@ -51,6 +51,12 @@ when ``dx`` grows (:meth:`graph_calib.model.preintegration.Preintegrated.needs_r
 
 Priors are residuals like the others (:class:`PriorResidual`): the prior of the first keyframe
 attitude (the alignment) and of the calibration vector (the grade's priors).
+
+Segments (``/imu/segment``: a record cut together from pieces)
+    Keyframes never span a segment boundary; the first keyframe of each segment has an attitude
+    prior of its own (that segment's alignment) and no rotation factor ties it to the previous
+    segment's last keyframe, whose gravity factor still counts (its end attitude ``E R_k dR_k`` is
+    that keyframe's own).
 """
 
 from __future__ import annotations
@@ -126,6 +132,10 @@ class Residuals:
 def rotation_factors(record, R, preint, x, *, noise):
     """Residuals between consecutive keyframe attitudes ``R`` (K+1, 3, 3).
 
+    One factor per keyframe ``k`` of ``record.rotation_keys``: every keyframe but the last of each
+    segment (``/imu/segment``), since attitude is never continuous across a segment boundary (one
+    segment: all ``K``; ``key`` tells which).
+
     Parameters
     ----------
     record : graph_calib.model.record.PreparedRecord
@@ -139,20 +149,20 @@ def rotation_factors(record, R, preint, x, *, noise):
     -------
     Residuals
     """
-    dR = preint.corrected(x).dR
-    E = record.earth_turn(record.T_key)
-    A = E @ R[:-1] @ dR
-    r = log_so3(np.swapaxes(A, 1, 2) @ R[1:])
+    k = record.rotation_keys
+    dR = preint.corrected(x).dR[k]
+    E = record.earth_turn(record.T_key[k])
+    A = E @ R[k] @ dR
+    r = log_so3(np.swapaxes(A, 1, 2) @ R[k + 1])
     Jr_inv = right_jacobian_inv(r)
     Jl_inv = right_jacobian_inv(-r)
     H_next = Jr_inv
     H_prev = -Jl_inv @ np.swapaxes(dR, 1, 2)
-    H_x = -Jl_inv @ preint.J_dR
-    sigma = noise.gyro * np.sqrt(record.T_key)[:, None] * np.ones(3)
-    return Residuals(r=r, key=np.arange(record.n_keyframes), H_R=H_prev, H_R_next=H_next,
-                     H_x=H_x, sigma=sigma)
+    H_x = -Jl_inv @ preint.J_dR[k]
+    sigma = noise.gyro * np.sqrt(record.T_key[k])[:, None] * np.ones(3)
+    return Residuals(r=r, key=k.copy(), H_R=H_prev, H_R_next=H_next, H_x=H_x, sigma=sigma)
 
-def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None):
+def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None, sway_sigma=None):
     """Gravity (reaction-force) mismatch of every keyframe, m/s^2; ``R`` (K+1 or K, 3, 3).
 
     Parameters
@@ -165,6 +175,9 @@ def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None):
     noise : Noise
     moving_sigma : float, optional
         Sigma (m/s^2) of the keyframes that are not static (a bench that may translate).
+    sway_sigma : float, optional
+        Sigma (m/s^2) of the bench's own acceleration over a keyframe (a hand's sway), added in
+        quadrature on every axis of every keyframe.
 
     Returns
     -------
@@ -210,6 +223,8 @@ def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None):
     var = np.empty((K, 3))
     var[:] = (noise.accel**2 / T)[:, None]
     var[:, :2] += (record.gravity * noise.gyro) ** 2 * T[:, None] / 3.0
+    if sway_sigma:
+        var += float(sway_sigma) ** 2
     sigma = np.sqrt(var)
     if moving_sigma is not None:
         sigma[~record.static_key] = np.maximum(sigma[~record.static_key], moving_sigma)

@@ -30,6 +30,11 @@ class ModelOptions:
     moving_sigma : float or None
         Without a table the bench may translate: gravity measurements of keyframes
         that are not static get this sigma (m/s^2).  None: every keyframe counts.
+    sway_sigma : float, ``"estimate"`` or None
+        The bench's own acceleration at rest (a hand holding the unit sways it), averaged over a
+        keyframe: one sigma (m/s^2) added in quadrature to every gravity measurement.  None: zero;
+        ``"estimate"``: :func:`graph_calib.problem.build_problem` estimates it from the static
+        intervals (:func:`graph_calib.problem.sway_from_static`, docs/model.md).
     n_newton : int
         Newton steps of the sensor-model inversion.
     """
@@ -44,4 +49,5 @@ class ModelOptions:
     encoder_noise: float | None = None
     initial_attitude_sigma: float | None = None
     moving_sigma: float | None = None
+    sway_sigma: float | str | None = None
     n_newton: int = 2

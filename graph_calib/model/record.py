@@ -55,7 +55,7 @@ def _moving_slope(y, dt, window_s):
     return np.column_stack([np.interp(t, tb, sb[:, i]) for i in range(y.shape[1])])
 
 
-def boundary_rate_correction(w_mean, k0):
+def boundary_rate_correction(w_mean, k0, *, segment_keys=None):
     """Correction from the two-sample mean to the angular rate at each keyframe boundary.
 
     The lever-arm term needs the rate at a boundary instant, but the data are
@@ -74,6 +74,9 @@ def boundary_rate_correction(w_mean, k0):
         Interval-mean rates of equally spaced samples, rad/s.
     k0 : ndarray of int, shape (K+1,)
         First sample of each keyframe, and N.
+    segment_keys : ndarray of int, optional
+        Keyframes that start a segment (``/imu/segment``): no correction there (the four samples
+        would straddle the cut).
 
     Returns
     -------
@@ -85,7 +88,10 @@ def boundary_rate_correction(w_mean, k0):
     n = w.shape[0]
     fix = np.zeros((b.size, 3))
     inner = np.arange(1, b.size - 1)
-    ok = inner[(b[inner] >= 2) & (b[inner] + 1 < n)]
+    ok = (b[inner] >= 2) & (b[inner] + 1 < n)
+    if segment_keys is not None:
+        ok &= ~np.isin(inner, np.asarray(segment_keys))
+    ok = inner[ok]
     j = b[ok]
     fix[ok] = (-w[j - 2] + w[j - 1] + w[j] - w[j + 1]) / 12.0
     if n >= 2:
@@ -125,6 +131,11 @@ class PreparedRecord:
         ``reading_f``, ``reading_w_nb_offset``, ``reading_E``, ``reading_C_nb_nominal``, ``reading_lo``).
     static_key : ndarray of bool, shape (K,)
         Whether each keyframe is static.
+    segment_bounds : ndarray of int, shape (S, 2)
+        ``(start, stop)`` samples of each segment (``/imu/segment``; one for a record without it);
+        ``segment_keys`` (S,) the first keyframe of each (keyframes never span a boundary, and the last
+        keyframe of a segment ends at its last sample: its ``T_key`` is its own); ``rotation_keys``
+        (K - S + 1,) the keyframes whose end is the next one's start, i.e. those with a rotation factor.
     """
 
     #: A valid table reading counts as taken while the table turns above this rate
@@ -162,8 +173,18 @@ class PreparedRecord:
         self.w_raw = e.dtheta / dt[:, None]
         self.f_raw = e.dv / dt[:, None]
         h = 1.0 / e.rate_hz
-        self.dw_raw = _limited_derivative(self.w_raw, e.t)
-        self.df_raw = _limited_derivative(self.f_raw, e.t)
+        # the segments (/imu/segment): sample ranges whose attitude is continuous; no derivative,
+        # keyframe or rotation factor reaches across a boundary between two of them
+        self.segment_bounds = np.asarray(e.segment_bounds(), dtype=np.int64).reshape(-1, 2)
+        self.dw_raw = np.empty_like(self.w_raw)
+        self.df_raw = np.empty_like(self.f_raw)
+        for a, b in self.segment_bounds:
+            if b - a < 2:
+                self.dw_raw[a:b] = 0.0
+                self.df_raw[a:b] = 0.0
+                continue
+            self.dw_raw[a:b] = _limited_derivative(self.w_raw[a:b], e.t[a:b])
+            self.df_raw[a:b] = _limited_derivative(self.f_raw[a:b], e.t[a:b])
         T = e.sensor_temperatures()
         self.temperatures = T
         dT = T - self.t_ref_degC
@@ -177,15 +198,34 @@ class PreparedRecord:
         e = self.experiment
         n = e.n_samples
         per = max(1, int(round(self.keyframe_s * e.rate_hz)))
-        k0 = np.arange(0, n, per, dtype=np.int64)
-        if n - k0[-1] < max(1, per // 2) and k0.size > 1:
-            k0 = k0[:-1]
-        self.k0 = np.append(k0, n).astype(np.int64)
+        starts, seg_keys = [], []
+        for a, b in self.segment_bounds:          # keyframes never span a segment boundary
+            k0 = np.arange(a, b, per, dtype=np.int64)
+            if b - k0[-1] < max(1, per // 2) and k0.size > 1:
+                k0 = k0[:-1]
+            seg_keys.append(sum(s.size for s in starts))
+            starts.append(k0)
+        self.k0 = np.append(np.concatenate(starts), n).astype(np.int64)
         self.n_keyframes = self.k0.size - 1
+        #: keyframe index of each segment's first keyframe, (S,); 0 first
+        self.segment_keys = np.asarray(seg_keys, dtype=np.int64)
+        #: the keyframes whose end is the next one's start (no segment boundary between them), (K - S + 1,)
+        cont = np.ones(self.n_keyframes, dtype=bool)
+        cont[self.segment_keys[1:] - 1] = False
+        self.rotation_keys = np.flatnonzero(cont).astype(np.int64)
         t_start = e.t - self.dt
         self.t_key = np.append(t_start[self.k0[:-1]], e.t[-1])  # time of each boundary, (K+1,)
+        # the last keyframe of a segment ends at its last sample, not at the next segment's start
         self.T_key = np.diff(self.t_key)
-        self.w_b_fix = boundary_rate_correction(self.w_raw, self.k0)
+        if self.segment_keys.size > 1:
+            last = self.segment_keys[1:] - 1
+            self.T_key[last] = e.t[self.k0[last + 1] - 1] - t_start[self.k0[last]]
+        self.w_b_fix = boundary_rate_correction(self.w_raw, self.k0, segment_keys=self.segment_keys)
+
+    @property
+    def n_segments(self):
+        """Number of segments (``/imu/segment``; 1 without it)."""
+        return int(self.segment_keys.size)
 
     def _prepare_table(self):
         e = self.experiment

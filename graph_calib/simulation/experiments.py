@@ -24,6 +24,7 @@ from graph_calib import params
 from graph_calib.experiment import Experiment, Result, Table
 from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
 from graph_calib.simulation.design import rotation_program
+from graph_calib.simulation.ferraris import ferraris_motion
 from graph_calib.simulation.handheld import HandheldMotion
 from graph_calib.simulation.imu import SignalModel, simulate_increments
 from graph_calib.simulation.thermal import ThermalModel, ramp_chamber
@@ -41,6 +42,9 @@ NAV_CHANNELS = (
     ("chamber", 0.0, 0.0),
 )
 NAV_TEMPERATURE_MAP = (0, 1, 2, 3, 3, 3)
+
+#: Sinusoids per axis of a hand's sway (:meth:`HandheldMotion.sway`).
+HAND_SWAY_TERMS = 4
 
 #: One-sigma noise of a recorded temperature, degC (when noise is on).
 TEMPERATURE_NOISE = {"navigation": 0.005, "tactical": 0.01, "consumer": 0.02}
@@ -195,11 +199,35 @@ def _random_rotation(rng):
     return quat_to_dcm(q / np.linalg.norm(q))
 
 
-def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, n_poses,
-                              initial_static_s, hold_s, turn_s, translation_m, latitude_rad, gravity_mps2,
-                              noise, description, tag):
-    g = params.grade(imu.grade)
-    r_prog, r_therm, r_noise = _child_rngs(seed, 3)
+def cut_out(motion, drop):
+    """Sample selection and ``/imu/segment`` of a session with the turns ``drop`` cut out.
+
+    Parameters
+    ----------
+    motion : graph_calib.simulation.handheld.HandheldMotion
+    drop : iterable of int
+        Turns (counted from 0 in the order made) whose samples are removed.
+
+    Returns
+    -------
+    keep : ndarray of bool, shape (N,)
+        Samples kept (sample ``i`` covers tick ``i``).
+    segment : ndarray of int32, shape (N_kept,)
+        Segment of each kept sample: a new one after each removed turn.
+    """
+    n = int(round(motion.duration * motion.rate_hz))
+    keep = np.ones(n, dtype=bool)
+    seg = np.zeros(n, dtype=np.int32)
+    drop = set(drop)
+    for i, (start, count) in enumerate(motion.turn_ticks()):
+        if i in drop:
+            keep[start:start + count] = False
+            seg[start + count:] += 1
+    return keep, seg[keep]
+
+
+def _random_poses(r_prog, *, rate_hz, duration_s, n_poses, initial_static_s, hold_s, turn_s, translation_m):
+    """Random poses joined by hand turns: ``(motion, number of turns)``."""
     motion = HandheldMotion(rate_hz, rot_z(r_prog.uniform(0.0, 2.0 * np.pi)))
     motion.hold(initial_static_s)
     k = 0
@@ -224,6 +252,22 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
         rest = int(round(duration_s * rate_hz)) - int(round(motion.duration * rate_hz))
         if rest > 0:
             motion.hold(rest / rate_hz)
+    return motion, k
+
+
+def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, n_poses,
+                              initial_static_s, hold_s, turn_s, translation_m, latitude_rad, gravity_mps2,
+                              noise, description, tag, cut=False, pivot_m=0.0, hand_accel_mps2=0.0,
+                              program="poses"):
+    g = params.grade(imu.grade)
+    r_prog, r_therm, r_noise = _child_rngs(seed, 3)
+    if program == "ferraris":
+        motion, full_turns = ferraris_motion(rate_hz, rng=r_prog, initial_static_s=initial_static_s)
+        k = len(motion.turn_ticks())
+    else:
+        motion, k = _random_poses(r_prog, rate_hz=rate_hz, duration_s=duration_s, n_poses=n_poses,
+                                  initial_static_s=initial_static_s, hold_s=hold_s, turn_s=turn_s,
+                                  translation_m=translation_m)
     n = int(round(motion.duration * rate_hz))
 
     room0 = r_therm.uniform(21.0, 25.0)
@@ -238,25 +282,50 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
     T_rec = thermal.temperature(t)
     if sig_T > 0:
         T_rec = T_rec + sig_T * r_noise.standard_normal(T_rec.shape)
-    t_ref = float(np.mean(T_rec[:, tmap]))
+    segment = None
+    if cut:
+        # every second turn cut out, the time stamps left continuous (no gap to see): one segment per piece
+        # (the Ferraris programme: the turns between faces, each face and each full turn a piece); T_ref is
+        # the mean over the samples kept, as a calibration of the cut record takes it
+        drop = [i for i in range(k) if i not in full_turns] if program == "ferraris" else range(1, k, 2)
+        keep, segment = cut_out(motion, drop)
+    t_ref = float(np.mean((T_rec[keep] if cut else T_rec)[:, tmap]))
     tl, x_truth, sl, x_sim, unmodelled = imu.at(t_ref)
-    signals = SignalModel(motion, latitude_rad=latitude_rad, gravity_mps2=gravity_mps2, rate_hz=rate_hz)
+    # the hand: its pivot sways (HAND_SWAY_TERMS sinusoids per axis, 0.3-3 Hz, hand_accel_mps2 rms of |a|) and
+    # the sensor sits pivot_m from it in a random body direction; drawn from a generator of their own, so
+    # that every other draw of the seed stays what it was
+    lever = None
+    if pivot_m > 0 or hand_accel_mps2 > 0:
+        r_hand = np.random.default_rng([seed, 1])
+        u = r_hand.normal(size=3)
+        lever = float(pivot_m) * u / np.linalg.norm(u)
+        m = HAND_SWAY_TERMS
+        amp = float(hand_accel_mps2) / np.sqrt(1.5 * m) * np.ones((m, 3))
+        motion.sway(amplitude=amp, omega=2.0 * np.pi * r_hand.uniform(0.3, 3.0, (m, 3)),
+                    phase=r_hand.uniform(0.0, 2.0 * np.pi, (m, 3)))
+    signals = SignalModel(motion, latitude_rad=latitude_rad, gravity_mps2=gravity_mps2, rate_hz=rate_hz,
+                          lever_arm=lever)
     t, dtheta, dv = simulate_increments(signals, thermal, rate_hz=rate_hz, n_samples=n, layout=sl, x=x_sim,
                                         t_ref=t_ref, temperature_map=tmap)
     dt = 1.0 / rate_hz
     if noise:
         dtheta += g.gyro_noise * np.sqrt(dt) * r_noise.standard_normal(dtheta.shape)
         dv += g.accel_noise * np.sqrt(dt) * r_noise.standard_normal(dv.shape)
+    if cut:
+        t, dtheta, dv, T_rec = t[: keep.sum()], dtheta[keep], dv[keep], T_rec[keep]
     experiment = Experiment(
         t=t, dtheta=dtheta, dv=dv, temperature=T_rec, temperature_names=("imu",), temperature_map=tmap,
         rate_hz=float(rate_hz), latitude_rad=float(latitude_rad), gravity_mps2=float(gravity_mps2),
-        imu_id=imu_id, description=description, table=None, source=file_name,
+        imu_id=imu_id, description=description, table=None, source=file_name, segment=segment,
     )
     info = {
         "scenario": scenario, "tag": tag, "grade": imu.grade, "effects_on": list(imu.effects),
         "noise": {"gyro_noise": g.gyro_noise if noise else 0.0, "accel_noise": g.accel_noise if noise else 0.0,
                   "temperature_noise_degC": sig_T},
         "poses": k, "translation_m": float(translation_m),
+        "segments": 1 if segment is None else int(segment[-1]) + 1,
+        "hand": {"pivot_to_sensor_b_m": [] if lever is None else _as_list(lever),
+                 "sway_rms_mps2": float(hand_accel_mps2)},
         "chamber": {"t_s": _as_list(thermal.chamber_t), "T_degC": _as_list(thermal.chamber_T)},
         "channels": {"names": ["imu"], "tau_s": _as_list(thermal.tau), "offset_degC": _as_list(thermal.offset)},
     }
@@ -266,4 +335,4 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
                                thermal=thermal, layout=sl, x=x_sim)
 
 
-__all__ = ["SimulatedExperiment", "NAV_CHANNELS", "NAV_TEMPERATURE_MAP", "TEMPERATURE_NOISE"]
+__all__ = ["SimulatedExperiment", "cut_out", "NAV_CHANNELS", "NAV_TEMPERATURE_MAP", "TEMPERATURE_NOISE"]

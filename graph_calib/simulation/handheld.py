@@ -11,6 +11,12 @@ acceleration vanish at both ends::
 
 so the kinematics are exact at any time.  Segment boundaries lie on the IMU
 sample grid.
+
+A hand does not hold still: :meth:`HandheldMotion.sway` adds a translation of the
+rotation centre (the hand's pivot) made of sinusoids, at rest or not,
+``a_n = sum_i A_i sin(w_i t + p_i)``, ``v_n = -sum_i A_i / w_i cos(w_i t + p_i)``
+(exact, position bounded).  The lever arm from the pivot to the sensor is the
+signal model's (:class:`graph_calib.simulation.imu.SignalModel`).
 """
 
 from __future__ import annotations
@@ -49,6 +55,11 @@ class HandheldMotion:
         self._rows = []  # (start_tick, n_ticks, C_start, phi, r_start, d)
         self._tick = 0
         self._frozen = None
+        self._sway = None
+
+    def sway(self, *, amplitude, omega, phase):
+        """Add the pivot's sway: accelerations ``amplitude`` (M, 3) m/s^2 at ``omega`` (M, 3) rad/s, ``phase`` (M, 3)."""
+        self._sway = tuple(np.asarray(a, dtype=float) for a in (amplitude, omega, phase))
 
     @property
     def duration(self):
@@ -75,6 +86,10 @@ class HandheldMotion:
         self._C = self._C @ exp_so3(phi)
         self._r = self._r + d
         self._frozen = None
+
+    def turn_ticks(self):
+        """``[(first tick, number of ticks), ...]`` of every turn, in the order made."""
+        return [(start, n) for start, n, _, phi, _, d in self._rows if np.any(phi) or np.any(d)]
 
     def _arrays(self):
         if self._frozen is None:
@@ -103,15 +118,24 @@ class HandheldMotion:
         dw = (dds / T**2)[:, None] * p
         acc = (dds / T**2)[:, None] * d[idx]
         vel = (ds / T)[:, None] * d[idx]
+        if self._sway is not None:
+            A, om, ph = self._sway
+            arg = np.atleast_1d(np.asarray(t, dtype=float))[:, None, None] * om + ph     # (N, M, 3)
+            acc = acc + np.sum(A * np.sin(arg), axis=1)
+            vel = vel - np.sum(A / om * np.cos(arg), axis=1)
         return Kinematics(C_nb=C_nb, omega_nb_b=w, domega_nb_b=dw, acc_n=acc, vel_n=vel)
 
     def is_static(self, t, *, margin=0.0):
-        """Whether the body rests at ``t`` (and ``margin`` seconds either side), shape (N,)."""
+        """Whether the body rests at ``t`` (and ``margin`` seconds either side), shape (N,); the sway aside."""
         t = np.atleast_1d(np.asarray(t, dtype=float))
         out = np.ones(t.shape, dtype=bool)
-        for dt in (-margin, 0.0, margin) if margin > 0 else (0.0,):
-            k = self.kinematics(t + dt)
-            out &= np.all(k.omega_nb_b == 0.0, axis=1) & np.all(k.acc_n == 0.0, axis=1)
+        sway, self._sway = self._sway, None
+        try:
+            for dt in (-margin, 0.0, margin) if margin > 0 else (0.0,):
+                k = self.kinematics(t + dt)
+                out &= np.all(k.omega_nb_b == 0.0, axis=1) & np.all(k.acc_n == 0.0, axis=1)
+        finally:
+            self._sway = sway
         return out
 
 

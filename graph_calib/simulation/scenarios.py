@@ -234,13 +234,20 @@ def effect_scenario(effect, *, rng, hours=0.3, noise=True, errors=True, rate_hz=
 
 def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                       n_poses=30, initial_static_s=20.0, hold_s=(3.0, 10.0), turn_s=(1.0, 2.5), translation_m=0.05,
-                      latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2, tag=""):
+                      latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2, cut=False, pivot_m=0.0,
+                      hand_accel_mps2=0.0, tag=""):
     """A consumer MEMS IMU turned by hand, no table: 20 s static, then 30 poses of 3-10 s.
 
     Between poses the hand turns the unit smoothly (1-2.5 s, to a random
     orientation at least 40 deg away) and moves it by a few cm.  The unit warms
     by 2-4 degC after power-on in a room drifting by up to 1 degC/h.  With
-    ``hours`` the poses fill that length instead of ``n_poses``.
+    ``hours`` the poses fill that length instead of ``n_poses``.  With ``cut``
+    every second turn is cut out (sections cut together, the time stamps left
+    continuous) and ``/imu/segment`` marks the pieces; the truth's signals describe
+    the session before the cut.  A hand holds no pivot still: ``hand_accel_mps2``
+    (rms of the acceleration, m/s^2, at rest and in motion) sways the rotation centre,
+    and ``pivot_m`` puts the sensor that far from it (m, a random body direction), so
+    that every turn also accelerates the sensor.
     """
     _check_common(hours, rate_hz, effect_scale, effects)
     if hours is None and not (isinstance(n_poses, (int, np.integer)) and n_poses >= 1):
@@ -250,18 +257,59 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
     imu = draw_imu("consumer", rng=np.random.default_rng(imu_seed), effects=effects, effect_scale=effect_scale,
                    errors=errors, curvature=False, exclude=exclude)
     desc = ("graph-calib simulate consumer-handheld: consumer MEMS IMU turned by hand, no table"
-            + ("" if noise else ", no noise") + ("" if errors else ", no errors") + (f"; {tag}" if tag else ""))
+            + (", every second turn cut out (/imu/segment)" if cut else "") + ("" if noise else ", no noise") + ("" if errors else ", no errors") + (f"; {tag}" if tag else ""))
     make = partial(
         _make_handheld_experiment, file_name="handheld.h5", scenario="consumer-handheld", imu=imu,
         imu_id="SIM-MEMS 0001", seed=seed, rate_hz=float(rate_hz),
         duration_s=None if hours is None else float(hours) * 3600.0, n_poses=int(n_poses),
         initial_static_s=float(initial_static_s), hold_s=tuple(hold_s), turn_s=tuple(turn_s),
         translation_m=float(translation_m), latitude_rad=np.radians(latitude_deg),
-        gravity_mps2=float(gravity_mps2), noise=noise, description=desc, tag=tag,
+        gravity_mps2=float(gravity_mps2), noise=noise, description=desc, tag=tag, cut=bool(cut),
+        pivot_m=float(pivot_m), hand_accel_mps2=float(hand_accel_mps2),
     )
-    plan = ExperimentPlan(file_name="handheld.h5", make=make, summary="hand-held poses, no table")
-    info = {"hours": hours, "rate_hz": rate_hz, "noise": noise, "errors": errors, "effects": list(effects)}
+    plan = ExperimentPlan(file_name="handheld.h5", make=make, summary="hand-held poses, no table"
+                          + (", every second turn cut out" if cut else ""))
+    info = {"hours": hours, "rate_hz": rate_hz, "noise": noise, "errors": errors, "effects": list(effects),
+            "cut": bool(cut), "pivot_m": pivot_m, "hand_accel_mps2": hand_accel_mps2}
     return Simulation(scenario="consumer-handheld", imu_id="SIM-MEMS 0001", grade="consumer", plans=(plan,),
+                      imu=imu, exclude=exclude, info=info)
+
+
+def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
+                      initial_static_s=20.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
+                      cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag=""):
+    """A Ferraris-style session of a consumer MEMS IMU by hand, no table (about 2.5 min).
+
+    Six static faces (10 s each, the first 20 s) joined by hand turns, then a
+    full turn (360 deg, 3-5 s) about each body axis held horizontal, with 5 s of
+    rest before and after (:mod:`graph_calib.simulation.ferraris`).  With ``cut``
+    the turns between faces are cut out (the time stamps left continuous):
+    every face and every full turn a segment (``/imu/segment``), as sections of a
+    session cut together.  ``pivot_m`` and ``hand_accel_mps2`` as for
+    ``consumer-handheld``.  The programme has its own length: ``hours`` is refused.
+    """
+    if hours is not None:
+        raise InputError("consumer-ferraris has a fixed programme (six faces, three full turns): no --hours")
+    _check_common(None, rate_hz, effect_scale, effects)
+    exclude = ("mount", "lever_arm", "time_lag.table")
+    imu_seed, seed = (int(s) for s in rng.integers(0, 2**62, size=2))
+    imu = draw_imu("consumer", rng=np.random.default_rng(imu_seed), effects=effects, effect_scale=effect_scale,
+                   errors=errors, curvature=False, exclude=exclude)
+    desc = ("graph-calib simulate consumer-ferraris: consumer MEMS IMU by hand, six faces and three full turns"
+            + (", the turns between faces cut out (/imu/segment)" if cut else "")
+            + ("" if noise else ", no noise") + ("" if errors else ", no errors") + (f"; {tag}" if tag else ""))
+    make = partial(
+        _make_handheld_experiment, file_name="ferraris.h5", scenario="consumer-ferraris", imu=imu,
+        imu_id="SIM-MEMS 0002", seed=seed, rate_hz=float(rate_hz), duration_s=None, n_poses=0,
+        initial_static_s=float(initial_static_s), hold_s=(10.0, 10.0), turn_s=(1.5, 2.5), translation_m=0.0,
+        latitude_rad=np.radians(latitude_deg), gravity_mps2=float(gravity_mps2), noise=noise, description=desc,
+        tag=tag, cut=bool(cut), pivot_m=float(pivot_m), hand_accel_mps2=float(hand_accel_mps2), program="ferraris",
+    )
+    plan = ExperimentPlan(file_name="ferraris.h5", make=make, summary="six faces and three full turns by hand"
+                          + (", cut together" if cut else ""))
+    info = {"rate_hz": rate_hz, "noise": noise, "errors": errors, "effects": list(effects), "cut": bool(cut),
+            "pivot_m": pivot_m, "hand_accel_mps2": hand_accel_mps2}
+    return Simulation(scenario="consumer-ferraris", imu_id="SIM-MEMS 0002", grade="consumer", plans=(plan,),
                       imu=imu, exclude=exclude, info=info)
 
 
@@ -290,6 +338,8 @@ def _registry():
                                  nav_campaign),
         "consumer-handheld": Scenario("consumer-handheld", "consumer MEMS turned by hand, no table, ~5 min",
                                       consumer_handheld),
+        "consumer-ferraris": Scenario("consumer-ferraris", "consumer MEMS by hand: six faces, three full turns",
+                                      consumer_ferraris),
     }
     for e in effects.FURTHER_EFFECTS:
         name = f"effect-{e}"
@@ -355,6 +405,6 @@ def simulate(name, *, rng, **options):
 
 __all__ = [
     "ExperimentPlan", "Simulation", "Scenario", "SCENARIOS", "scenario_names", "get_scenario", "simulate",
-    "nav_subrange", "nav_subrange_short", "nav_campaign", "consumer_handheld", "effect_scenario",
+    "nav_subrange", "nav_subrange_short", "nav_campaign", "consumer_handheld", "consumer_ferraris", "effect_scenario",
     "CAMPAIGN_SUBRANGES", "DEFAULT_LATITUDE_DEG", "DEFAULT_GRAVITY_MPS2",
 ]

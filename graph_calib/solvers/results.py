@@ -53,6 +53,24 @@ def residual_block(output):
     return block
 
 
+#: An element whose posterior sigma is above this fraction of its prior sigma is prior-dominated: the data
+#: bring less than half its information (``(sigma / prior)^2 > 1/2``), so its estimate is mostly the prior's.
+PRIOR_DOMINATED_RATIO = 0.7
+
+
+def prior_dominated(model, output):
+    """``{element: posterior sigma / prior sigma}`` of the elements the data barely inform.
+
+    Those above :data:`PRIOR_DOMINATED_RATIO`, in layout order: a result lists them (``prior_dominated``)
+    so that a sigma that is the prior's is not read as a measured one.
+    """
+    _, prior = model.prior()
+    sig = np.asarray(output.sigma, dtype=float)
+    ratio = sig / prior
+    names = output.layout.element_names()
+    return {n: float(r) for n, r in zip(names, ratio) if r > PRIOR_DOMINATED_RATIO}
+
+
 def to_result(model, output, *, extra=None):
     """The :class:`graph_calib.experiment.Result` of a solver's output.
 
@@ -67,9 +85,12 @@ def to_result(model, output, *, extra=None):
     names = output.layout.element_names()
     sig = output.sigma
     T = model.temperatures
+    sway = model.options.sway_sigma
     ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
+          "prior_dominated": prior_dominated(model, output),
           "noise": {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
-                    "encoder_rad": model.encoder_noise}}
+                    "encoder_rad": model.encoder_noise,
+                    "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0}}
     ex.update(extra or {})
     return Result(
         source=model.experiment.source.rsplit("/", 1)[-1] if model.experiment.source else "",

@@ -1,0 +1,96 @@
+r"""A Ferraris-style hand-held session: six static faces, then a full turn about each body axis.
+
+After Ferraris et al. (Sensors and Materials, 1995): the unit rests on each of its six faces (each
+body axis up, then down), then is turned by hand once round each body axis, 360 deg, the axis held
+horizontal so that gravity sweeps the plane of the other two and the rest at the end shows how far
+the gyros integrated.  Every move is a :class:`~graph_calib.simulation.handheld.HandheldMotion` turn
+(a smooth step about one body axis); the faces are reached by the shortest turn from the previous
+attitude.
+
+>>> motion, turns = ferraris_motion(100.0, rng=np.random.default_rng(1))    # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graph_calib.rotations import exp_so3, log_so3
+from graph_calib.simulation.handheld import HandheldMotion
+
+#: The six faces: the body axis that points up, in order.
+FACES = ((0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0))
+#: For each body axis turned round, the face the unit rests on meanwhile (an axis across it is up).
+ROTATION_FACES = {0: (0, 0, 1), 1: (1, 0, 0), 2: (0, 1, 0)}
+
+
+def _rot_z(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def face_attitude(up_b, heading_rad):
+    """``C_nb`` with the body axis ``up_b`` pointing up and a heading, shape (3, 3)."""
+    u = np.asarray(up_b, dtype=float)
+    # the rotation taking u to the level frame's up, then a turn about up
+    z = np.array([0.0, 0.0, 1.0])
+    axis = np.cross(u, z)
+    s, c = np.linalg.norm(axis), float(u @ z)
+    if s < 1e-12:
+        C = np.eye(3) if c > 0 else np.diag([1.0, -1.0, -1.0])
+    else:
+        C = exp_so3(axis / s * np.arctan2(s, c))
+    return _rot_z(heading_rad) @ C
+
+
+def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=(1.5, 2.5),
+                    rotation_s=(3.0, 5.0), rest_s=5.0):
+    """The Ferraris-style programme as a hand-held motion.
+
+    Parameters
+    ----------
+    rate_hz : float
+    rng : numpy.random.Generator
+        Headings and the lengths of the turns.
+    initial_static_s : float
+        Rest on the first face before anything moves, s.
+    face_s : float
+        Rest on each face, s.
+    turn_s : (float, float)
+        Range of a turn's length between faces, s.
+    rotation_s : (float, float)
+        Range of a full turn's length, s.
+    rest_s : float
+        Rest before and after each full turn, s.
+
+    Returns
+    -------
+    motion : HandheldMotion
+    rotations : tuple of int
+        Index (among the motion's turns) of each full turn about a body axis x, y, z.
+    """
+    motion = HandheldMotion(rate_hz, face_attitude(FACES[0], rng.uniform(0.0, 2.0 * np.pi)))
+    motion.hold(initial_static_s)
+    n_turns = 0
+
+    def go(C_target, seconds):
+        nonlocal n_turns
+        motion.turn(log_so3(motion.attitude_now.T @ C_target), seconds)
+        n_turns += 1
+
+    for up in FACES[1:]:
+        go(face_attitude(up, rng.uniform(0.0, 2.0 * np.pi)), rng.uniform(*turn_s))
+        motion.hold(face_s)
+    rotations = []
+    for axis in range(3):
+        go(face_attitude(ROTATION_FACES[axis], rng.uniform(0.0, 2.0 * np.pi)), rng.uniform(*turn_s))
+        motion.hold(rest_s)
+        phi = np.zeros(3)
+        phi[axis] = 2.0 * np.pi * (1.0 if rng.uniform() < 0.5 else -1.0)
+        motion.turn(phi, rng.uniform(*rotation_s))
+        rotations.append(n_turns)
+        n_turns += 1
+        motion.hold(rest_s)
+    return motion, tuple(rotations)
+
+
+__all__ = ["FACES", "ROTATION_FACES", "face_attitude", "ferraris_motion"]
