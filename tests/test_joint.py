@@ -170,13 +170,13 @@ def test_curved_truth_the_joint_curves_follow_the_truth_curves(curved):
 def test_result_file_round_trip_and_its_bad_input(curved, tmp_path):
     _, runs, problems, _, out = curved
     res = joint_result(out, source="campaign.toml", experiments=[f"e{i}" for i in range(len(runs))],
-                       t_refs=[p.model.t_ref_degC for p in problems], sensor_ranges=_ranges(runs),
-                       verdict={"passed": True, "reasons": []})
+                       t_refs=[p.model.t_ref_degC for p in problems], sensor_ranges=_ranges(runs))
     p = tmp_path / "joint.json"
     write_joint_result(res, p)
     back = read_joint_result(p)
     assert back.values == res.values and back.sigmas == res.sigmas
     np.testing.assert_array_equal(back.covariance, res.covariance)
+    assert back.extra["verdict"]["passed"] and back.extra["verdict"]["converged"] == {"joint": True}
     assert back.t_ref_degC == out.unknowns.t0_degC and back.extra["joint"]["degrees"] == out.unknowns.degrees
     a, b = JointCalibration.from_result(res), JointCalibration.from_file(p)
     T = np.tile(np.linspace(-5, 45, 9)[:, None], (1, 6))
@@ -209,3 +209,53 @@ def test_validation_and_export_accept_the_joint_calibration(curved, tmp_path):
     T = np.tile(table.grid_degC[3:6, None], (1, 6))
     for n, vals in cal.element_values(T).items():
         np.testing.assert_allclose(back.element_values(T)[n], vals, rtol=1e-12, atol=1e-300)
+
+
+@pytest.fixture
+def joint_registered(monkeypatch):
+    """The ``joint`` entry point as ``pip install -e .`` declares it from pyproject.toml (the test venv may
+    predate it)."""
+    from importlib.metadata import EntryPoint
+
+    from graph_calib.solvers import registry
+    eps = dict(registry._entry_points())
+    if "joint" not in eps:
+        eps["joint"] = EntryPoint(name="joint", value="graph_calib.joint:JointSolver",
+                                  group=registry.ENTRY_POINT_GROUP)
+        monkeypatch.setattr(registry, "_entry_points", lambda: eps)
+        registry.get_solver.cache_clear()
+    yield
+    registry.get_solver.cache_clear()
+
+
+def test_the_joint_solver_is_registered_by_its_entry_point(joint_registered):
+    import tomllib
+    from pathlib import Path
+
+    from graph_calib.solvers.registry import get_solver
+    doc = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    assert doc["project"]["entry-points"]["graph_calib.solvers"]["joint"] == "graph_calib.joint:JointSolver"
+    assert get_solver("joint").name == "joint" and get_solver("joint").campaign
+
+
+def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(joint_registered, tmp_path):
+    import json
+
+    from graph_calib.campaign import CampaignOptions, run_campaign
+    from graph_calib.simulation import write_simulation
+    sim = simulate("nav-campaign", rng=np.random.default_rng(5), hours=HOURS, curvature=False)
+    write_simulation(sim, tmp_path / "data")
+    opts = CampaignOptions(workers=0, solvers="factor-graph+joint", report=False, progress=False)
+    run = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
+    doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
+    entry = doc["joint"]["joint"]
+    assert entry["status"] == "computed" and entry["verdict"]["passed"], entry["verdict"]
+    assert (tmp_path / "out" / "joint.json").is_file() and run.joint.solver == "joint"
+    assert all(v == 1 for v in entry["degrees"].values()), entry["degree_choice"]
+    cc = entry["cross_check"]["factor-graph"]
+    assert len(cc["experiments"]) == 6 and cc["rms_z"] < 1.0 and cc["max_abs_z"] < 4.0, cc
+    # no temperature_curves in these truth files: each curve against each subrange's own truth, inside it
+    tc = doc["truth_check"]["joint"]["joint"]
+    assert tc["mode"] == "per-subrange" and tc["max_abs_z"] < 4.5 and tc["fraction_within_2sigma"] > 0.9, tc
+    again = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
+    assert again.document["joint"]["joint"]["status"] == "cached"

@@ -17,8 +17,10 @@ def add_arguments(p):
                         "process")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="use an existing Dask cluster (e.g. tcp://host:8786); its workers must see --out")
-    p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default=None,
-                   help="override the manifest's [solver] solvers (default: both)")
+    p.add_argument("--solver", choices=("both", "per-subrange", "sqrt-kf", "factor-graph", "factor-graph+joint",
+                                        "joint"), default=None,
+                   help="override the manifest's [solver] solvers (default: both: the two per-subrange solvers "
+                        "and the joint campaign solver; per-subrange: without the joint one)")
     p.add_argument("--validate", action="append", default=[], metavar="RECORD.h5",
                    help="independent record to validate the stitched calibration on (repeatable); a "
                         "RECORD.truth.json next to it is the reference, else its own calibration")

@@ -11,14 +11,18 @@ documents the ``joint`` block.
 
 from __future__ import annotations
 
+from math import comb
+
 import numpy as np
 
 from graph_calib import io
+from graph_calib.effects import EFFECTS
 from graph_calib.errors import InputError
 from graph_calib.experiment import Result
 from graph_calib.joint.unknowns import family_member
 from graph_calib.params import split_element_name
 from graph_calib.solvers.results import residual_block
+from graph_calib.solvers.verdict import verdict_of
 
 #: Value of the ``joint.curve_form`` key.
 CURVE_FORM = "polynomial"
@@ -36,7 +40,7 @@ def _coefficient_element(label):
     return m if el is None else f"{m}.{el}"
 
 
-def joint_result(output, *, source, experiments, t_refs, sensor_ranges, verdict=None):
+def joint_result(output, *, source, experiments, t_refs, sensor_ranges):
     """The :class:`graph_calib.experiment.Result` of a :class:`graph_calib.joint.JointOutput`.
 
     Parameters
@@ -50,8 +54,6 @@ def joint_result(output, *, source, experiments, t_refs, sensor_ranges, verdict=
         Their reference temperatures, degC.
     sensor_ranges : sequence of array_like (6, 2)
         Their sensor temperature ranges, degC (gyro x, y, z, accel x, y, z).
-    verdict : dict, optional
-        The verdict fields (``passed``, ``reasons``, ...) as the campaign computed them.
     """
     u = output.unknowns
     nz = u.nz
@@ -74,7 +76,9 @@ def joint_result(output, *, source, experiments, t_refs, sensor_ranges, verdict=
     blocks = [residual_block(o) for o in output.outputs]
     chi2 = [b["chi2_per_dof"] for b in blocks]
     counts = [sum(3 * n for k, n in b["counts"].items() if k != "rotation") for b in blocks]
+    kinds = sorted({k for b in blocks for k in b["counts"]})
     residuals = {"quantity": output.outputs[0].residual_quantity,
+                 "counts": {k: int(sum(b["counts"].get(k, 0) for b in blocks)) for k in kinds},
                  "chi2_per_dof": float(np.dot(chi2, counts) / max(sum(counts), 1)),
                  "iterations": int(output.iterations), "converged": bool(output.converged),
                  "final_cost": float(output.final_cost), "seconds": float(output.seconds),
@@ -90,14 +94,43 @@ def joint_result(output, *, source, experiments, t_refs, sensor_ranges, verdict=
         "setups": setups,
         "unknowns": {"names": list(output.theta_names), "covariance": output.covariance.tolist()},
     }
-    extra = {"joint": block}
-    if verdict is not None:
-        extra["verdict"] = verdict
-    return Result(source=source, solver=output.outputs[0].solver, t_ref_degC=float(u.t0_degC),
-                  temperature_range_degC=(lo, hi), effects=_effects(z_elements),
-                  values=dict(zip(z_elements, output.theta[:nz].tolist())),
-                  sigmas=dict(zip(z_elements, sig[:nz].tolist())), covariance_names=tuple(z_elements),
-                  covariance=output.covariance[:nz, :nz].copy(), residuals=residuals, extra=extra)
+    result = Result(source=source, solver=output.outputs[0].solver, t_ref_degC=float(u.t0_degC),
+                    temperature_range_degC=(lo, hi), effects=_effects(z_elements),
+                    values=dict(zip(z_elements, output.theta[:nz].tolist())),
+                    sigmas=dict(zip(z_elements, sig[:nz].tolist())), covariance_names=tuple(z_elements),
+                    covariance=output.covariance[:nz, :nz].copy(), residuals=residuals, extra={"joint": block})
+    # the verdict fields every result's verdict carries (converged; residuals consistent with the noise model)
+    result.extra["verdict"] = verdict_of({result.solver: result}).to_json()
+    return result
+
+
+def joint_element_at(result, flat, t_ref_degC, *, experiment=None):
+    """A per-experiment element as the joint calibration gives it at ``t_ref_degC``: ``(value, sigma)``.
+
+    A curve family's member of order ``k`` (``gyro.bias_tc.x``: ``k = 1``) is the curve's ``k``-th Taylor
+    coefficient at ``t_ref_degC``, with its sigma from the coefficients' covariance; a shared element is
+    the joint estimate; a set-up element is ``experiment``'s.  None when the joint does not hold it.
+    """
+    block = result.extra["joint"]
+    p, el = split_element_name(flat)
+    eff = EFFECTS[p]
+    base = eff.temperature_of or p
+    bflat = base if el is None else f"{base}.{el}"
+    if bflat in block["curves"]:
+        cv = block["curves"][bflat]
+        c = np.asarray(cv["coefficients"], dtype=float)
+        C = np.asarray(cv["covariance"], dtype=float)
+        k = eff.temperature_order
+        d = float(t_ref_degC) - float(block["t0_degC"])
+        row = np.array([comb(j, k) * d ** (j - k) if j >= k else 0.0 for j in range(c.size)])
+        return float(row @ c), float(np.sqrt(max(row @ C @ row, 0.0)))
+    if experiment is not None:
+        est = (block["setups"].get(experiment) or {}).get("estimates", {})
+        if flat in est:
+            return float(est[flat]["value"]), float(est[flat]["sigma"])
+    if flat in result.values:
+        return float(result.values[flat]), float(result.sigmas[flat])
+    return None
 
 
 def _effects(elements):
@@ -151,4 +184,4 @@ def read_joint_result(path):
     return r
 
 
-__all__ = ["CURVE_FORM", "JOINT_BLOCK_VERSION", "joint_result", "write_joint_result", "read_joint_result"]
+__all__ = ["CURVE_FORM", "JOINT_BLOCK_VERSION", "joint_result", "joint_element_at", "write_joint_result", "read_joint_result"]
