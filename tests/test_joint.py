@@ -245,7 +245,7 @@ def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(joint_reg
     from graph_calib.simulation import write_simulation
     sim = simulate("nav-campaign", rng=np.random.default_rng(5), hours=HOURS, curvature=False)
     write_simulation(sim, tmp_path / "data")
-    opts = CampaignOptions(workers=0, solvers="factor-graph+joint", report=False, progress=False)
+    opts = CampaignOptions(workers=0, solvers="factor-graph+joint", report=True, progress=False)
     run = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
     doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
     entry = doc["joint"]["joint"]
@@ -257,5 +257,15 @@ def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(joint_reg
     # no temperature_curves in these truth files: each curve against each subrange's own truth, inside it
     tc = doc["truth_check"]["joint"]["joint"]
     assert tc["mode"] == "per-subrange" and tc["max_abs_z"] < 4.5 and tc["fraction_within_2sigma"] > 0.9, tc
+    html = (tmp_path / "out" / "report.html").read_text()
+    assert "Joint solver: one model over the whole range" in html and "Degree by evidence" in html
+    # export and apply take the campaign's joint calibration like a stitched one
+    from graph_calib.cli import main
+    from graph_calib.compensation import read_compensation
+    assert main(["export", str(tmp_path / "out"), "--out", str(tmp_path / "joint.csv"), "--solver", "joint"]) == 0
+    comp, prov = read_compensation(tmp_path / "out", solver="joint")
+    assert isinstance(comp, JointCalibration) and prov["solver"] == "joint"
+    comp2, _ = read_compensation(tmp_path / "out" / "joint.json")
+    assert isinstance(comp2, JointCalibration) and set(comp2.curves) == set(comp.curves)
     again = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
     assert again.document["joint"]["joint"]["status"] == "cached"

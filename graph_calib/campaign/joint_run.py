@@ -200,7 +200,13 @@ def run_joint(planned, collected, *, progress=False, force=False):
         except InputError:              # a damaged or older file is recomputed
             joint = None
     if joint is None:
-        joint = _solve(planned, collected, key, progress=progress)
+        try:
+            joint = _solve(planned, collected, key, progress=progress)
+        except InputError:
+            raise
+        except Exception as exc:        # told like a failed task (joint_failures): campaign.json, exit code 1
+            error = f"{type(exc).__name__}: {exc}"
+            return None, {JOINT: {"file": None, "status": "failed", "error": error, "truth_check": {}}}
     names = [e.name for e in planned.campaign.experiments]
     block = joint.extra["joint"]
     entry = {"file": JOINT_FILE, "status": status, "seconds": (joint.extra.get("campaign") or {}).get("seconds"),
@@ -212,4 +218,10 @@ def run_joint(planned, collected, *, progress=False, force=False):
     return joint, {JOINT: entry}
 
 
-__all__ = ["JOINT_FILE", "run_joint", "cross_check", "truth_check"]
+def joint_failures(joint_doc):
+    """The failed joint solves of ``campaign.json``'s ``joint`` as entries of its ``failed`` list."""
+    return [{"name": "(campaign)", "solver": s, "error": e["error"]} for s, e in joint_doc.items()
+            if e.get("status") == "failed"]
+
+
+__all__ = ["JOINT_FILE", "run_joint", "joint_failures", "cross_check", "truth_check"]

@@ -25,7 +25,7 @@ from pathlib import Path
 
 from graph_calib import io
 from graph_calib.campaign.execution import execute
-from graph_calib.campaign.joint_run import run_joint
+from graph_calib.campaign.joint_run import joint_failures, run_joint
 from graph_calib.campaign.planning import plan_campaign
 from graph_calib.campaign.tasks import CampaignOptions
 from graph_calib.campaign.truth import truth_check, truth_path
@@ -140,6 +140,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     document = _document(planned, collected, stitched, outcomes, primary=primary, stitch_model=options.stitch_model,
                          truth_doc=truth_doc, validation_doc=validation_doc, compute_timing=compute_timing)
     document["joint"] = joint_doc
+    collected.failed.extend(joint_failures(joint_doc))     # after the timing counted the tasks
     run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
                       truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed,
                       joint=joint)
