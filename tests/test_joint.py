@@ -4,10 +4,18 @@ per-subrange graph on linear truth, the curves against the truth curves, the res
 Short simulated subranges (``nav-campaign``, 0.05 h each at 100 Hz: 18,000 samples per experiment).
 """
 
+import json
+import tomllib
+from importlib.metadata import EntryPoint
+from pathlib import Path
+
 import numpy as np
 import pytest
 
 from graph_calib import io
+from graph_calib.campaign import CampaignOptions, run_campaign
+from graph_calib.cli import main
+from graph_calib.compensation import read_compensation
 from graph_calib.compensation import read_table, write_table
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
@@ -16,10 +24,13 @@ from graph_calib.joint.result import joint_result, read_joint_result, write_join
 from graph_calib.joint.solver import _extend, _JointCache, _priors
 from graph_calib.joint.unknowns import MAX_DEGREE, curve_label
 from graph_calib.options import CalibrationOptions
-from graph_calib.params import split_element_name
+from graph_calib.params import Layout, split_element_name
 from graph_calib.problem import build_problem
-from graph_calib.simulation import simulate
-from graph_calib.solvers.registry import solve
+from graph_calib.reports import html as H
+from graph_calib.reports.joint_report import joint_sections
+from graph_calib.simulation import simulate, write_simulation
+from graph_calib.solvers import registry
+from graph_calib.solvers.registry import get_solver, solve
 from graph_calib.validation import simulate_validation_record, validate
 
 HOURS = 0.05
@@ -59,7 +70,6 @@ def _ranges(runs):
 
 
 def test_the_map_is_the_exact_taylor_expansion_of_the_curves():
-    from graph_calib.params import Layout
     degrees = {b: d for b, d in MAX_DEGREE.items()}
     lay = Layout.declared(extra=("gyro.bias_tc2", "gyro.bias_tc3", "accel.bias_tc2", "accel.bias_tc3",
                                  "gyro.scale_tc2", "accel.scale_tc2"))
@@ -215,9 +225,6 @@ def test_validation_and_export_accept_the_joint_calibration(curved, tmp_path):
 def joint_registered(monkeypatch):
     """The ``joint`` entry point as ``pip install -e .`` declares it from pyproject.toml (the test venv may
     predate it)."""
-    from importlib.metadata import EntryPoint
-
-    from graph_calib.solvers import registry
     eps = dict(registry._entry_points())
     if "joint" not in eps:
         eps["joint"] = EntryPoint(name="joint", value="graph_calib.joint:JointSolver",
@@ -229,23 +236,15 @@ def joint_registered(monkeypatch):
 
 
 def test_the_joint_solver_is_registered_by_its_entry_point(joint_registered):
-    import tomllib
-    from pathlib import Path
-
-    from graph_calib.solvers.registry import get_solver
     doc = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
     assert doc["project"]["entry-points"]["graph_calib.solvers"]["joint"] == "graph_calib.joint:JointSolver"
     assert get_solver("joint").name == "joint" and get_solver("joint").campaign
 
 
 def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(joint_registered, tmp_path):
-    import json
-
-    from graph_calib.campaign import CampaignOptions, run_campaign
-    from graph_calib.simulation import write_simulation
     sim = simulate("nav-campaign", rng=np.random.default_rng(5), hours=HOURS, curvature=False)
     write_simulation(sim, tmp_path / "data")
-    opts = CampaignOptions(workers=0, solvers="factor-graph+joint", report=True, progress=False)
+    opts = CampaignOptions(workers=0, solvers="factor-graph+joint", report=False, progress=False)
     run = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
     doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
     entry = doc["joint"]["joint"]
@@ -257,11 +256,13 @@ def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(joint_reg
     # no temperature_curves in these truth files: each curve against each subrange's own truth, inside it
     tc = doc["truth_check"]["joint"]["joint"]
     assert tc["mode"] == "per-subrange" and tc["max_abs_z"] < 4.5 and tc["fraction_within_2sigma"] > 0.9, tc
-    html = (tmp_path / "out" / "report.html").read_text()
+    # the report's joint section (the rest of the report is tests/test_campaign.py's)
+    figures = []
+    sections = joint_sections(run, lambda f, caption: figures.append(caption) or H.figure(f, caption=caption))
+    assert len(sections) == 1 and len(figures) == 4 and "degree 1" in figures[0]
+    html = H.page("t", *sections)
     assert "Joint solver: one model over the whole range" in html and "Degree by evidence" in html
     # export and apply take the campaign's joint calibration like a stitched one
-    from graph_calib.cli import main
-    from graph_calib.compensation import read_compensation
     assert main(["export", str(tmp_path / "out"), "--out", str(tmp_path / "joint.csv"), "--solver", "joint"]) == 0
     comp, prov = read_compensation(tmp_path / "out", solver="joint")
     assert isinstance(comp, JointCalibration) and prov["solver"] == "joint"
