@@ -459,10 +459,15 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     lam = options.lambda_initial
     it, converged = 0, False
     preint_current = [c.preint for c in caches]
+    # the caches hold every factor (residuals and Jacobians) at `values` with `preint_current` after the cost
+    # of the starting point and after an accepted step: the next linearisation reads them (a 3-h experiment's
+    # factors cost seconds to evaluate; factor_graph.solve evaluates them again there)
+    fresh = True
     for it in range(1, options.max_iterations + 1):
-        for c, pre in zip(caches, preint_current):
-            c.preint = pre
-        invalidate()
+        if not fresh:
+            for c, pre in zip(caches, preint_current):
+                c.preint = pre
+            invalidate()
         gfg = graph.linearize(values)
         while True:
             try:
@@ -484,6 +489,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
             lam *= 10.0
         step = np.concatenate([np.asarray(delta.at(Z(0)))] + [np.asarray(delta.at(k)) for k in s_keys])
         accepted = new_cost <= cost
+        fresh = accepted
         if accepted:
             values = trial
             preint_current = [c.preint for c in caches]
@@ -510,8 +516,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     cov = np.block([[np.asarray(jm.at(a, b)) for b in tkeys] for a in tkeys])
     cov = 0.5 * (cov + cov.T)
     theta = theta_of(values)
-    invalidate()
-    for c in caches:
+    for c in caches:       # the marginals' linearisation left every factor evaluated at the solution
         c.ensure(values)
     n_meas = int(sum(3 * (c.grav.r.shape[0] + c.enc.r.shape[0]) for c in caches))
     if select_degree:
