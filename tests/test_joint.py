@@ -6,7 +6,6 @@ Short simulated subranges (``nav-campaign``, 0.05 h each at 100 Hz: 18,000 sampl
 
 import json
 import tomllib
-from importlib.metadata import EntryPoint
 from pathlib import Path
 
 import numpy as np
@@ -29,7 +28,6 @@ from graph_calib.problem import build_problem
 from graph_calib.reports import html as H
 from graph_calib.reports.joint_report import joint_sections
 from graph_calib.simulation import simulate, write_simulation
-from graph_calib.solvers import registry
 from graph_calib.solvers.registry import get_solver, solve
 from graph_calib.validation import simulate_validation_record, validate
 
@@ -221,27 +219,13 @@ def test_validation_and_export_accept_the_joint_calibration(curved, tmp_path):
         np.testing.assert_allclose(back.element_values(T)[n], vals, rtol=1e-12, atol=1e-300)
 
 
-@pytest.fixture
-def joint_registered(monkeypatch):
-    """The ``joint`` entry point as ``pip install -e .`` declares it from pyproject.toml (the test venv may
-    predate it)."""
-    eps = dict(registry._entry_points())
-    if "joint" not in eps:
-        eps["joint"] = EntryPoint(name="joint", value="graph_calib.joint:JointSolver",
-                                  group=registry.ENTRY_POINT_GROUP)
-        monkeypatch.setattr(registry, "_entry_points", lambda: eps)
-        registry.get_solver.cache_clear()
-    yield
-    registry.get_solver.cache_clear()
-
-
-def test_the_joint_solver_is_registered_by_its_entry_point(joint_registered):
+def test_the_joint_solver_is_registered_by_its_entry_point():
     doc = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
     assert doc["project"]["entry-points"]["graph_calib.solvers"]["joint"] == "graph_calib.joint:JointSolver"
     assert get_solver("joint").name == "joint" and get_solver("joint").campaign
 
 
-def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(joint_registered, tmp_path):
+def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(tmp_path):
     sim = simulate("nav-campaign", rng=np.random.default_rng(5), hours=HOURS, curvature=False)
     write_simulation(sim, tmp_path / "data")
     opts = CampaignOptions(workers=0, solvers="factor-graph+joint", report=False, progress=False)
