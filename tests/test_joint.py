@@ -254,3 +254,13 @@ def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(tmp_path)
     assert isinstance(comp2, JointCalibration) and set(comp2.curves) == set(comp.curves)
     again = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
     assert again.document["joint"]["joint"]["status"] == "cached"
+
+
+def test_a_manifest_asking_for_an_unknown_solver_choice_is_refused(tmp_path):
+    write_simulation(simulate("nav-campaign", rng=np.random.default_rng(2), hours=0.005), tmp_path)
+    m = tmp_path / "campaign.toml"
+    m.write_text(m.read_text() + '\n[solver]\nsolvers = "joint-only"\n')
+    with pytest.raises(InputError, match=r"campaign\.toml.*solvers.*must be one of 'both', 'per-subrange'.*'joint'"):
+        io.read_manifest(m)
+    m.write_text(m.read_text().replace('"joint-only"', '"factor-graph+joint"'))
+    assert io.read_manifest(m).solver["solvers"] == "factor-graph+joint"
