@@ -252,7 +252,8 @@ class WarmStart:
     sigma : ndarray, shape (P,), optional
         Weights of the fit of the joint unknowns to the starting values (default the priors).
     attitudes : ndarray, shape (K+1, 3, 3), optional
-        Keyframe attitudes (else dead reckoning from the alignment, then fitted to the measurements).
+        Keyframe attitudes (else dead reckoning from the alignment with the starting calibration; fitted to
+        the measurements first only when some experiment has no starting solution).
     """
 
     layout: object
@@ -449,7 +450,9 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         s = np.asarray(v.atVector(S(c.e)), dtype=float) if c.B.shape[1] else np.zeros(0)
         return c.x_of(np.asarray(v.atVector(Z(0)), dtype=float), s)
 
-    if not have_attitudes:
+    # attitudes dead-reckoned with a warm calibration (every experiment's own solution) stay within the
+    # alignment's error of the truth: no fit needed there (it costs a linearisation of the whole graph per pass)
+    if not have_attitudes and not all(s is not None for s in starts):
         values = _fit_attitudes(graph, caches, values, x_keys=x_keys, theta_keys=theta_keys,
                                 theta_dims=theta_dims, ordering=ordering)
     invalidate()
