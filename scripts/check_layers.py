@@ -23,7 +23,7 @@ LAYERS = {
     "graph_calib.model": 4, "graph_calib.plausibility": 4,
     "graph_calib.options": 5, "graph_calib.problem": 5, "graph_calib.calibration": 5, "graph_calib.grade_choice": 5,
     "graph_calib.solvers": 6,
-    "graph_calib.factor_graph": 7, "kf_reference": 7,
+    "graph_calib.factor_graph": 7, "graph_calib.joint": 7, "kf_reference": 7,
     "graph_calib.calibrate": 8, "graph_calib.diagnosis": 8, "graph_calib.stitching": 8, "graph_calib.validation": 8,
     "graph_calib.prediction": 8, "graph_calib.program_design": 8,
     "graph_calib.simulation": 8, "graph_calib.importers": 8, "graph_calib.compensation": 8,

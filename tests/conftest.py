@@ -1,5 +1,7 @@
 """Small shared fixtures: a valid synthetic experiment factory and the measured data folder."""
 
+import tomllib
+from importlib.metadata import EntryPoint
 from pathlib import Path
 
 import numpy as np
@@ -7,6 +9,7 @@ import pytest
 
 from graph_calib import constants as c
 from graph_calib.experiment import Experiment, Table
+from graph_calib.solvers import registry
 
 #: Measured recordings beside the repository (``../shared/data/real``), read at test time.
 REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
@@ -67,3 +70,23 @@ def require_real(path):
 def real_data():
     """Folder of the measured recordings; the test fails when it is absent."""
     return require_real(REAL_DATA)
+
+
+@pytest.fixture(scope="session", autouse=True)
+def solvers_of_this_checkout():
+    """Every solver entry point pyproject.toml declares, also when the venv's editable-install metadata predates
+    one (``pip install -e .`` refreshes it): the tests test this checkout's solvers, not the venv's list."""
+    declared = tomllib.loads((Path(__file__).resolve().parents[1] / "pyproject.toml").read_text())
+    declared = declared["project"]["entry-points"][registry.ENTRY_POINT_GROUP]
+    installed = dict(registry._entry_points())
+    missing = {n: EntryPoint(name=n, value=v, group=registry.ENTRY_POINT_GROUP)
+               for n, v in declared.items() if n not in installed}
+    if not missing:
+        yield
+        return
+    original = registry._entry_points
+    registry._entry_points = lambda: {**installed, **missing}
+    registry.get_solver.cache_clear()
+    yield
+    registry._entry_points = original
+    registry.get_solver.cache_clear()

@@ -17,7 +17,7 @@ import numpy as np
 
 from graph_calib import io
 from graph_calib.campaign.tasks import (
-    SOLVER_CHOICES, Task, cached, calibration_options, file_sha256, options_sha256, task_key,
+    JOINT_CHOICES, SOLVER_CHOICES, Task, cached, calibration_options, file_sha256, options_sha256, task_key,
 )
 from graph_calib.campaign.truth import truth_path
 from graph_calib.errors import InputError
@@ -42,6 +42,8 @@ class CampaignPlan:
         The same for the validation records without a truth file (factor graph only).
     references : dict
         ``{record: (kind, path)}``: ``("truth", its truth file)`` or ``("estimate", its factor-graph result)``.
+    joint : bool
+        Whether the joint campaign solver runs (:data:`graph_calib.campaign.tasks.JOINT_CHOICES`).
     """
 
     campaign: io.Campaign
@@ -53,6 +55,7 @@ class CampaignPlan:
     validation_todo: tuple[Task, ...]
     validation_done: tuple[Task, ...]
     references: dict[Path, tuple[str, Path]]
+    joint: bool = False
 
     @property
     def to_compute(self):
@@ -92,7 +95,8 @@ def plan_campaign(campaign, out, *, options):
     vtodo, vdone, refs = _validation_tasks(campaign, out, records, options=options)
     return CampaignPlan(campaign=campaign, out=out, solvers=_solvers(campaign, options), records=tuple(records),
                         todo=tuple(todo), done=tuple(done), validation_todo=tuple(vtodo),
-                        validation_done=tuple(vdone), references=refs)
+                        validation_done=tuple(vdone), references=refs,
+                        joint=(options.solvers or campaign.solver.get("solvers", "both")) in JOINT_CHOICES)
 
 
 def _solvers(campaign, options):

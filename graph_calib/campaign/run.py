@@ -9,7 +9,8 @@
    ``campaign.json`` and its ``comparison.json``, the truth files read;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
 5. truth check: the stitched curves against the first truth file
-   (:func:`graph_calib.campaign.truth.truth_check`);
+   (:func:`graph_calib.campaign.truth.truth_check`); the joint campaign solver, its cross-check and its
+   truth check (:func:`graph_calib.campaign.joint_run.run_joint`, ``campaign.json``'s ``joint``);
 6. validate: the stitched calibration on each independent record (:func:`graph_calib.validation.validate`);
 7. document and report: ``campaign.json`` (:class:`CampaignRun.document`) and ``report.html``.
 """
@@ -24,6 +25,7 @@ from pathlib import Path
 
 from graph_calib import io
 from graph_calib.campaign.execution import execute
+from graph_calib.campaign.joint_run import joint_failures, run_joint
 from graph_calib.campaign.planning import plan_campaign
 from graph_calib.campaign.tasks import CampaignOptions
 from graph_calib.campaign.truth import truth_check, truth_path
@@ -63,6 +65,8 @@ class CampaignRun:
         Tasks that raised: ``{"name", "solver", "error"}``.
     report_path : Path or None
         ``report.html``, when written.
+    joint : graph_calib.experiment.Result or None
+        The joint campaign solver's result (``joint.json``), when it ran.
     """
 
     @property
@@ -79,6 +83,7 @@ class CampaignRun:
     validations: list[Validation] = field(default_factory=list)
     failed: list[dict] = field(default_factory=list)
     report_path: Path | None = None
+    joint: Result | None = None
 
 
 @dataclass(frozen=True)
@@ -127,13 +132,18 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     collected = _collect(planned, outcomes)
     stitched = _stitch(planned, collected)
     truth_doc = _check_truth(stitched, collected.truths)
+    joint, joint_doc = run_joint(planned, collected, progress=options.progress, force=options.force)
+    truth_doc.update({s: {"joint": e["truth_check"]} for s, e in joint_doc.items() if e["truth_check"]})
     primary = "factor-graph" if "factor-graph" in stitched else next(iter(stitched), None)
     validations, validation_doc = _validate(planned, stitched, outcomes, primary=primary,
                                             stitch_model=options.stitch_model)
     document = _document(planned, collected, stitched, outcomes, primary=primary, stitch_model=options.stitch_model,
                          truth_doc=truth_doc, validation_doc=validation_doc, compute_timing=compute_timing)
+    document["joint"] = joint_doc
+    collected.failed.extend(joint_failures(joint_doc))     # after the timing counted the tasks
     run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
-                      truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed)
+                      truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed,
+                      joint=joint)
     _write_report_and_document(run, report=options.report, t_start=t_start)
     return run
 

@@ -24,8 +24,12 @@ from graph_calib.solvers.registry import DEFAULT_SOLVERS
 #: Bumped when a change of the code invalidates cached results.
 CACHE_VERSION = 1
 
-#: The solvers each value of :attr:`CampaignOptions.solvers` (and ``[solver] solvers``) stands for.
-SOLVER_CHOICES = {"both": DEFAULT_SOLVERS, "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",)}
+#: The per-experiment solvers each value of :attr:`CampaignOptions.solvers` (and ``[solver] solvers``) stands for.
+SOLVER_CHOICES = {"both": DEFAULT_SOLVERS, "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",),
+                  "per-subrange": DEFAULT_SOLVERS, "joint": (), "factor-graph+joint": ("factor-graph",)}
+#: The choices that also run the joint campaign solver (graph_calib.joint; docs/campaign.md): by default it
+#: runs beside both per-subrange solvers ("both"); "per-subrange" leaves it out, "joint" runs it alone.
+JOINT_CHOICES = ("both", "joint", "factor-graph+joint")
 
 
 @dataclass(frozen=True)
@@ -42,7 +46,8 @@ class CampaignOptions:
         Address of an existing Dask scheduler (``tcp://host:8786``); its workers must
         see the output folder.  Overrides ``workers``.
     solvers : str or None
-        ``"both"``, ``"sqrt-kf"`` or ``"factor-graph"``; None: the manifest's
+        ``"both"`` (both per-subrange solvers and the joint one), ``"per-subrange"`` (both, no joint),
+        ``"sqrt-kf"``, ``"factor-graph"``, ``"factor-graph+joint"`` or ``"joint"``; None: the manifest's
         ``[solver] solvers``, else both.
     stitch_model : str
         ``"cubic"`` or ``"linear"``: the stitched model that validation uses.
@@ -162,5 +167,5 @@ def cached(task):
     return isinstance(doc, dict) and isinstance(doc.get("campaign"), dict) and doc["campaign"].get("key") == task.key
 
 
-__all__ = ["CACHE_VERSION", "SOLVER_CHOICES", "CampaignOptions", "Task", "calibration_options", "file_sha256",
+__all__ = ["CACHE_VERSION", "SOLVER_CHOICES", "JOINT_CHOICES", "CampaignOptions", "Task", "calibration_options", "file_sha256",
            "options_sha256", "task_key", "cached"]

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from graph_calib.errors import InputError
+from graph_calib.validation import validation_text
 
 
 def add_arguments(p):
@@ -17,8 +18,10 @@ def add_arguments(p):
                         "process")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="use an existing Dask cluster (e.g. tcp://host:8786); its workers must see --out")
-    p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default=None,
-                   help="override the manifest's [solver] solvers (default: both)")
+    p.add_argument("--solver", choices=("both", "per-subrange", "sqrt-kf", "factor-graph", "factor-graph+joint",
+                                        "joint"), default=None,
+                   help="override the manifest's [solver] solvers (default: both: the two per-subrange solvers "
+                        "and the joint campaign solver; per-subrange: without the joint one)")
     p.add_argument("--validate", action="append", default=[], metavar="RECORD.h5",
                    help="independent record to validate the stitched calibration on (repeatable); a "
                         "RECORD.truth.json next to it is the reference, else its own calibration")
@@ -41,7 +44,6 @@ def options_from_args(args):
 
 def print_summary(run, out=None):
     """The short human summary of a finished campaign (stdout by default)."""
-    from graph_calib.validation import validation_text
 
     out = out if out is not None else sys.stdout
     doc = run.document
@@ -79,6 +81,7 @@ def print_summary(run, out=None):
             continue
         print(f"  validation {Path(v['record']).name}: {validation_text(r)} -> "
               f"{'pass' if r['pass']['all'] else 'FAIL'}", file=out)
+    _print_joint(doc, out)
     outdir = Path(run.out)
     print(f"  -> {outdir / 'campaign.json'}" + (f", {run.report_path}" if run.report_path else ""), file=out)
     failed = run.verdict_failed
@@ -88,6 +91,29 @@ def print_summary(run, out=None):
     else:
         print("verdict: pass: every experiment converged, its solvers agree and its residuals are consistent",
               file=out)
+
+
+def _print_joint(doc, out):
+    """The joint campaign solver's lines of the summary (docs/campaign.md)."""
+    j = (doc.get("joint") or {}).get("joint")
+    if not j:
+        return
+    if j.get("status") == "failed":
+        print(f"  joint: FAILED: {j['error']}", file=out)
+        return
+    v = j.get("verdict") or {}
+    print(f"  joint ({j['status']}): degrees {', '.join(f'{k} {d}' for k, d in j['degrees'].items())}; "
+          f"{v.get('text', '')}", file=out)
+    for solver, cc in (j.get("cross_check") or {}).items():
+        if cc.get("rms_z") is not None:
+            print(f"    joint at T_ref - {solver}: rms {cc['rms_z']:.2f}, max {cc['max_abs_z']:.2f} sigma", file=out)
+    tc = j.get("truth_check") or {}
+    if tc.get("points"):
+        print(f"    joint vs truth ({tc['mode']}): {100 * tc['fraction_within_2sigma']:.0f} % within 2 sigma, "
+              f"max |z| {tc['max_abs_z']:.2f}", file=out)
+    for val in j.get("validation", []):
+        print(f"    joint validation {Path(val['record']).name}: {validation_text(val['summary'])} -> "
+              f"{'pass' if val['summary']['pass']['all'] else 'FAIL'}", file=out)
 
 
 def run(args):

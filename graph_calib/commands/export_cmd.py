@@ -13,6 +13,7 @@ import sys
 from pathlib import Path
 
 from graph_calib.compensation import STITCH_MODELS, SUFFIX, TABLE_FORMATS, StitchedCalibration, write_table
+from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
 
 #: Largest interpolation error (in sigma of the element) the export accepts without a remark.
@@ -26,7 +27,8 @@ def add_arguments(p):
                    help="json, csv or c-header (default: from the --out suffix .json, .csv, .h; else json)")
     p.add_argument("--step-degC", type=float, default=1.0, dest="step_degC",
                    help="grid step, degC (default 1)")
-    p.add_argument("--solver", default=None, help="whose stitched results (default: the campaign's primary solver)")
+    p.add_argument("--solver", default=None, help="whose stitched results (default: the campaign's primary solver); "
+                   "'joint': the joint campaign solver's curves")
     p.add_argument("--model", choices=STITCH_MODELS, default=None,
                    help="stitched model (default: the campaign's stitch_model)")
 
@@ -43,7 +45,13 @@ def run(args):
     if out.is_dir():
         raise InputError("is a folder; --out names the table file", path=out)
     fmt = _format(args, out)
-    stitched = StitchedCalibration.from_campaign(args.campaign, solver=args.solver, model=args.model)
+    if args.solver == "joint":       # the joint campaign solver's curves (docs/campaign.md), not a stitching
+        if args.model:
+            raise InputError("the joint calibration has one curve form; --model chooses among stitched models",
+                             dataset="--model")
+        stitched = JointCalibration.from_campaign(args.campaign)
+    else:
+        stitched = StitchedCalibration.from_campaign(args.campaign, solver=args.solver, model=args.model)
     table = stitched.table(step_degC=args.step_degC)
     out.parent.mkdir(parents=True, exist_ok=True)
     write_table(table, out, fmt=fmt)

@@ -49,6 +49,7 @@ from graph_calib.compensation.formats import (
 from graph_calib.compensation.stitched import (
     CAMPAIGN_FORMAT, CAMPAIGN_VERSION, STITCH_MODELS, StitchedCalibration, read_campaign,
 )
+from graph_calib.compensation.joint import JointCalibration, JointCurve
 from graph_calib.compensation.table import (
     INTERPOLATION, TABLE_FORMAT, TABLE_VERSION, CompensationTable, TableCurve, interpolate,
 )
@@ -58,6 +59,7 @@ __all__ = [
     "unit_of",
     "TABLE_FORMAT", "TABLE_VERSION", "INTERPOLATION", "interpolate", "TableCurve", "CompensationTable",
     "CAMPAIGN_FORMAT", "CAMPAIGN_VERSION", "STITCH_MODELS", "StitchedCalibration", "read_campaign",
+    "JointCalibration", "JointCurve",
     "TABLE_FORMATS", "SUFFIX", "table_json", "table_csv", "table_c_header", "write_table", "read_table",
     "element_identifier",
     "PROVENANCE_ATTRIBUTE", "read_compensation", "apply", "note_of", "write_corrected", "correction_of",

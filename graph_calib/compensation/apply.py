@@ -28,10 +28,12 @@ import numpy as np
 from graph_calib import __version__, io
 from graph_calib.calibration import CALIBRATION_FORMAT, Calibration, corrected_experiment
 from graph_calib.compensation.formats import read_table
+from graph_calib.compensation.joint import JointCalibration
 from graph_calib.compensation.stitched import CAMPAIGN_FORMAT, StitchedCalibration
 from graph_calib.compensation.table import TABLE_FORMAT
 from graph_calib.constants import MPS2_TO_UG, RS_TO_DH
 from graph_calib.errors import InputError
+from graph_calib.joint.result import read_joint_result
 
 #: Root attribute of a corrected experiment file: the provenance of its correction, JSON.
 PROVENANCE_ATTRIBUTE = "corrected_by"
@@ -84,7 +86,9 @@ def read_compensation(path, *, solver=None, model=None):
     prov = {"kind": kind, "file": str(path.resolve()), "sha256": _sha256(path)}
     if kind == "result":
         result = io.read_result(path)
-        comp = Calibration.from_result(result)
+        # a joint result (docs/joint-result.md): its curves with their bands, like a stitched calibration
+        comp = (JointCalibration.from_result(read_joint_result(path), source=str(path.resolve()))
+                if isinstance(result.extra.get("joint"), dict) else Calibration.from_result(result))
         prov.update(solver=result.solver, source=result.source, t_ref_degC=result.t_ref_degC,
                     temperature_range_degC=list(result.temperature_range_degC))
     elif kind == "calibration":
@@ -98,6 +102,9 @@ def read_compensation(path, *, solver=None, model=None):
         prov.update(format=fmt, **{k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model",
                                                                               "source", "step_degC")})
         prov["grid_degC"] = [float(comp.grid_degC[0]), float(comp.grid_degC[-1])]
+    elif solver == "joint":
+        comp = JointCalibration.from_campaign(path)
+        prov.update({k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model", "subranges")})
     else:
         comp = StitchedCalibration.from_campaign(path, solver=solver, model=model)
         prov.update({k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model", "subranges")})

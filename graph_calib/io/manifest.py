@@ -23,10 +23,14 @@ from graph_calib.errors import InputError
 from graph_calib.io.checks import _is_int, _is_real, _show
 
 #: Options of the ``[solver]`` table: name -> (description, check returning an error text or None).
+#: Values of ``[solver] solvers`` (graph_calib.campaign.tasks.SOLVER_CHOICES).
+_SOLVER_VALUES = ("both", "per-subrange", "sqrt-kf", "factor-graph", "factor-graph+joint", "joint")
+
 SOLVER_OPTIONS = {
-    "solvers": ("which solvers run: 'sqrt-kf', 'factor-graph' or 'both'",
-                lambda v: None if v in ("sqrt-kf", "factor-graph", "both")
-                else "must be 'sqrt-kf', 'factor-graph' or 'both'"),
+    "solvers": ("which solvers run: 'both' (both per-subrange solvers and the joint one), 'per-subrange', "
+                "'sqrt-kf', 'factor-graph', 'factor-graph+joint' or 'joint'",
+                lambda v: None if v in _SOLVER_VALUES
+                else "must be one of " + ", ".join(repr(c) for c in _SOLVER_VALUES)),
     "keyframe_s": ("length of one keyframe (preintegration interval), s",
                    lambda v: None if _is_real(v) and math.isfinite(v) and v > 0 else "must be a positive number"),
     "max_iterations": ("largest number of solver iterations",

@@ -15,6 +15,7 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib import effects, io, params
+from graph_calib.reports.joint_report import joint_sections
 from graph_calib.reports import html as H
 from graph_calib.reports.campaign_figures import (
     SOLVER_LABEL,
@@ -342,11 +343,13 @@ def build_report(run, *, figures_dir=None):
             "unit variance. Structure over time or temperature points to an effect the model lacks "
             "(graph-calib diagnose looks for it)."), *rparts, anchor="residuals"))
 
+    parts.extend(joint_sections(run, fig))
+
     nav = H.Raw("<nav><ul>" + "".join(
         f'<li><a href="#{a}">{t}</a></li>' for a, t in (
             ("summary", "Summary"), ("reading", "How to read the figures"), ("parameters", "Stitched parameters"),
             ("bench", "Bench parameters"), ("solvers", "Filter against graph"), ("boundaries", "Boundaries"),
-            ("validation", "Validation"), ("residuals", "Residuals"))) + "</ul></nav>")
+            ("validation", "Validation"), ("residuals", "Residuals"), ("joint", "Joint solver"))) + "</ul></nav>")
     return H.page(f"Thermal calibration campaign: {doc['imu_id']}", nav, *parts,
                   H.paragraph("Written by graph-calib campaign. Units: SI in the files; here deg/h, ppm, arcsec, "
                               "micro-g (1 micro-g = 9.80665e-6 m/s^2), mm, ms.", cls="note"))

@@ -1,0 +1,143 @@
+"""The joint campaign solver on the 6 x 3 h campaign (6.5 million samples): wall time and peak memory.
+
+Run by hand, after ``benchmarks/bench_campaign.py`` simulated (and calibrated) the campaign::
+
+    .venv/bin/python benchmarks/bench_joint.py [--data /tmp/bench-campaign/data]
+                                               [--campaign /tmp/bench-campaign/campaign] [--cold]
+
+Reads the six experiments, builds each problem (static detection, alignment, the prepared record), and
+solves them jointly (``graph_calib.joint.solve_joint``), warm-started from the campaign's per-subrange
+factor-graph results when ``--campaign`` holds them (the campaign runs them anyway; ``--cold`` starts
+from the priors instead).  Samples the resident memory of this process every 0.2 s.  Prints the time of
+each stage (reading, problems, joint solve) and the peak memory; docs/performance.md records what it
+measured.  Targets: the joint solve within 60 s, under 4 GB.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import psutil
+
+from _report import report
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from graph_calib import io  # noqa: E402
+from graph_calib.campaign.tasks import calibration_options  # noqa: E402
+from graph_calib.compensation.joint import JointCalibration  # noqa: E402
+from graph_calib.joint import WarmStart, solve_joint  # noqa: E402
+from graph_calib.joint.result import joint_element_at, joint_result  # noqa: E402
+from graph_calib.problem import build_problem  # noqa: E402
+
+
+class Peak:
+    """Peak resident memory of this process, sampled in a thread."""
+
+    def __init__(self, interval=0.2):
+        self.proc, self.interval, self.peak = psutil.Process(), interval, 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, daemon=True)
+
+    def _run(self):
+        while not self._stop.is_set():
+            self.peak = max(self.peak, self.proc.memory_info().rss)
+            self._stop.wait(self.interval)
+
+    def __enter__(self):
+        self._thread.start()
+        return self
+
+    def __exit__(self, *exc):
+        self._stop.set()
+        self._thread.join()
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", default="/tmp/bench-campaign/data")
+    ap.add_argument("--campaign", default="/tmp/bench-campaign/campaign")
+    ap.add_argument("--cold", action="store_true", help="start from the priors, not the per-subrange results")
+    ap.add_argument("--save", default="/tmp/bench-joint.json", help="where to write the joint result")
+    args = ap.parse_args(argv)
+    manifest = io.read_manifest(Path(args.data) / "campaign.toml")
+    print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} on "
+          f"{os.cpu_count()} cores")
+    with Peak() as mem:
+        t0 = time.perf_counter()
+        problems, starts, n, ranges, truths, graphs = [], [], 0, [], [], []
+        for e in manifest.experiments:
+            exp = io.read_experiment(e.file)
+            n += exp.n_samples
+            T = exp.sensor_temperatures()
+            ranges.append(np.column_stack([T.min(axis=0), T.max(axis=0)]))
+            tp = Path(e.file).with_suffix(".truth.json")
+            truths.append(io.read_result(tp) if tp.is_file() else None)
+            opts = calibration_options(manifest, t_ref_degC=e.t_ref_degC)
+            problems.append(build_problem(exp, options=opts))
+            fg = Path(args.campaign) / e.name / "factor-graph.json"
+            graphs.append(io.read_result(fg) if fg.is_file() else None)
+            starts.append(WarmStart.from_result(graphs[-1]) if graphs[-1] is not None and not args.cold else None)
+        t1 = time.perf_counter()
+        out = solve_joint(problems, options=opts.graph, progress=lambda ev: print(ev.text(), flush=True))
+        t2 = time.perf_counter()
+    warm = sum(s is not None for s in starts)
+    print(f"{len(problems)} experiments, {n:,} samples; warm start from {warm} per-subrange result(s)")
+    print(f"read + problems {t1 - t0:.1f} s; joint solve {t2 - t1:.1f} s ({out.iterations} iterations, "
+          f"converged {out.converged}, marginals and degree choice included); peak RSS {mem.peak / 2**30:.2f} GB")
+    print("degrees:", {c.family: c.degree for c in out.degree_choices})
+    print(f"load average after {os.getloadavg()[0]:.2f}")
+    names = [e.name for e in manifest.experiments]
+    res = joint_result(out, source="campaign.toml", experiments=names,
+                       t_refs=[p.model.t_ref_degC for p in problems], sensor_ranges=ranges)
+    io.write_result(res, args.save)
+    _figures(res, names, graphs, truths)
+    report("joint_solve_s", t2 - t1, "s", f"joint solve of {len(problems)} x 3 h ({n:,} samples), warm {warm}")
+    report("joint_problems_s", t1 - t0, "s", "reading the experiments and building the problems")
+    report("joint_peak_memory_gb", mem.peak / 2**30, "GB", "peak resident memory of the joint solve's process")
+    return 0
+
+
+def _figures(res, names, graphs, truths):
+    """Joint at T_ref minus each subrange's graph estimate (in its sigma); joint curves against the truth curves."""
+    z = []
+    for n, g in zip(names, graphs):
+        if g is None:
+            continue
+        for el, v in g.values.items():
+            j = joint_element_at(res, el, g.t_ref_degC, experiment=n)
+            if j is not None and g.sigmas[el] > 0:
+                z.append((j[0] - v) / g.sigmas[el])
+    if z:
+        z = np.abs(np.array(z))
+        print(f"joint at T_ref - subrange graph: {z.size} elements, rms {np.sqrt(np.mean(z**2)):.2f}, "
+              f"max {z.max():.2f}, within 0.5 sigma {100 * np.mean(z <= 0.5):.1f} % (in the subrange's sigma)")
+    sim = next((t.extra.get("simulation", {}) for t in truths if t is not None), {})
+    curves = sim.get("temperature_curves")
+    if curves:
+        cal = JointCalibration.from_result(res)
+        tc = float(curves["t_center_degC"])
+        zs, worst = [], (None, 0.0)
+        for name, cv in cal.curves.items():
+            if name not in curves:
+                continue
+            T = np.linspace(*cv.t_span, 25)
+            v, s = cv.evaluate(T)
+            zz = (v - sum(c * (T - tc) ** i for i, c in enumerate(curves[name]))) / s
+            zs.append(zz)
+            if np.abs(zz).max() > abs(worst[1]):
+                worst = (name, float(zz[np.argmax(np.abs(zz))]))
+        zz = np.abs(np.concatenate(zs))
+        print(f"joint curves vs truth curves: {zz.size} points, {100 * np.mean(zz <= 2):.1f} % within 2 sigma, "
+              f"max |z| {zz.max():.2f} ({worst[0]}), rms {np.sqrt(np.mean(zz**2)):.2f}")
+        report("joint_truth_within_2sigma", 100 * np.mean(zz <= 2), "%", "joint curves vs truth, points within 2 sigma")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
