@@ -8,8 +8,8 @@
    finished, each experiment's verdict (converged, solvers agree, residuals consistent) in
    ``campaign.json`` and its ``comparison.json``, the truth files read;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
-5. truth check: the stitched curves against the first truth file
-   (:func:`graph_calib.campaign.truth.truth_check`);
+5. truth check: the stitched curves against the truth files' ``temperature_curves``, or else against each
+   subrange's own truth inside its range (:func:`graph_calib.campaign.truth.truth_check`);
 6. validate: the stitched calibration on each independent record (:func:`graph_calib.validation.validate`);
 7. document and report: ``campaign.json`` (:class:`CampaignRun.document`) and ``report.html``.
 """
@@ -33,7 +33,7 @@ from graph_calib.reports.campaign_report import write_report
 from graph_calib.solvers.results import compare
 from graph_calib.solvers.verdict import verdict_of
 from graph_calib.stitching import Stitched, stitch
-from graph_calib.validation import ResultCalibration, Validation, validate, window_means
+from graph_calib.validation import Validation, truth_reference, validate, window_means
 
 #: Format name of ``campaign.json``.
 CAMPAIGN_FORMAT = "imu-calibration-campaign"
@@ -126,7 +126,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     outcomes, compute_timing = _compute(planned, options=options, on_done=on_done)
     collected = _collect(planned, outcomes)
     stitched = _stitch(planned, collected)
-    truth_doc = _check_truth(stitched, collected.truths)
+    truth_doc = _check_truth(stitched, collected.truths, collected.summaries)
     primary = "factor-graph" if "factor-graph" in stitched else next(iter(stitched), None)
     validations, validation_doc = _validate(planned, stitched, outcomes, primary=primary,
                                             stitch_model=options.stitch_model)
@@ -235,13 +235,17 @@ def _stitch(planned, collected):
     return stitched
 
 
-def _check_truth(stitched, truths):
-    """Phase 5: ``{solver: {model: truth_check}}`` against the first truth file, ``{}`` without one."""
-    truth_any = next(iter(truths.values()), None)
+def _check_truth(stitched, truths, summaries):
+    """Phase 5: ``{solver: {model: truth_check}}``, ``{}`` without a truth file.
+
+    Against the truth files' ``temperature_curves`` when they have them; otherwise each curve against each
+    subrange's own truth inside that subrange's sensor temperature range (never extrapolated).
+    """
     truth_doc = {}
-    if truth_any is not None:
+    if truths:
+        ranges = {n: summaries.get(n, {}).get("sensor_temperature_range_degC") for n in truths}
         for s, st in stitched.items():
-            truth_doc[s] = {m: truth_check(st, truth_any, model=m) for m in ("cubic", "linear")}
+            truth_doc[s] = {m: truth_check(st, truths, model=m, sensor_ranges=ranges) for m in ("cubic", "linear")}
     return truth_doc
 
 
@@ -267,7 +271,7 @@ def _validate(planned, stitched, outcomes, *, primary, stitch_model):
             entry["error"] = oc.get("error", "the record's own calibration is missing")
             validation_doc.append(entry)
             continue
-        reference = ResultCalibration(io.read_result(ref_path))
+        reference = truth_reference(io.read_result(ref_path))
         exp = io.read_experiment(rec)
         w = window_means(exp)
         entry["results"] = {}

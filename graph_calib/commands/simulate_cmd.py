@@ -28,6 +28,10 @@ def add_arguments(parser):
                         help="switch a further effect of model.md on (repeatable)")
     parser.add_argument("--effect-scale", type=float, metavar="S",
                         help="multiply the size of every switched-on effect (default 1)")
+    parser.add_argument("--cubic-scale", type=float, metavar="S",
+                        help="turntable scenarios: a cubic term in the bias temperature curves, as real IMUs have, "
+                             "S times the grade's typical size (default 0: none; the same seed otherwise gives the "
+                             "same data)")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
 
 
@@ -61,6 +65,8 @@ def run(args):
                "effect_scale": args.effect_scale}
     if args.effect:
         options["effects"] = tuple(args.effect)
+    if args.cubic_scale is not None:
+        options["cubic_scale"] = args.cubic_scale
     rng = np.random.default_rng(args.seed)
     t0 = time.monotonic()
     sim = simulate(args.scenario, rng=rng, **options)

@@ -27,7 +27,7 @@ from graph_calib.reports.campaign_figures import (
     report_unit,
 )
 from graph_calib.solvers.results import sigma_ratio_range_text
-from graph_calib.validation import ResultCalibration, validation_text
+from graph_calib.validation import TruthCurves, validation_text
 
 
 def _fmt(v, digits=4):
@@ -157,6 +157,17 @@ def _bench_table(run, solver):
 # ---------------------------------------------------------------------------
 
 
+def _truth_curves(truths):
+    """The truth over the whole range to draw (a truth file's ``temperature_curves``), or None.
+
+    A truth file without them holds only inside its own subrange (data-format.md); it is not drawn as a curve.
+    """
+    for t in (truths or {}).values():
+        if (t.extra or {}).get("temperature_curves"):
+            return TruthCurves(t)
+    return None
+
+
 def build_report(run, *, figures_dir=None):
     """The HTML text of a campaign's report.
 
@@ -184,7 +195,7 @@ def build_report(run, *, figures_dir=None):
 
     parts = []
     n_exp = len(doc["experiments"])
-    truth_cal = ResultCalibration(next(iter(run.truths.values()))) if run.truths else None
+    truth_cal = _truth_curves(run.truths)
 
     # --- summary
     verdicts = []
