@@ -6,7 +6,9 @@
    (:func:`graph_calib.campaign.execution.execute`), the cached ones counted;
 3. collect: the tasks' files read back per experiment, ``comparison.json`` written where both solvers
    finished, each experiment's verdict (converged, solvers agree, residuals consistent) in
-   ``campaign.json`` and its ``comparison.json``, the truth files read;
+   ``campaign.json`` and its ``comparison.json``, the truth files read; with the closed loop (default,
+   :mod:`graph_calib.campaign.loop`) the results are those of the model the loop chose, and each
+   experiment's ``loop`` records the effects added and why, residuals and errors before and after;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
 5. truth check: the stitched curves against the truth files' ``temperature_curves``, or else against each
    subrange's own truth inside its range (:func:`graph_calib.campaign.truth.truth_check`);
@@ -24,6 +26,7 @@ from pathlib import Path
 
 from graph_calib import io
 from graph_calib.campaign.execution import execute
+from graph_calib.campaign.loop import loop_entry
 from graph_calib.campaign.planning import plan_campaign
 from graph_calib.campaign.tasks import CampaignOptions
 from graph_calib.campaign.truth import truth_check, truth_path
@@ -125,6 +128,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     planned = _read_and_plan(manifest, out, options=options)
     outcomes, compute_timing = _compute(planned, options=options, on_done=on_done)
     collected = _collect(planned, outcomes)
+    loop_doc = _loop(planned, collected)
     stitched = _stitch(planned, collected)
     truth_doc = _check_truth(stitched, collected.truths, collected.summaries)
     primary = "factor-graph" if "factor-graph" in stitched else next(iter(stitched), None)
@@ -132,6 +136,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
                                             stitch_model=options.stitch_model)
     document = _document(planned, collected, stitched, outcomes, primary=primary, stitch_model=options.stitch_model,
                          truth_doc=truth_doc, validation_doc=validation_doc, compute_timing=compute_timing)
+    document["loop"] = loop_doc
     run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
                       truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed)
     _write_report_and_document(run, report=options.report, t_start=t_start)
@@ -221,6 +226,28 @@ def _collect(planned, outcomes):
         experiments_doc.append(entry)
     return _Collected(experiments=experiments_doc, results=results, summaries=summaries, truths=truths,
                       failed=failed)
+
+
+def _loop(planned, collected):
+    """Phase 3b: the closed loop's record per experiment (``experiments[i].loop``) and its summary.
+
+    Per experiment :func:`graph_calib.campaign.loop.loop_entry` (the model chosen and why, residual RMS
+    before and after, the error against its truth before and after); the summary (``campaign.json``'s
+    ``loop``) says whether the loop ran, its options and which experiments it changed.
+    """
+    dopts = planned.todo[0].diagnosis if planned.todo else (planned.done[0].diagnosis if planned.done else None)
+    changed = []
+    for entry in collected.experiments:
+        le = loop_entry(planned.out / entry["name"], collected.results.get(entry["name"], {}),
+                        collected.truths.get(entry["name"]))
+        if le is not None:
+            entry["loop"] = le
+            if le["added"]:
+                changed.append({"name": entry["name"], "added": [a["effect"] for a in le["added"]]})
+    return {"enabled": dopts is not None,
+            "options": None if dopts is None else {"alpha": dopts.alpha, "max_added": dopts.max_added,
+                                                   "solvers": list(dopts.solvers)},
+            "changed": changed}
 
 
 def _stitch(planned, collected):
