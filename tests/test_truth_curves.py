@@ -133,3 +133,20 @@ def test_truth_check_uses_each_subrange_truth_only_inside_its_range():
     truths_c = {k: _subrange(*ranges[i], solver="truth", with_curves=True) for i, k in enumerate(truths)}
     tcc = truth_check(st, truths_c, model="cubic")
     assert tcc["reference"] == "temperature_curves" and tcc["consistent"], tcc
+
+
+def test_subranges_with_different_layouts_stitch():
+    """One subrange's model has ``accel.bias_tc2`` (the loop added it there), the others not: the stitch uses
+    each point with the coefficients it has, and the curve still follows the truth."""
+    ranges = [(0.0, 4.0), (10.0, 14.0), (20.0, 24.0), (30.0, 34.0)]
+    est = [_subrange(lo, hi, solver="factor-graph") for lo, hi in ranges]
+    r0 = est[0]
+    curved = Result(**{**r0.__dict__, "effects": r0.effects + ("accel.bias_tc2",),
+                       "values": {**r0.values, "accel.bias_tc2.x": C[2]},
+                       "sigmas": {**r0.sigmas, "accel.bias_tc2.x": SIGMA / 30.0}})
+    st = stitch([curved] + est[1:], names=[r.source for r in est])
+    cv = st.curves["accel.bias.x"]
+    assert [p.coef.size for p in cv.points] == [3, 2, 2, 2]
+    truths = {r.source: _subrange(lo, hi, solver="truth", with_curves=True) for r, (lo, hi) in zip(est, ranges)}
+    tc = truth_check(st, truths, model="cubic")
+    assert tc["consistent"] and tc["max_abs_z"] < 1.5, tc
