@@ -23,9 +23,10 @@ compared.
 The *remaining error* is the difference between the reference calibration's
 error and the stitched one's, ``de_w = e^ref_w - e^stitched_w``: what a navigation
 system would still see after correcting its sensors with the stitched
-calibration.  The reference is the truth for simulated data (the truth file's
-values at its reference temperature, temperature coefficients and curvature
-remainder make the exact truth curve), or, for a real record, the record's own
+calibration.  The reference is the truth for simulated data (its
+``temperature_curves``, the truth over the whole range, :class:`TruthCurves`; a
+truth file without them holds only inside its own temperature range, and windows
+outside it are left out, never extrapolated), or, for a real record, the record's own
 calibration (then ``de`` is a consistency check limited by that calibration's
 own uncertainty).  Measured rates and forces stand in for the true ones (the
 difference changes ``de`` by a product of two small errors).
@@ -113,6 +114,10 @@ class ResultCalibration:
         self.calibration = Calibration.from_values(own, t_ref_degC=result.t_ref_degC, sigmas=result.sigmas,
                                                    source=result.source)
         self.label = "truth" if result.solver == "truth" else f"{result.solver} estimate of {result.source}"
+        #: Where this result holds: a truth without ``temperature_curves`` only inside its own range
+        #: (data-format.md: never extrapolate it); None for an estimate (its record's own range).
+        self.valid_range_degC = (tuple(float(v) for v in result.temperature_range_degC)
+                                 if result.solver == "truth" else None)
 
     def evaluate(self, T_sensors, model=None):
         """``{flat element: values (N,)}`` at the sensor temperatures ``T_sensors`` (N, 6), SI."""
@@ -135,6 +140,65 @@ class ResultCalibration:
         """
         cal = self.calibration
         return cal.sensor_errors(omega_b, f_b, dT=np.asarray(T_sensors, dtype=float) - cal.t_ref_degC)
+
+
+class TruthCurves:
+    """A truth file's ``temperature_curves``: the truth of each element over the whole temperature range.
+
+    ``value(T) = sum_i c_i (T - t0)^i`` (SI) with ``T`` the element's own sensor temperature
+    (data-format.md).  Elements without a curve take the truth file's own value (with its temperature
+    coefficients, :class:`ResultCalibration`): for the simulator these are the elements that do not
+    depend on temperature (misalignments, mount, lever arm).
+
+    Parameters
+    ----------
+    result : graph_calib.experiment.Result
+        A truth file with ``extra["temperature_curves"]`` (validated by :func:`graph_calib.io.read_result`).
+
+    Attributes
+    ----------
+    result : graph_calib.experiment.Result
+    curves : dict
+        ``{flat element: (t0_degC, coefficients ndarray)}``.
+    label : str
+        ``"truth (temperature curves)"``.
+    """
+
+    def __init__(self, result):
+        self.result = result
+        raw = (result.extra or {}).get("temperature_curves") or {}
+        self.curves = {k: (float(v["t0_degC"]), np.asarray(v["coefficients"], dtype=float)) for k, v in raw.items()}
+        self._own = ResultCalibration(result)
+        self.label = "truth (temperature curves)"
+
+    def evaluate(self, T_sensors, model=None):
+        """``{flat element: values (N,)}`` at the sensor temperatures ``T_sensors`` (N, 6), SI."""
+        T_sensors = np.atleast_2d(np.asarray(T_sensors, dtype=float))
+        out = self._own.evaluate(T_sensors)
+        for k, (t0, coef) in self.curves.items():
+            T = sensor_columns(T_sensors, sensor_of(k))
+            out[k] = np.polynomial.polynomial.polyval(T - t0, coef)
+        return out
+
+    def element_sigmas(self, T_sensors, model=None):
+        """A truth has no uncertainty: ``{}``."""
+        return {}
+
+    def sensor_errors(self, T_sensors, omega_b, f_b):
+        """The truth's declared sensor errors at the sensor temperatures, rad/s and m/s^2, (N, 3) each."""
+        return sensor_errors(self.evaluate(T_sensors), omega_b, f_b)
+
+
+def truth_reference(result):
+    """The reference a truth (or estimate) result stands for over temperature.
+
+    A truth file with ``temperature_curves`` gives :class:`TruthCurves` (valid over the whole range);
+    any other result gives :class:`ResultCalibration`, valid only inside the result's own
+    ``temperature_range_degC`` (its :attr:`ResultCalibration.valid_range_degC`).
+    """
+    if result.solver == "truth" and (result.extra or {}).get("temperature_curves"):
+        return TruthCurves(result)
+    return ResultCalibration(result)
 
 
 def _element_rows(values, n):
@@ -431,13 +495,16 @@ def validate(record, calibration, reference, *, model=None, window_s=1.0, window
     Validation
     """
     if not hasattr(reference, "evaluate"):
-        reference = ResultCalibration(reference)
+        reference = truth_reference(reference)
     w = windows if windows is not None else window_means(record, window_s=window_s)
     T = w["T"]
     eg_c, ea_c = _errors_of(calibration, T, w["omega"], w["f"], model)
     eg_r, ea_r = _errors_of(reference, T, w["omega"], w["f"])
     sig_g = sig_a = coverage = None
     inside = np.ones(T.shape, dtype=bool)
+    valid = getattr(reference, "valid_range_degC", None)
+    if valid is not None:   # a truth without curves: only inside its own range (never extrapolated)
+        inside &= (T >= valid[0]) & (T <= valid[1])
     curves = getattr(calibration, "curves", None)
     if curves:
         sig_g, sig_a = sensor_error_sigmas(calibration.element_sigmas(T, model), w["omega"], w["f"])
@@ -447,7 +514,7 @@ def validate(record, calibration, reference, *, model=None, window_s=1.0, window
                 cv = curves.get(f"{triad}.bias.{ax}")
                 if cv is not None:
                     coverage[s] = cv.t_span
-                    inside[:, s] = (T[:, s] >= cv.t_span[0]) & (T[:, s] <= cv.t_span[1])
+                    inside[:, s] &= (T[:, s] >= cv.t_span[0]) & (T[:, s] <= cv.t_span[1])
     ref_g = ref_a = None
     if hasattr(reference, "element_sigmas"):
         ref_sig = reference.element_sigmas(T)
@@ -502,6 +569,6 @@ def simulate_validation_record(simulation, *, hours=2.0, start_degC=None, span_d
                     f"{start:g}..{start + span:g} degC, {hours:g} h", tag="validation")
 
 
-__all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "sensor_errors", "sensor_error_sigmas", "window_means",
+__all__ = ["GYRO_ACCURACY_RADPS", "ACCEL_ACCURACY_MPS2", "ResultCalibration", "TruthCurves", "truth_reference", "sensor_errors", "sensor_error_sigmas", "window_means",
            "Validation", "validate", "validation_text", "simulate_validation_record", "STATIC_RATE_TOLERANCE_RADPS",
            "ERROR_LAYOUT", "RESULT_PARAMETERS"]

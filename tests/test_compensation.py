@@ -357,14 +357,14 @@ def _propagated(table, windows):
 def test_the_exported_table_reproduces_the_campaigns_validation_figures(validated, tmp_path, capsys):
     """validate(record, table, reference) against campaign.json's validation summary: the same windows, the
     largest errors per axis within the table's stated interpolation error propagated, the same verdict."""
-    from graph_calib.validation import ResultCalibration, validate, window_means
+    from graph_calib.validation import truth_reference, validate, window_means
 
     entry = validated["entry"]
     doc = json.loads((validated["camp"] / "campaign.json").read_text())
     solver, model = doc["primary_solver"], doc["stitch_model"]
     campaign_summary = entry["results"][solver][model]
     record = io.read_experiment(validated["record"])
-    reference = ResultCalibration(io.read_result(entry["reference"]))
+    reference = truth_reference(io.read_result(entry["reference"]))    # what the campaign validates against
     w = window_means(record)
     # the campaign's figures come back bit for bit from the stitching export recomputes
     st = validate(record, StitchedCalibration.from_campaign(validated["camp"]).stitched, reference, model=model,

@@ -349,7 +349,7 @@ def test_noise_density_and_independence():
     assert np.array_equal(e.table.t, e0.table.t) and np.array_equal(e.table.valid, e0.table.valid)
     assert abs(noisy.truth.t_ref_degC - clean.truth.t_ref_degC) < 1e-4
     assert np.allclose(list(noisy.truth.values.values()), list(clean.truth.values.values()), rtol=1e-5, atol=0)
-    assert noisy.truth.extra["simulation"]["temperature_curves"] == clean.truth.extra["simulation"]["temperature_curves"]
+    assert noisy.truth.extra["temperature_curves"] == clean.truth.extra["temperature_curves"]
     g = params.GRADES["navigation"]
     dt = 1.0 / e.rate_hz
     static = noisy.motion.is_static(e.t - 0.5 * dt, margin=dt)

@@ -28,6 +28,8 @@ import numpy as np
 from tqdm import tqdm
 
 from graph_calib import io
+from graph_calib.campaign.loop import declared_path, loop_record
+from graph_calib.diagnosis import diagnose
 from graph_calib.errors import InputError
 from graph_calib.problem import build_problem
 from graph_calib.solvers.registry import solve
@@ -85,6 +87,8 @@ def run_tasks(tasks):
             numba.set_num_threads(max(1, min(first.numba_threads, numba.config.NUMBA_NUM_THREADS)))
         except Exception:  # pragma: no cover - numba threading is an optimisation only
             pass
+    if first.diagnosis is not None:
+        return _run_tasks_with_loop(tasks)
     t0 = time.perf_counter()
     try:
         with CompileClock() as build_clock:
@@ -118,6 +122,61 @@ def run_tasks(tasks):
             io.write_result(replace(result, extra=extra), task.result_path)
             outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
                              "compile_seconds": compile_seconds})
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            outcomes.append(_failure(task, exc))
+    return outcomes
+
+
+def _run_tasks_with_loop(tasks):
+    """:func:`run_tasks` with the closed loop: diagnose, then each task's solver on the chosen model.
+
+    :func:`graph_calib.diagnosis.diagnose` solves the declared model (the factor graph, and the filter
+    when it is one of the experiment's solvers), tests every further effect, adds what the data ask for
+    and solves the chosen model with both.  Files, in this order (each atomic): ``summary.json``,
+    ``diagnosis.json`` (the loop's full record), ``declared/<solver>.json`` (the declared model's
+    results, only when something was added), and per task its residual series and ``<solver>.json``
+    of the chosen model, last, its ``campaign.loop`` holding :func:`graph_calib.campaign.loop.loop_record`.
+    """
+    first = tasks[0]
+    t0 = time.perf_counter()
+    try:
+        with CompileClock() as clock:
+            Path(first.out_dir).mkdir(parents=True, exist_ok=True)
+            exp = io.read_experiment(first.file)
+            diag = diagnose(exp, options=first.options, diagnosis=first.diagnosis)
+            record = loop_record(diag)
+            io.atomic_write_json(first.summary_path,
+                                 experiment_summary(exp, t_ref_degC=diag.before.problem.model.t_ref_degC))
+            js = diag.to_json()
+            js["source"] = Path(first.file).name
+            io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - reported per task
+        return [_failure(t, exc) for t in tasks]
+    seconds = (time.perf_counter() - t0 - clock.seconds) / len(tasks)
+    outcomes = []
+    for task in tasks:
+        try:
+            output = diag.after.graph if task.solver == "factor-graph" else getattr(diag.after, "kf", None)
+            result = diag.after.results.get(task.solver)
+            if output is None or result is None:
+                raise RuntimeError(f"the loop ran no {task.solver} on the chosen model")
+            if diag.added:
+                declared = declared_path(task)
+                declared.parent.mkdir(parents=True, exist_ok=True)
+                io.write_result(diag.before.results[task.solver], declared)
+            io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
+                               source=Path(task.file).name, kind=output.residual_quantity)
+            extra = dict(result.extra)
+            extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
+                                 "options_sha256": task.options_sha256, "experiment": task.name,
+                                 "seconds": seconds, "compile_seconds": clock.seconds / len(tasks), "loop": record}
+            io.write_result(replace(result, extra=extra), task.result_path)
+            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
+                             "compile_seconds": clock.seconds / len(tasks), "added": list(diag.added)})
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001
@@ -228,6 +287,8 @@ def execute(tasks, *, options, on_done=None, timing=None):
         else:
             cs = outcome.get("compile_seconds", 0.0)
             note = f" (and {cs:.0f} s compiling numba kernels)" if cs >= 0.5 else ""
+            if "added" in outcome:
+                note += f"; loop added {', '.join(outcome['added']) or 'nothing'}"
             _say(bar, f"  {task.name} {task.solver}: done in {outcome['seconds']:.1f} s{note}", options.progress)
         if on_done is not None:
             on_done(outcome)

@@ -19,6 +19,7 @@ from graph_calib import io
 from graph_calib.campaign.tasks import (
     JOINT_CHOICES, SOLVER_CHOICES, Task, cached, calibration_options, file_sha256, options_sha256, task_key,
 )
+from graph_calib.campaign.loop import loop_options
 from graph_calib.campaign.truth import truth_path
 from graph_calib.errors import InputError
 
@@ -120,19 +121,20 @@ def _remove_stale_temporaries(folder):
 def plan(campaign, out, *, options):
     """Every task of a campaign with its cache key: ``(tasks to run, cached tasks)``."""
     solvers = _solvers(campaign, options)
+    loop = loop_options(campaign, options, solvers)
     threads = 1 if (options.scheduler or options.workers != 0) else 0
     todo, done = [], []
     for e in campaign.experiments:
         check_experiment_header(e.file)
         copts = calibration_options(campaign, t_ref_degC=e.t_ref_degC)
-        osha = options_sha256(copts)
+        osha = options_sha256(copts, loop)
         fsha = file_sha256(e.file)
         folder = Path(out) / e.name
         _remove_stale_temporaries(folder)
         for s in solvers:
             t = Task(name=e.name, file=str(e.file), solver=s, options=copts, out_dir=str(folder),
                      key=task_key(input_sha256=fsha, options_sha256=osha, solver=s), input_sha256=fsha,
-                     options_sha256=osha, numba_threads=threads)
+                     options_sha256=osha, numba_threads=threads, diagnosis=loop)
             (done if (not options.force and cached(t)) else todo).append(t)
     return todo, done
 

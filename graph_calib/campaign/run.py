@@ -6,11 +6,14 @@
    (:func:`graph_calib.campaign.execution.execute`), the cached ones counted;
 3. collect: the tasks' files read back per experiment, ``comparison.json`` written where both solvers
    finished, each experiment's verdict (converged, solvers agree, residuals consistent) in
-   ``campaign.json`` and its ``comparison.json``, the truth files read;
+   ``campaign.json`` and its ``comparison.json``, the truth files read; with the closed loop (default,
+   :mod:`graph_calib.campaign.loop`) the results are those of the model the loop chose, and each
+   experiment's ``loop`` records the effects added and why, residuals and errors before and after;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
-5. truth check: the stitched curves against the first truth file
-   (:func:`graph_calib.campaign.truth.truth_check`); the joint campaign solver, its cross-check and its
-   truth check (:func:`graph_calib.campaign.joint_run.run_joint`, ``campaign.json``'s ``joint``);
+5. truth check: the stitched curves against the truth files' ``temperature_curves``, or else against each
+   subrange's own truth inside its range (:func:`graph_calib.campaign.truth.truth_check`); the joint
+   campaign solver, its cross-check and its truth check
+   (:func:`graph_calib.campaign.joint_run.run_joint`, ``campaign.json``'s ``joint``);
 6. validate: the stitched calibration on each independent record (:func:`graph_calib.validation.validate`);
 7. document and report: ``campaign.json`` (:class:`CampaignRun.document`) and ``report.html``.
 """
@@ -26,6 +29,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.campaign.execution import execute
 from graph_calib.campaign.joint_run import joint_failures, run_joint
+from graph_calib.campaign.loop import loop_entry
 from graph_calib.campaign.planning import plan_campaign
 from graph_calib.campaign.tasks import CampaignOptions
 from graph_calib.campaign.truth import truth_check, truth_path
@@ -35,7 +39,7 @@ from graph_calib.reports.campaign_report import write_report
 from graph_calib.solvers.results import compare
 from graph_calib.solvers.verdict import verdict_of
 from graph_calib.stitching import Stitched, stitch
-from graph_calib.validation import ResultCalibration, Validation, validate, window_means
+from graph_calib.validation import Validation, truth_reference, validate, window_means
 
 #: Format name of ``campaign.json``.
 CAMPAIGN_FORMAT = "imu-calibration-campaign"
@@ -130,8 +134,9 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     planned = _read_and_plan(manifest, out, options=options)
     outcomes, compute_timing = _compute(planned, options=options, on_done=on_done)
     collected = _collect(planned, outcomes)
+    loop_doc = _loop(planned, collected)
     stitched = _stitch(planned, collected)
-    truth_doc = _check_truth(stitched, collected.truths)
+    truth_doc = _check_truth(stitched, collected.truths, collected.summaries)
     joint, joint_doc = run_joint(planned, collected, progress=options.progress, force=options.force)
     truth_doc.update({s: {"joint": e["truth_check"]} for s, e in joint_doc.items() if e["truth_check"]})
     primary = "factor-graph" if "factor-graph" in stitched else next(iter(stitched), None)
@@ -141,6 +146,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
                          truth_doc=truth_doc, validation_doc=validation_doc, compute_timing=compute_timing)
     document["joint"] = joint_doc
     collected.failed.extend(joint_failures(joint_doc))     # after the timing counted the tasks
+    document["loop"] = loop_doc
     run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
                       truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed,
                       joint=joint)
@@ -233,6 +239,28 @@ def _collect(planned, outcomes):
                       failed=failed)
 
 
+def _loop(planned, collected):
+    """Phase 3b: the closed loop's record per experiment (``experiments[i].loop``) and its summary.
+
+    Per experiment :func:`graph_calib.campaign.loop.loop_entry` (the model chosen and why, residual RMS
+    before and after, the error against its truth before and after); the summary (``campaign.json``'s
+    ``loop``) says whether the loop ran, its options and which experiments it changed.
+    """
+    dopts = planned.todo[0].diagnosis if planned.todo else (planned.done[0].diagnosis if planned.done else None)
+    changed = []
+    for entry in collected.experiments:
+        le = loop_entry(planned.out / entry["name"], collected.results.get(entry["name"], {}),
+                        collected.truths.get(entry["name"]))
+        if le is not None:
+            entry["loop"] = le
+            if le["added"]:
+                changed.append({"name": entry["name"], "added": [a["effect"] for a in le["added"]]})
+    return {"enabled": dopts is not None,
+            "options": None if dopts is None else {"alpha": dopts.alpha, "max_added": dopts.max_added,
+                                                   "solvers": list(dopts.solvers)},
+            "changed": changed}
+
+
 def _stitch(planned, collected):
     """Phase 4: ``{solver: Stitched}`` over the experiments that solver finished."""
     stitched = {}
@@ -245,13 +273,17 @@ def _stitch(planned, collected):
     return stitched
 
 
-def _check_truth(stitched, truths):
-    """Phase 5: ``{solver: {model: truth_check}}`` against the first truth file, ``{}`` without one."""
-    truth_any = next(iter(truths.values()), None)
+def _check_truth(stitched, truths, summaries):
+    """Phase 5: ``{solver: {model: truth_check}}``, ``{}`` without a truth file.
+
+    Against the truth files' ``temperature_curves`` when they have them; otherwise each curve against each
+    subrange's own truth inside that subrange's sensor temperature range (never extrapolated).
+    """
     truth_doc = {}
-    if truth_any is not None:
+    if truths:
+        ranges = {n: summaries.get(n, {}).get("sensor_temperature_range_degC") for n in truths}
         for s, st in stitched.items():
-            truth_doc[s] = {m: truth_check(st, truth_any, model=m) for m in ("cubic", "linear")}
+            truth_doc[s] = {m: truth_check(st, truths, model=m, sensor_ranges=ranges) for m in ("cubic", "linear")}
     return truth_doc
 
 
@@ -277,7 +309,7 @@ def _validate(planned, stitched, outcomes, *, primary, stitch_model):
             entry["error"] = oc.get("error", "the record's own calibration is missing")
             validation_doc.append(entry)
             continue
-        reference = ResultCalibration(io.read_result(ref_path))
+        reference = truth_reference(io.read_result(ref_path))
         exp = io.read_experiment(rec)
         w = window_means(exp)
         entry["results"] = {}

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from graph_calib import __version__
+from graph_calib.diagnosis import DiagnosisOptions
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, FilterOptions, GraphOptions
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
@@ -55,6 +56,9 @@ class CampaignOptions:
         Independent experiment files for validation.  A ``<stem>.truth.json`` next
         to one is its reference; otherwise it is calibrated (factor graph) as an
         extra task and its own estimate is the reference.
+    diagnose : bool or None
+        The closed loop on every experiment (:mod:`graph_calib.campaign.loop`): True, False, or None for
+        the manifest's ``[solver] diagnose`` (default on).
     force : bool
         Ignore cached results.
     report : bool
@@ -68,6 +72,7 @@ class CampaignOptions:
     solvers: str | None = None
     stitch_model: str = "cubic"
     validate: tuple[str, ...] = ()
+    diagnose: bool | None = None
     force: bool = False
     report: bool = True
     progress: bool = True
@@ -93,6 +98,8 @@ class Task:
         The two hashes the key is made of.
     numba_threads : int
         Threads for numba's parallel kernels on the worker; 0: leave numba's default.
+    diagnosis : graph_calib.diagnosis.DiagnosisOptions or None
+        The closed loop's options (its repr is part of ``options_sha256``); None: the declared model only.
     """
 
     name: str
@@ -104,6 +111,7 @@ class Task:
     input_sha256: str
     options_sha256: str
     numba_threads: int = 0
+    diagnosis: DiagnosisOptions | None = None
 
     @property
     def result_path(self):
@@ -123,7 +131,8 @@ def calibration_options(campaign, *, t_ref_degC=None):
 
     ``[imu] grade``, ``[priors]``, ``[model] effects / exclude``,
     ``[solver] keyframe_s / max_iterations`` (the latter for both solvers: LM
-    iterations and filter passes), and the experiment's ``t_ref_degC``.
+    iterations and filter passes), and the experiment's ``t_ref_degC``.  (``[solver] diagnose``
+    is the loop's switch, :func:`graph_calib.campaign.loop.loop_options`.)
     """
     s = campaign.solver
     mopt = ModelOptions(
@@ -145,9 +154,10 @@ def file_sha256(path, *, chunk=1 << 22):
     return h.hexdigest()
 
 
-def options_sha256(options):
-    """SHA-256 (hex) of calibration options (their repr: frozen dataclasses of plain values)."""
-    return hashlib.sha256(repr(options).encode("utf-8")).hexdigest()
+def options_sha256(options, diagnosis=None):
+    """SHA-256 (hex) of calibration options and, with the loop, its options (reprs of frozen dataclasses)."""
+    text = repr(options) if diagnosis is None else f"{options!r}|loop|{diagnosis!r}"
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
 def task_key(*, input_sha256, options_sha256, solver):

@@ -27,6 +27,10 @@ def add_arguments(p):
                         "RECORD.truth.json next to it is the reference, else its own calibration")
     p.add_argument("--stitch", choices=("cubic", "linear"), default="cubic",
                    help="stitched model used for validation and the calibration table (default cubic)")
+    p.add_argument("--no-diagnose", action="store_true",
+                   help="skip the closed loop (by default every experiment is diagnosed and the effects its data "
+                        "ask for are adopted before stitching; the manifest's [solver] diagnose = false does the "
+                        "same)")
     p.add_argument("--force", action="store_true", help="recompute every experiment, ignoring cached results")
     p.add_argument("--no-report", action="store_true", help="do not write report.html")
     p.add_argument("--quiet", action="store_true", help="no progress display")
@@ -38,7 +42,8 @@ def options_from_args(args):
     if args.workers is not None and args.workers < 0:
         raise InputError(f"must be 0 or more, got {args.workers}", dataset="--workers")
     return CampaignOptions(workers=args.workers, scheduler=args.scheduler, solvers=args.solver,
-                           stitch_model=args.stitch, validate=tuple(args.validate), force=args.force,
+                           stitch_model=args.stitch, validate=tuple(args.validate),
+                           diagnose=False if args.no_diagnose else None, force=args.force,
                            report=not args.no_report, progress=not args.quiet)
 
 
@@ -62,6 +67,7 @@ def print_summary(run, out=None):
             chi = ", ".join(f"{v:.2f}" for v in verdict["fit_chi2_per_dof"].values())
             line += f", chi2/dof {chi}: {'pass' if verdict['passed'] else 'VERDICT FAILED'}"
         print(line, file=out)
+        _print_loop(e.get("loop"), out)
         for problem in (verdict or {}).get("problems", []):
             print(f"    {problem}", file=out)
     primary = doc.get("primary_solver")
@@ -114,6 +120,21 @@ def _print_joint(doc, out):
     for val in j.get("validation", []):
         print(f"    joint validation {Path(val['record']).name}: {validation_text(val['summary'])} -> "
               f"{'pass' if val['summary']['pass']['all'] else 'FAIL'}", file=out)
+
+
+def _print_loop(loop, out):
+    """One line of an experiment's closed loop: effects added (score, log10 p), error vs truth before -> after."""
+    if not loop:
+        return
+    added = ", ".join(f"{a['effect']} (score {a['statistic']:.1f}, log10 p {a['log10_p']:.1f})"
+                      for a in loop["added"]) or "nothing"
+    line = f"    loop: added {added}"
+    err = (loop.get("error_vs_truth") or {}).get("factor-graph") or {}
+    if err.get("before") and err.get("after"):
+        b, a = err["before"], err["after"]
+        line += (f"; graph vs truth RMS {b['rms_z']:.2f} -> {a['rms_z']:.2f} sigma, max {b['max_abs_z']:.1f} -> "
+                 f"{a['max_abs_z']:.1f}")
+    print(line, file=out)
 
 
 def run(args):

@@ -36,6 +36,10 @@ def add_arguments(parser):
                         help="hand-held scenarios: the pivot's sway, m/s^2 rms (default 0)")
     parser.add_argument("--pivot", type=float, metavar="M",
                         help="hand-held scenarios: distance of the sensor from the hand's pivot, m (default 0)")
+    parser.add_argument("--cubic-scale", type=float, metavar="S",
+                        help="turntable scenarios: a cubic term in the bias temperature curves, as real IMUs have, "
+                             "S times the grade's typical size (default 0: none; the same seed otherwise gives the "
+                             "same data)")
     parser.add_argument("--list", action="store_true", help="list the scenarios and exit")
 
 
@@ -77,6 +81,8 @@ def run(args):
     for key, value in (("cut", args.cut or None), ("hand_accel_mps2", args.hand_accel), ("pivot_m", args.pivot)):
         if value is not None:
             options[key] = value
+    if args.cubic_scale is not None:
+        options["cubic_scale"] = args.cubic_scale
     rng = np.random.default_rng(args.seed)
     t0 = time.monotonic()
     if args.program:

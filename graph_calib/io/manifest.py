@@ -35,6 +35,8 @@ SOLVER_OPTIONS = {
                    lambda v: None if _is_real(v) and math.isfinite(v) and v > 0 else "must be a positive number"),
     "max_iterations": ("largest number of solver iterations",
                        lambda v: None if _is_int(v) and v > 0 else "must be a positive integer"),
+    "diagnose": ("the closed loop on every experiment of a campaign (graph-calib campaign): true (default) or false",
+                 lambda v: None if isinstance(v, bool) else "must be true or false"),
 }
 
 _MANIFEST_KEYS = ("imu", "experiment", "priors", "model", "solver")

@@ -155,6 +155,43 @@ def validate_result(result, *, path):
     if clash:
         raise InputError(f"extra key {_show(clash[0])} clashes with a key of the result layout", path=path,
                          dataset=clash[0])
+    if "temperature_curves" in r.extra:
+        validate_temperature_curves(r.extra["temperature_curves"], path=path)
+
+
+def validate_temperature_curves(curves, *, path):
+    """Check a truth file's ``temperature_curves`` (data-format.md).
+
+    ``{flat element: {"t0_degC": t0, "coefficients": [c0, c1, ...]}}``: each key a known flat element
+    of a temperature-dependent parameter (one with temperature coefficients in the catalogue, e.g.
+    ``accel.bias.y``), ``t0_degC`` a finite number, ``coefficients`` a non-empty list of finite numbers
+    (SI; value(T) = sum_i c_i (T - t0)^i) and no other key.
+
+    Raises
+    ------
+    InputError
+        Naming the file and the offending entry.
+    """
+    ds0 = "temperature_curves"
+    if not isinstance(curves, dict):
+        raise InputError(f"must be an object {{element: {{t0_degC, coefficients}}}}, got {_show(curves)}",
+                         path=path, dataset=ds0)
+    for name, entry in curves.items():
+        ds = f'{ds0}["{name}"]'
+        _check_element_name(name, path=path, dataset=ds)
+        parameter = params.split_element_name(name)[0]
+        if effects.EFFECTS[parameter].temperature_of is not None or not effects.temperature_family(parameter)[1]:
+            raise InputError(f"{_show(name)} is not an element of a temperature-dependent parameter (a curve over "
+                             "temperature is given for bias and scale elements)", path=path, dataset=ds)
+        if not isinstance(entry, dict) or set(entry) != {"t0_degC", "coefficients"}:
+            raise InputError("must be an object with exactly 't0_degC' and 'coefficients'", path=path, dataset=ds)
+        _check_finite_real(entry["t0_degC"], path=path, dataset=ds + ".t0_degC")
+        coef = entry["coefficients"]
+        if not isinstance(coef, list) or not coef:
+            raise InputError(f"must be a non-empty list of numbers [c0, c1, ...], got {_show(coef)}", path=path,
+                             dataset=ds + ".coefficients")
+        for i, v in enumerate(coef):
+            _check_finite_real(v, path=path, dataset=f"{ds}.coefficients[{i}]", what="coefficient")
 
 
 def result_to_dict(result):

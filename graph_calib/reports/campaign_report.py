@@ -28,7 +28,7 @@ from graph_calib.reports.campaign_figures import (
     report_unit,
 )
 from graph_calib.solvers.results import sigma_ratio_range_text
-from graph_calib.validation import ResultCalibration, validation_text
+from graph_calib.validation import TruthCurves, validation_text
 
 
 def _fmt(v, digits=4):
@@ -158,6 +158,60 @@ def _bench_table(run, solver):
 # ---------------------------------------------------------------------------
 
 
+def _loop_table(doc):
+    """Rows per subrange of the closed loop: effects added, residual RMS and error vs truth before -> after."""
+    rows, truth = [], False
+    for e in doc["experiments"]:
+        lp = e.get("loop")
+        if not lp:
+            continue
+        added = "; ".join(f"{a['effect']} (score {a['statistic']:.1f} > {a['threshold']:.1f}, log10 p "
+                          f"{a['log10_p']:.1f})" for a in lp["added"]) or "nothing"
+        rr = lp["residual_rms"]
+        res = ", ".join(f"{SOLVER_LABEL.get(s, s)} {rr['before'][s]['overall']:.3f} -> {rr['after'][s]['overall']:.3f}"
+                        for s in rr["after"] if s in rr["before"])
+        errs = []
+        for s, ev in (lp.get("error_vs_truth") or {}).items():
+            b, a = ev.get("before"), ev.get("after")
+            if b and a:
+                truth = True
+                errs.append(f"{SOLVER_LABEL.get(s, s)}: RMS {b['rms_z']:.2f} -> {a['rms_z']:.2f}, max "
+                            f"{b['max_abs_z']:.1f} -> {a['max_abs_z']:.1f}, within 3 sigma "
+                            f"{100 * b['fraction_within_3sigma']:.0f} -> {100 * a['fraction_within_3sigma']:.0f} %")
+        rows.append([e["name"], added, res, "; ".join(errs) or "-"])
+    return rows, truth
+
+
+def _loop_section(doc):
+    """The closed loop's section (None when the loop did not run)."""
+    if not (doc.get("loop") or {}).get("enabled"):
+        return None
+    rows, truth = _loop_table(doc)
+    text = ("Before stitching, every experiment went through the closed loop of graph-calib diagnose: calibrated "
+            "with the declared model, every further effect of model.md score-tested against its residuals, the most "
+            "significant one added and the model solved again, until none is significant (Bonferroni at alpha = "
+            f"{doc['loop']['options']['alpha']:g}). The stitched curves come from the models the loop chose. "
+            "Residual RMS: overall RMS of the whitened residuals (graph) or normalised innovations (filter), about 1 "
+            "for a model that explains the data.")
+    if truth:
+        text += (" Error against the truth: the declared parameters' estimates minus the truth at the subrange's "
+                 "reference temperature, in their own sigmas (RMS, largest, share within 3 sigma).")
+    return H.section("The closed loop", H.paragraph(text),
+                     H.table(["experiment", "effects added (score, log10 p)", "residual RMS before -> after",
+                              "error against the truth before -> after"], rows, left=(0, 1, 2, 3)), anchor="loop")
+
+
+def _truth_curves(truths):
+    """The truth over the whole range to draw (a truth file's ``temperature_curves``), or None.
+
+    A truth file without them holds only inside its own subrange (data-format.md); it is not drawn as a curve.
+    """
+    for t in (truths or {}).values():
+        if (t.extra or {}).get("temperature_curves"):
+            return TruthCurves(t)
+    return None
+
+
 def build_report(run, *, figures_dir=None):
     """The HTML text of a campaign's report.
 
@@ -185,7 +239,7 @@ def build_report(run, *, figures_dir=None):
 
     parts = []
     n_exp = len(doc["experiments"])
-    truth_cal = ResultCalibration(next(iter(run.truths.values()))) if run.truths else None
+    truth_cal = _truth_curves(run.truths)
 
     # --- summary
     verdicts = []
@@ -272,6 +326,11 @@ def build_report(run, *, figures_dir=None):
                 "Mounting, lever arm and table time lag belong to each set-up, not to the IMU; they are not "
                 "stitched."), bt, anchor="bench"))
 
+    # --- the closed loop
+    lp = _loop_section(doc)
+    if lp is not None:
+        parts.append(lp)
+
     # --- solvers
     ct = _comparison_table(run)
     if ct is not None:
@@ -348,7 +407,7 @@ def build_report(run, *, figures_dir=None):
     nav = H.Raw("<nav><ul>" + "".join(
         f'<li><a href="#{a}">{t}</a></li>' for a, t in (
             ("summary", "Summary"), ("reading", "How to read the figures"), ("parameters", "Stitched parameters"),
-            ("bench", "Bench parameters"), ("solvers", "Filter against graph"), ("boundaries", "Boundaries"),
+            ("bench", "Bench parameters"), ("loop", "The closed loop"), ("solvers", "Filter against graph"), ("boundaries", "Boundaries"),
             ("validation", "Validation"), ("residuals", "Residuals"), ("joint", "Joint solver"))) + "</ul></nav>")
     return H.page(f"Thermal calibration campaign: {doc['imu_id']}", nav, *parts,
                   H.paragraph("Written by graph-calib campaign. Units: SI in the files; here deg/h, ppm, arcsec, "

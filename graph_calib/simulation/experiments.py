@@ -28,7 +28,7 @@ from graph_calib.simulation.ferraris import ferraris_motion
 from graph_calib.simulation.handheld import HandheldMotion
 from graph_calib.simulation.imu import SignalModel, simulate_increments
 from graph_calib.simulation.thermal import ThermalModel, ramp_chamber
-from graph_calib.simulation.truth import TEMPERATURE_TRIPLES, curvature_fit_offsets
+from graph_calib.simulation.truth import curvature_fit_offsets
 from graph_calib.simulation.turntable import TurntableMotion, encoder_readings, rot_z
 
 #: Temperature channels of the navigation-grade IMU: name, time constant (min),
@@ -108,19 +108,17 @@ def _as_list(a):
 
 def _truth_result(*, file_name, imu, t_ref, T_rec_sensors, tl, x_truth, unmodelled, info):
     sensor_dT = T_rec_sensors - t_ref
-    curves = {"t_center_degC": imu.t_center}
-    for p, _, _ in TEMPERATURE_TRIPLES:
-        c0, c1, c2 = imu.curves[p]
-        for i, ax in enumerate("xyz"):
-            curves[f"{p}.{ax}"] = [float(c0[i]), float(c1[i]), float(c2[i])]
     sim = dict(info)
     sim["unmodelled"] = unmodelled
-    sim["curvature_fit_offsets"] = curvature_fit_offsets(imu, sensor_dT)
-    sim["temperature_curves"] = curves
+    sim["curvature_fit_offsets"] = curvature_fit_offsets(imu, sensor_dT, t_ref=t_ref)
+    if imu.cubic:
+        sim["cubic"] = {p: [float(v) for v in c3] for p, c3 in imu.cubic.items()}
+    # the truth over the whole range (data-format.md), beside the values at this experiment's T_ref
     return Result(
         source=file_name, solver="truth", t_ref_degC=float(t_ref),
         temperature_range_degC=(float(T_rec_sensors.min()), float(T_rec_sensors.max())),
-        effects=tuple(tl.names), values=tl.to_dict(x_truth), sigmas=None, extra={"simulation": sim},
+        effects=tuple(tl.names), values=tl.to_dict(x_truth), sigmas=None,
+        extra={"temperature_curves": imu.temperature_curves(), "simulation": sim},
     )
 
 

@@ -148,13 +148,15 @@ def _check_common(hours, rate_hz, effect_scale, effect_names):
 
 def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, noise, errors, rate_hz, effects,
                     effect_scale, curvature, latitude_deg, gravity_mps2, table_valid, encoder_rate_hz, tag,
-                    file_stem):
+                    file_stem, cubic_scale=0.0):
     _check_common(hours, rate_hz, effect_scale, effects)
+    if not (np.isfinite(cubic_scale) and cubic_scale >= 0):
+        raise InputError(f"--cubic-scale must be a non-negative number, got {cubic_scale!r}")
     if table_valid not in ("static", "all"):
         raise InputError(f"table_valid must be 'static' or 'all', got {table_valid!r}")
     imu_seed, *seeds = (int(s) for s in rng.integers(0, 2**62, size=1 + len(subranges)))
     imu = draw_imu("navigation", rng=np.random.default_rng(imu_seed), effects=effects, effect_scale=effect_scale,
-                   errors=errors, curvature=curvature)
+                   errors=errors, curvature=curvature, cubic_scale=float(cubic_scale))
     azimuth = 0.0
     plans = []
     for i, ((lo, hi), seed) in enumerate(zip(subranges, seeds)):
@@ -179,12 +181,12 @@ def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, n
         plans.append(ExperimentPlan(file_name=f"{stem}.h5", make=make,
                                     summary=f"subrange {lo:g}..{hi:g} degC, {hours:g} h"))
     info = {"hours": hours, "rate_hz": rate_hz, "noise": noise, "errors": errors, "effects": list(effects),
-            "subranges": [list(s) for s in subranges]}
+            "subranges": [list(s) for s in subranges], "cubic_scale": float(cubic_scale)}
     return Simulation(scenario=name, imu_id=imu_id, grade="navigation", plans=tuple(plans), imu=imu, info=info)
 
 
 def nav_subrange(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
-                 curvature=True, subrange=(20.0, 30.0), span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG,
+                 curvature=True, cubic_scale=0.0, subrange=(20.0, 30.0), span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG,
                  gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag=""):
     """One navigation-grade experiment: 1.5 h at 100 Hz, sensors drifting 8 degC through 20..30 degC.
 
@@ -195,11 +197,12 @@ def nav_subrange(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effe
                            span_degC=span_degC, design=NAV_DESIGN, imu_id="SIM-NAV 0001", noise=noise,
                            errors=errors, rate_hz=rate_hz, effects=tuple(effects), effect_scale=effect_scale,
                            curvature=curvature, latitude_deg=latitude_deg, gravity_mps2=gravity_mps2,
-                           table_valid=table_valid, encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=None)
+                           table_valid=table_valid, encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=None,
+                           cubic_scale=cubic_scale)
 
 
 def nav_subrange_short(*, rng, hours=0.3, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
-                       curvature=True, subrange=(20.0, 25.0), span_degC=5.0, latitude_deg=DEFAULT_LATITUDE_DEG,
+                       curvature=True, cubic_scale=0.0, subrange=(20.0, 25.0), span_degC=5.0, latitude_deg=DEFAULT_LATITUDE_DEG,
                        gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag="",
                        _name="nav-subrange-short", _stem=None):
     """The nav-subrange design in 18 min (3 min alignment, 15-25 s static positions), sensors drifting 5 degC."""
@@ -207,28 +210,29 @@ def nav_subrange_short(*, rng, hours=0.3, noise=True, errors=True, rate_hz=100.0
                            design=SHORT_DESIGN, imu_id="SIM-NAV 0001", noise=noise, errors=errors,
                            rate_hz=rate_hz, effects=tuple(effects), effect_scale=effect_scale, curvature=curvature,
                            latitude_deg=latitude_deg, gravity_mps2=gravity_mps2, table_valid=table_valid,
-                           encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=_stem)
+                           encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=_stem,
+                           cubic_scale=cubic_scale)
 
 
 def nav_campaign(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
-                 curvature=True, span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
+                 curvature=True, cubic_scale=0.0, span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
                  table_valid="static", encoder_rate_hz=10.0, tag=""):
     """Six navigation-grade experiments covering -10..+50 degC (one IMU), the nav-subrange design each."""
     return _table_scenario("nav-campaign", rng=rng, subranges=CAMPAIGN_SUBRANGES, hours=hours, span_degC=span_degC,
                            design=NAV_DESIGN, imu_id="SIM-NAV 0001", noise=noise, errors=errors, rate_hz=rate_hz,
                            effects=tuple(effects), effect_scale=effect_scale, curvature=curvature,
                            latitude_deg=latitude_deg, gravity_mps2=gravity_mps2, table_valid=table_valid,
-                           encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=None)
+                           encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=None, cubic_scale=cubic_scale)
 
 
 def effect_scenario(effect, *, rng, hours=0.3, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
-                    curvature=True, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
+                    curvature=True, cubic_scale=0.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
                     table_valid="static", encoder_rate_hz=10.0, tag=""):
     """nav-subrange-short with the further effect ``effect`` switched on (size from ``EFFECT_SIZES``)."""
     return nav_subrange_short(rng=rng, hours=hours, noise=noise, errors=errors, rate_hz=rate_hz,
                               effects=(effect,) + tuple(e for e in effects if e != effect),
-                              effect_scale=effect_scale, curvature=curvature, latitude_deg=latitude_deg,
-                              gravity_mps2=gravity_mps2, table_valid=table_valid, encoder_rate_hz=encoder_rate_hz,
+                              effect_scale=effect_scale, curvature=curvature, cubic_scale=cubic_scale,
+                              latitude_deg=latitude_deg, gravity_mps2=gravity_mps2, table_valid=table_valid, encoder_rate_hz=encoder_rate_hz,
                               tag=tag, _name=f"effect-{effect}", _stem=f"effect_{effect.replace('.', '_')}")
 
 
@@ -379,7 +383,8 @@ def simulate(name, *, rng, **options):
         ``noise`` (False: no sensor, encoder or temperature noise), ``errors`` (False: every truth
         parameter zero), ``hours`` (length of each experiment), ``rate_hz``, ``effects`` (further
         effects of model.md switched on), ``effect_scale`` (multiplies their sizes), ``curvature``
-        (False: exactly linear temperature curves), ``latitude_deg``, ``gravity_mps2``,
+        (False: exactly linear temperature curves), ``cubic_scale`` (a cubic term of the bias curves,
+        as real IMUs have: its size relative to the grade's typical one; 0, the default: none), ``latitude_deg``, ``gravity_mps2``,
         ``table_valid`` (``"static"`` or ``"all"``), ``encoder_rate_hz``, ``tag`` (free text for the
         description and the truth file).
 

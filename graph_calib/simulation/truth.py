@@ -12,9 +12,10 @@ the campaign's range,
 
     p(T) = c_0 + c_1 (T - T_c) + c_2 (T - T_c)^2, \qquad T_c = 20\ \mathrm{degC},
 
-(quadratic, because the sensor model has terms up to ``dT^2``: the simulator
-must produce its errors through :func:`graph_calib.sensor_model.measure`).  In
-an experiment with reference temperature ``T_ref`` the same curve is exactly
+(quadratic by default; the simulator must produce its errors through
+:func:`graph_calib.sensor_model.measure`, whose terms go up to ``dT^2``, and
+``dT^3`` for the biases).  In an experiment with reference temperature ``T_ref``
+the same curve is exactly
 
 .. math::
 
@@ -26,6 +27,17 @@ and the curvature ``c_2`` is a small ``*_tc2`` remainder that the declared
 ``*.scale_tc2`` terms of the simulation layout); the truth file lists it under
 ``simulation.unmodelled`` unless the scenario switches that effect on, when it
 is part of the truth (effect value plus curvature).
+
+A cubic term, as real IMUs show, is added to the biases with ``cubic_scale > 0``
+(:func:`draw_imu`): ``p(T) = ... + c_3 (T - T_c)^3`` with ``c_3`` drawn from the
+grade's ``*.bias_tc3`` range times ``cubic_scale`` (drawn after every other
+parameter, so the other draws of a seed stay the same; ``cubic_scale = 0``, the
+default, draws nothing and leaves every seed's data as before).  Around ``T_ref``
+it is ``p(T_ref) + p' dT + (c_2 + 3 c_3 d) dT^2 + c_3 dT^3`` with
+``d = T_ref - T_c``: the local curvature grows towards the ends of the range.
+
+The truth over the whole range is :meth:`ImuTruth.temperature_curves`, written
+into each truth file as data-format.md's top-level ``temperature_curves``.
 """
 
 from __future__ import annotations
@@ -63,6 +75,7 @@ TRUTH_RANGES = {
         "gyro.bias": (0.01 * DH, 0.1 * DH),
         "gyro.bias_tc": (0.001 * DH, 0.005 * DH),
         "gyro.bias_tc2": (1e-5 * DH, 3e-5 * DH),
+        "gyro.bias_tc3": (1e-7 * DH, 4e-7 * DH),
         "gyro.scale": (10 * PPM, 100 * PPM),
         "gyro.scale_tc": (0.3 * PPM, 1.5 * PPM),
         "gyro.scale_tc2": (0.002 * PPM, 0.01 * PPM),
@@ -70,6 +83,7 @@ TRUTH_RANGES = {
         "accel.bias": (1e-4, 1e-3),
         "accel.bias_tc": (0.5e-5, 2e-5),
         "accel.bias_tc2": (2e-8, 8e-8),
+        "accel.bias_tc3": (2e-9, 8e-9),
         "accel.scale": (50 * PPM, 300 * PPM),
         "accel.scale_tc": (0.5 * PPM, 2 * PPM),
         "accel.scale_tc2": (0.002 * PPM, 0.01 * PPM),
@@ -82,6 +96,7 @@ TRUTH_RANGES = {
         "gyro.bias": (0.5 * DH, 5 * DH),
         "gyro.bias_tc": (0.02 * DH, 0.1 * DH),
         "gyro.bias_tc2": (2e-4 * DH, 6e-4 * DH),
+        "gyro.bias_tc3": (2e-6 * DH, 8e-6 * DH),
         "gyro.scale": (100 * PPM, 1000 * PPM),
         "gyro.scale_tc": (3 * PPM, 15 * PPM),
         "gyro.scale_tc2": (0.02 * PPM, 0.1 * PPM),
@@ -89,6 +104,7 @@ TRUTH_RANGES = {
         "accel.bias": (5e-4, 5e-3),
         "accel.bias_tc": (2e-5, 1e-4),
         "accel.bias_tc2": (2e-7, 8e-7),
+        "accel.bias_tc3": (2e-8, 8e-8),
         "accel.scale": (200 * PPM, 1000 * PPM),
         "accel.scale_tc": (5 * PPM, 20 * PPM),
         "accel.scale_tc2": (0.02 * PPM, 0.1 * PPM),
@@ -101,6 +117,7 @@ TRUTH_RANGES = {
         "gyro.bias": (0.1 * c.DEG_TO_RAD, 1.0 * c.DEG_TO_RAD),
         "gyro.bias_tc": (0.005 * c.DEG_TO_RAD, 0.03 * c.DEG_TO_RAD),
         "gyro.bias_tc2": (0.0, 0.0),
+        "gyro.bias_tc3": (0.0, 0.0),
         "gyro.scale": (0.005, 0.03),
         "gyro.scale_tc": (50 * PPM, 300 * PPM),
         "gyro.scale_tc2": (0.0, 0.0),
@@ -108,6 +125,7 @@ TRUTH_RANGES = {
         "accel.bias": (0.02, 0.2),
         "accel.bias_tc": (1e-3, 5e-3),
         "accel.bias_tc2": (0.0, 0.0),
+        "accel.bias_tc3": (0.0, 0.0),
         "accel.scale": (0.005, 0.03),
         "accel.scale_tc": (50 * PPM, 300 * PPM),
         "accel.scale_tc2": (0.0, 0.0),
@@ -165,6 +183,26 @@ class ImuTruth:
     exclude: tuple = ()
     curvature: bool = True
     notes: dict = field(default_factory=dict)
+    cubic: dict = field(default_factory=dict)
+
+    def temperature_curves(self):
+        """The truth over the whole range, data-format.md's ``temperature_curves``.
+
+        ``{flat element: {"t0_degC": t_center, "coefficients": [c0, c1, c2(, c3)]}}`` (SI) for every
+        element of the temperature-dependent parameters, except those of a parameter whose ``*_tc2`` or
+        ``*_tc3`` further effect is switched on (that effect is added around each experiment's
+        ``T_ref``, so it is no single curve over the range: those elements are left out).
+        """
+        out = {}
+        for p, ptc, ptc2 in TEMPERATURE_TRIPLES:
+            if ptc2 in self.effects or f"{p}_tc3" in self.effects:
+                continue
+            c0, c1, c2 = self.curves[p]
+            c3 = self.cubic.get(p)
+            for i, ax in enumerate("xyz"):
+                coef = [float(c0[i]), float(c1[i]), float(c2[i])] + ([] if c3 is None else [float(c3[i])])
+                out[f"{p}.{ax}"] = {"t0_degC": float(self.t_center), "coefficients": coef}
+        return out
 
     def truth_layout(self):
         """Layout of the truth file: the declared model (minus ``exclude``) plus ``effects``."""
@@ -173,6 +211,7 @@ class ImuTruth:
     def simulation_layout(self):
         """Layout the data are made with: the truth layout plus the curvature terms."""
         extra = [t[2] for t in TEMPERATURE_TRIPLES] if self.curvature else []
+        extra += [f"{p}_tc3" for p in self.cubic]
         return self.truth_layout().with_names(*[n for n in extra if n not in self.effects])
 
     def at(self, t_ref):
@@ -196,6 +235,12 @@ class ImuTruth:
             values[p] = c0 + c1 * d + c2 * d * d
             values[ptc] = c1 + 2.0 * c2 * d
             curv = c2 if self.curvature else np.zeros(3)
+            c3 = self.cubic.get(p)
+            if c3 is not None:   # the cubic about T_ref: value, slope and curvature grow, the dT^3 term stays
+                values[p] = values[p] + c3 * d**3
+                values[ptc] = values[ptc] + 3.0 * c3 * d * d
+                curv = curv + 3.0 * c3 * d
+                values[f"{p}_tc3"] = values.get(f"{p}_tc3", np.zeros(3)) + c3
             values[ptc2] = values.get(ptc2, np.zeros(3)) + curv
         tl = self.truth_layout()
         sl = self.simulation_layout()
@@ -215,7 +260,7 @@ class ImuTruth:
         return tl, x_truth, sl, x_sim, unmodelled
 
 
-def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature=True, exclude=()):
+def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature=True, exclude=(), cubic_scale=0.0):
     """Draw one IMU's truth.
 
     Parameters
@@ -233,6 +278,9 @@ def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature
         False: temperature curves exactly linear (no unmodelled remainder).
     exclude : sequence of str
         Declared parameters absent from this set-up (kept zero, left out of the truth).
+    cubic_scale : float
+        Multiplies the cubic term of the bias curves (``*.bias_tc3`` of :data:`TRUTH_RANGES`); 0 (the
+        default): none, and nothing drawn, so every seed's IMU stays as before.  Needs ``curvature``.
 
     Returns
     -------
@@ -272,11 +320,16 @@ def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature
         curvature = False
     if not curvature:
         curves = {n: (v[0], v[1], np.zeros(3)) for n, v in curves.items()}
+    cubic = {}
+    if cubic_scale > 0 and errors and curvature:   # drawn last: the draws above stay those of the seed
+        for p in ("gyro.bias", "accel.bias"):
+            lo, hi = ranges[f"{p}_tc3"]
+            cubic[p] = _draw(rng, lo * cubic_scale, hi * cubic_scale, 3)
     return ImuTruth(grade=grade, constants=consts, curves=curves, effects=effects, exclude=tuple(exclude),
-                    curvature=curvature)
+                    curvature=curvature, cubic=cubic)
 
 
-def curvature_fit_offsets(imu, sensor_dT):
+def curvature_fit_offsets(imu, sensor_dT, *, t_ref=None):
     """How a linear fit in ``dT`` would absorb the curvature inside one experiment.
 
     Least squares of ``c_2 dT_i^2`` on ``[1, dT_i]`` over the experiment's
@@ -289,6 +342,8 @@ def curvature_fit_offsets(imu, sensor_dT):
     imu : ImuTruth
     sensor_dT : ndarray, shape (N, 6)
         ``T - T_ref`` of gyro x, y, z and accel x, y, z.
+    t_ref : float, optional
+        degC; with a cubic term (``imu.cubic``) its local curvature and ``dT^3`` are included.
 
     Returns
     -------
@@ -300,11 +355,14 @@ def curvature_fit_offsets(imu, sensor_dT):
         return out
     for p, ptc, _ in TEMPERATURE_TRIPLES:
         c2 = imu.curves[p][2]
+        c3 = imu.cubic.get(p) if t_ref is not None else None
+        if c3 is not None:
+            c2 = c2 + 3.0 * c3 * (t_ref - imu.t_center)
         cols = slice(0, 3) if p.startswith("gyro") else slice(3, 6)
         dT = sensor_dT[:, cols]
         for i, ax in enumerate("xyz"):
             d = dT[:, i]
-            y = c2[i] * d * d
+            y = c2[i] * d * d + (0.0 if c3 is None else c3[i] * d**3)
             dm, ym = d.mean(), y.mean()
             var = np.mean((d - dm) ** 2)
             slope = float(np.mean((d - dm) * (y - ym)) / var) if var > 0 else 0.0
