@@ -6,7 +6,8 @@
   0.0011 m/s^2, transitions 0.517 / 0.465 / 1.005 deg);
 - ``graph-calib calibrate`` with no options on that session (slow): converged, solvers agree,
   transitions RMS at most IMU-TK's; fitted on the first 20 poses, the 18 transitions after at least as
-  good as the issue's figure (0.633 deg) and as IMU-TK's fit on the same poses.
+  good as the issue's figure (0.633 deg) and as IMU-TK's fit on the same poses; with the loop
+  (``diagnose``) at most 0.2 deg; the shortened records of the issue converge and agree or fail the verdict.
 """
 import numpy as np
 import pytest
@@ -14,6 +15,7 @@ import pytest
 from graph_calib import measured_metrics as mm
 from graph_calib.calibration import Calibration
 from graph_calib.calibrate import build_problem, solve_problem
+from graph_calib.diagnosis import DiagnosisOptions, diagnose
 from graph_calib.grade_choice import choose_grade
 from graph_calib.importers import import_xsens
 from graph_calib.options import CalibrationOptions, ModelOptions
@@ -117,3 +119,17 @@ def test_shortened_xsens_records_converge_and_agree_or_fail_the_verdict(xsens, r
     assert (all(v.converged.values()) and v.agree) or not v.passed, v.text()
     if v.passed:
         assert all(c < 2.0 for c in v.fit_chi2.values())
+
+
+@pytest.mark.slow
+def test_xsens_loop_takes_the_transitions_below_two_tenths_of_a_degree(xsens, intervals):
+    """``graph-calib diagnose`` with no options (the grade chosen from the data): the calibration the loop
+    ends with, both solvers, transitions RMS at most 0.2 deg (issue #13's target; the figure is in
+    docs/measured-data.md)."""
+    iv, _ = intervals
+    opts = CalibrationOptions(model=ModelOptions(grade=choose_grade(xsens).grade))
+    diag = diagnose(xsens, options=opts, diagnosis=DiagnosisOptions(solvers=("factor-graph", "sqrt-kf")))
+    assert diag.added
+    for s, res in diag.after.results.items():
+        rms = mm.transition_figures(xsens, Calibration.from_result(res), intervals=iv).transitions_deg()[0]
+        assert rms <= 0.2, (s, diag.added, rms)
