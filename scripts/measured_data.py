@@ -397,9 +397,43 @@ def _saturated(exp, limit_dps=249.9):
     return (w >= limit_dps).sum(axis=0)
 
 
+def _verdict_findings(results):
+    """Whether each failed verdict is honest, read from the loop's own numbers."""
+    lines = ["## The verdicts", ""]
+    for s in results:
+        d = s["diag"]
+        vb, va = s["verdicts"]
+        t = _first_test(d)
+        chi_b = max(vb.fit_chi2.values())
+        chi_a = max(va.fit_chi2.values())
+        txt = [f"**{s['title']}** (grade {s['choice'].grade}). Declared model: {_short(vb).lower()}, "
+               f"chi2/dof {chi_b:.2f}; after the loop: {_short(va).lower()}, chi2/dof {chi_a:.2f}."]
+        if not vb.passed and chi_b > 2 and t.significant:
+            txt.append(f"The declared model's failure is honest: its residuals carry an effect the model lacks "
+                       f"(`{t.name}`, score statistic {t.statistic:.0f} against a threshold of {t.threshold:.1f}), "
+                       f"and with the effects the loop adds the chi2/dof falls to {chi_a:.2f}: the noise model is "
+                       "not what was too small. `graph-calib calibrate` exits 3 on this session, as it should; "
+                       "`graph-calib diagnose` is the command that finds what is missing.")
+        if chi_a < 0.5:
+            txt.append(f"After the loop the chi2/dof ({chi_a:.2f}) is well below 1: the noise model now "
+                       "overstates the scatter of the residuals, so the sigmas are pessimistic (not found here "
+                       "which term overstates it; the densities come from the first static interval).")
+        if va.agree is False:
+            res = d.after.results
+            par = compare(res["sqrt-kf"], res["factor-graph"])["parameters"]
+            worst = sorted(par.items(), key=lambda kv: -abs(kv[1]["difference_in_sigma"]))[:4]
+            txt.append(f"After the loop the solvers differ by {va.max_difference_sigma:.2f} sigma, over the "
+                       "comparison's tolerance: the loop's calibration fails the verdict on agreement ("
+                       + ", ".join(f"`{k}` {v['difference_in_sigma']:+.2f}" for k, v in worst)
+                       + " sigma). The code still feeds `gyro.g_sensitivity` the raw specific force, where "
+                       "model.md asks for the calibrated one.")
+        lines += [" ".join(txt), ""]
+    return lines
+
+
 def _findings(results):
     """The reading of the results, written from the numbers (so the document is regenerated whole)."""
-    lines = ["## What the loop found", ""]
+    lines = _verdict_findings(results) + ["## What the loop found", ""]
     tops = {_first_test(s["diag"]).name for s in results}
     if len(tops) == 1:
         top = tops.pop()
