@@ -2,7 +2,8 @@
 
 Run from the repository root: ``.venv/bin/python scripts/measured_data.py [TARGETS.json]`` (a few minutes).
 ``TARGETS.json`` (optional): the output of ``scripts/xsens_targets.py --cuts --sweep 2000 --out FILE``, the
-Xsens session against IMU-TK (defaults, hold-out, shortened records), added as its own section.
+Xsens session against IMU-TK (defaults, hold-out, shortened records), added as its own section; the copy
+the document was generated from is ``docs/figures/measured_xsens_targets.json``.
 Reads ``../shared/data/real`` (IMU-TK's Xsens MTi sample and UNCuyo's MPU-6050 sessions); writes
 ``docs/measured-data.md``, its figures ``docs/figures/measured_*.png`` and the loop's own files
 (``diagnosis.json``, ``report.html``) under ``<temp dir>/graph-calib-measured-data/`` (not in the repository).
