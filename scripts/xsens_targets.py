@@ -73,7 +73,7 @@ def main(argv=None):
     ap.add_argument("--out")
     args = ap.parse_args(argv)
     exp = load()
-    out = {}
+    out = {"effects": list(args.effect)}
     intervals, mult = imu_tk_static_intervals(exp)
     out["intervals"] = {"count": int(intervals.shape[0]), "threshold_mult": mult}
     if not args.skip_main:
