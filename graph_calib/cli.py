@@ -40,7 +40,14 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
-def build_parser():
+def build_parser(only=None):
+    """The command-line parser; with ``only`` (a command name) only that command's arguments are added.
+
+    Each command's module is imported to add its arguments; ``main`` asks for the one
+    command being run, so that ``graph-calib calibrate`` does not import what
+    ``campaign``, ``diagnose`` or ``apply`` need (scipy.stats among them: most of the
+    start-up, docs/performance.md).  ``graph-calib --help`` lists every command.
+    """
     parser = _Parser(prog="graph-calib", description=__doc__.splitlines()[0])
     from graph_calib import __version__
 
@@ -48,7 +55,8 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for name, help_text in COMMANDS.items():
         p = sub.add_parser(name, help=help_text, description=help_text)
-        _module(name).add_arguments(p)
+        if only is None or name == only:
+            _module(name).add_arguments(p)
     return parser
 
 
@@ -61,8 +69,17 @@ def _debug():
     return os.environ.get("GRAPH_CALIB_DEBUG", "") not in ("", "0")
 
 
+def _command_named(argv):
+    """The command that ``argv`` runs (its first word that is not an option), or None."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in COMMANDS else None
+    return None
+
+
 def main(argv=None):
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(only=_command_named(argv))
     args = parser.parse_args(argv)
     try:
         return int(_module(args.command).run(args) or 0)

@@ -27,7 +27,7 @@ LAYERS = {
     "graph_calib.calibrate": 8, "graph_calib.diagnosis": 8, "graph_calib.stitching": 8, "graph_calib.validation": 8,
     "graph_calib.prediction": 8, "graph_calib.program_design": 8,
     "graph_calib.simulation": 8, "graph_calib.importers": 8, "graph_calib.compensation": 8,
-    "graph_calib.warmup": 8,
+    "graph_calib.warmup": 8, "graph_calib.measured_metrics": 8,
     "graph_calib.reports": 9,
     "graph_calib.campaign": 10,
     "graph_calib.commands": 11, "graph_calib.cli": 11,

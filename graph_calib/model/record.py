@@ -9,7 +9,6 @@ diagnosis builds it once and reuses it for every layout it tries.
 from __future__ import annotations
 
 import numpy as np
-from scipy.signal import savgol_filter
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
 from graph_calib.rotations import exp_so3, quat_to_dcm
@@ -27,6 +26,53 @@ def _limited_derivative(y, t):
     fwd = np.vstack([d, d[-1:]])
     same = np.sign(back) == np.sign(fwd)
     return np.where(same, np.sign(back) * np.minimum(np.abs(back), np.abs(fwd)), 0.0)
+
+
+def _quadratic_slope(y, win, delta):
+    """Slope of the least-squares quadratic over a centred window of ``win`` samples (odd), per row of ``y``.
+
+    Savitzky-Golay's first derivative of order 2 with scipy's ``mode='interp'``
+    (``scipy.signal.savgol_filter(y, win, 2, deriv=1, delta=delta, axis=0,
+    mode='interp')``, checked in tests/test_model.py): inside, the slope of the
+    quadratic through the window, ``sum(k y_{i+k}) / (delta sum k^2)``; in the
+    first and last ``win // 2`` rows, the slope at each row of the quadratic fitted
+    to the first (last) ``win`` rows.  Written here so that the solvers do not
+    import ``scipy.signal`` (and with it ``scipy.stats``: most of ``graph-calib
+    calibrate``'s start-up, docs/performance.md).
+
+    Parameters
+    ----------
+    y : ndarray, shape (M, K)
+        Series, ``M >= win``.
+    win : int
+        Odd window length, samples (at least 3).
+    delta : float
+        Sample spacing, s.
+
+    Returns
+    -------
+    ndarray, shape (M, K)
+        Slope, unit of ``y`` per s.
+    """
+    m = win // 2
+    k = np.arange(-m, m + 1, dtype=float)
+    c = k / (delta * np.sum(k * k))
+    n = y.shape[0]
+    out = np.empty_like(y)
+    # interior: correlation with the slope coefficients (one pass per offset, vectorised over the rows)
+    inner = np.zeros((n - 2 * m,) + y.shape[1:])
+    for j in range(win):
+        inner += c[j] * y[j:n - 2 * m + j]
+    out[m:n - m] = inner
+    # edges: the quadratic through the first (last) window, its slope at each edge row
+    x = np.arange(win, dtype=float)
+    V = np.vander(x, 3)                                   # columns x^2, x, 1
+    P = np.linalg.pinv(V)                                 # (3, win): coefficients from the window
+    D = np.column_stack([2 * x[:m], np.ones(m)]) @ P[:2]  # d/dx at rows 0..m-1
+    out[:m] = D @ y[:win] / delta
+    Dl = np.column_stack([2 * x[win - m:], np.ones(m)]) @ P[:2]
+    out[n - m:] = Dl @ y[n - win:] / delta
+    return out
 
 
 def _moving_slope(y, dt, window_s):
@@ -50,7 +96,7 @@ def _moving_slope(y, dt, window_s):
     tb = (np.arange(nb) * per + 0.5 * (per - 1)) * dt
     win = int(round(window_s / (per * dt))) | 1
     win = max(5, min(win, nb if nb % 2 else nb - 1))
-    sb = savgol_filter(yb, win, 2, deriv=1, delta=per * dt, axis=0, mode="interp")
+    sb = _quadratic_slope(yb, win, per * dt)
     t = np.arange(n) * dt
     return np.column_stack([np.interp(t, tb, sb[:, i]) for i in range(y.shape[1])])
 

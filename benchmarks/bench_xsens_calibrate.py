@@ -1,0 +1,91 @@
+"""Where ``graph-calib calibrate`` spends its time on the Xsens session (51,175 samples; run by hand).
+
+    .venv/bin/python benchmarks/bench_xsens_calibrate.py [--repeat N]
+
+The session is imported from ``../shared/data/real/imu_tk_xsens`` into a temporary file, then the
+command is timed whole (``python -m graph_calib.cli calibrate``, a fresh process, kernels from the
+on-disk cache: warm), and its parts in this process: start-up (importing the command and building its
+parser, in a fresh process), reading, the grade choice, ``build_problem`` (static detection, alignment,
+the plausibility check, the model), each solver (seconds, iterations, preintegrations) and writing.
+Figures in docs/performance.md, 'calibrate on the Xsens session'.
+"""
+
+import argparse
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from _report import report
+
+from graph_calib import io
+from graph_calib.calibrate import build_problem
+from graph_calib.grade_choice import choose_grade
+from graph_calib.importers import import_xsens
+from graph_calib.model import CalibrationModel
+from graph_calib.options import CalibrationOptions, ModelOptions
+from graph_calib.solvers import solve, to_result
+
+ROOT = Path(__file__).resolve().parents[1]
+REAL = ROOT.parent / "shared" / "data" / "real" / "imu_tk_xsens"
+STARTUP = ("import time; t = time.perf_counter(); from graph_calib.cli import build_parser; "
+           "build_parser(only='calibrate'); print(time.perf_counter() - t)")
+
+
+def timed(label, fn):
+    t = time.perf_counter()
+    out = fn()
+    el = time.perf_counter() - t
+    print(f"{label:40s} {el:7.2f} s")
+    return out, el
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=1, help="whole-command runs (the best is reported)")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "xsens.h5"
+        io.write_experiment(import_xsens(REAL / "xsens_acc.mat", REAL / "xsens_gyro.mat"), path)
+        whole = []
+        for _ in range(args.repeat):
+            t = time.perf_counter()
+            rc = subprocess.run([sys.executable, "-m", "graph_calib.cli", "calibrate", str(path), "--out",
+                                 str(Path(d) / "out")], cwd=ROOT, capture_output=True).returncode
+            whole.append(time.perf_counter() - t)
+            print(f"{'graph-calib calibrate (exit %d)' % rc:40s} {whole[-1]:7.2f} s")
+        start = float(subprocess.run([sys.executable, "-c", STARTUP], cwd=ROOT, capture_output=True, text=True,
+                                     check=True).stdout)
+        print(f"{'start-up (import, parser)':40s} {start:7.2f} s")
+        exp, t_read = timed("read the experiment", lambda: io.read_experiment(path))
+        choice, t_grade = timed("grade choice", lambda: choose_grade(exp))
+        opts = CalibrationOptions(model=ModelOptions(grade=choice.grade))
+        problem, t_build = timed("build_problem", lambda: build_problem(exp, options=opts))
+        calls = {"n": 0}
+        original = CalibrationModel.preintegrate
+
+        def counting(self, *a, **k):
+            calls["n"] += 1
+            return original(self, *a, **k)
+
+        CalibrationModel.preintegrate = counting
+        solved = {}
+        for s in ("sqrt-kf", "factor-graph"):
+            calls["n"] = 0
+            out, el = timed(s, lambda: solve(s, problem, options=opts))
+            print(f"  {out.iterations} iterations, {calls['n']} preintegrations, converged {out.converged}")
+            solved[s] = (out, el, calls["n"])
+        CalibrationModel.preintegrate = original
+        _, t_write = timed("results written", lambda: [io.write_result(to_result(problem.model, o),
+                                                                       Path(d) / f"{s}.json")
+                                                       for s, (o, _, _) in solved.items()])
+    report("calibrate_s", min(whole), "s", "graph-calib calibrate, Xsens session, both solvers, warm")
+    report("startup_s", start, "s", "start-up: import and parser of calibrate")
+    report("build_s", t_build, "s", "build_problem")
+    for s, (o, el, n) in solved.items():
+        report(f"{s}_s", el, "s", f"{s} solve ({o.iterations} iterations, {n} preintegrations)")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,36 @@
+"""Start-up of ``graph-calib calibrate``: what it imports (docs/performance.md, 'Start-up').
+
+The command imports only its own module: not scipy.signal or scipy.stats (which ``campaign``, ``diagnose``,
+``apply`` and ``export`` need and which were most of its start-up), and every command still parses.
+"""
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+PROBE = """
+import sys
+from graph_calib.cli import main
+try:
+    main(["calibrate", "--help"])
+except SystemExit as e:
+    assert e.code == 0, e.code
+heavy = sorted(m for m in ("scipy.signal", "scipy.stats", "graph_calib.diagnosis", "graph_calib.campaign",
+                           "graph_calib.compensation", "graph_calib.stitching") if m in sys.modules)
+print("HEAVY", heavy)
+"""
+
+
+def test_calibrate_imports_no_other_command():
+    out = subprocess.run([sys.executable, "-c", PROBE], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    assert "HEAVY []" in out, out
+
+
+def test_a_command_outside_the_list_is_still_refused_by_the_full_parser(capsys):
+    from graph_calib.cli import main
+    try:
+        main(["calibrat", "x.h5"])
+    except SystemExit as e:
+        assert e.code == 2
+    assert "invalid choice" in capsys.readouterr().err
