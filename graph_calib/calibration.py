@@ -165,16 +165,16 @@ def _columns6(a, n, what):
 # ---------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True)
 def _inverse_rows(rows, X, m, dT, dTdt, other, domega, dsig, n_iter, out):
     """:func:`graph_calib.sensor_model.correct` with row ``j`` of ``X`` for sample ``j``.
 
     The same per-sample call of :func:`graph_calib.sensor_model.correct_sample`
     as the model's own loop, only the calibration vector changes from row to row.
     """
-    for j in numba.prange(m.shape[0]):
-        work = np.empty((8, 3))
-        J = np.zeros((3, 1))
+    work = np.empty((8, 3))
+    J = np.zeros((3, 1))
+    for j in range(m.shape[0]):
         correct_sample(rows, X[j], m[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], n_iter, out[j], J, False,
                        work)
 
