@@ -351,7 +351,7 @@ def measure(layout, x, triad, signal, *, dT=None, dTdt=None, other=None, domega=
     n = signal.shape[0]
     rows = term_rows(layout, triad)
     out = np.empty_like(signal)
-    _forward_many(rows, np.asarray(x, dtype=float), signal, _as3(dT, n), _as3(dTdt, n),
+    _forward_many(rows, np.array(x, dtype=float), signal, _as3(dT, n), _as3(dTdt, n),
                   _as3(other, n), _as3(domega, n), _as3(dsignal, n), out, np.empty(3))
     return out
 
@@ -362,7 +362,7 @@ def _inverse(layout, x, triad, measured, *, dT, dTdt, other, domega, dsignal, n_
     rows = term_rows(layout, triad)
     out = np.empty_like(measured)
     J = np.zeros((n, 3, layout.size)) if jacobian else np.zeros((n, 3, 1))
-    _inverse_many(rows, np.asarray(x, dtype=float), measured, _as3(dT, n), _as3(dTdt, n),
+    _inverse_many(rows, np.array(x, dtype=float), measured, _as3(dT, n), _as3(dTdt, n),
                   _as3(other, n), _as3(domega, n), _as3(dsignal, n), n_iter, out, J, jacobian)
     return out, J
 
