@@ -27,6 +27,6 @@ clean:
 	rm -rf $(VENV) demo-out .pytest_cache build *.egg-info
 
 # numba's compiled kernels (docs/performance.md): a cached kernel is checked against its own file only, so
-# after editing a module whose kernels others inline (sensor_model.py, rotations.py), delete them all.
+# after editing a module whose kernels others call or inline (sensor_model.py, rotations.py), delete them all.
 clean-cache:
 	find graph_calib kf_reference \( -name '*.nbi' -o -name '*.nbc' \) -delete

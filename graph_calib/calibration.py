@@ -99,6 +99,13 @@ def _error_sum(rows, X, power, s, dT, dTdt, other, domega, dsig, out):
             out[j, rows[r, 1]] += X[k, rows[r, 0]] * phi
 
 
+def _writable(a):
+    """``a`` C-contiguous and writable (copied only when it is not): a read-only array is another numba type,
+    so a kernel would compile a second signature for it (docs/performance.md, "Compiling the kernels")."""
+    a = np.ascontiguousarray(a)
+    return a if a.flags.writeable else a.copy()
+
+
 def _rows3(a, n, what):
     """``a`` as a contiguous float array of shape (n, 3); None gives zeros, shape (3,) broadcasts."""
     if a is None:
@@ -139,7 +146,7 @@ def triad_errors(layout, X, triad, signal, *, dT=None, dTdt=None, other=None, do
     signal = np.atleast_2d(np.asarray(signal, dtype=float))
     n = signal.shape[0]
     signal = _rows3(signal, n, "signal")
-    X = np.ascontiguousarray(np.atleast_2d(np.asarray(X, dtype=float)))
+    X = _writable(np.atleast_2d(np.asarray(X, dtype=float)))
     if X.shape[1] != layout.size or X.shape[0] not in (1, n):
         raise ValueError(f"X must have shape ({layout.size},) or ({n}, {layout.size}), got {X.shape}")
     out = np.empty((n, 3))
@@ -165,18 +172,20 @@ def _columns6(a, n, what):
 # ---------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, parallel=True)
-def _inverse_rows(rows, X, m, dT, dTdt, other, domega, dsig, n_iter, out):
+@numba.njit(cache=True)
+def _inverse_rows(rows, X, m, dT, dTdt, other, domega, dsig, n_iter, out, want_jacobian):
     """:func:`graph_calib.sensor_model.correct` with row ``j`` of ``X`` for sample ``j``.
 
     The same per-sample call of :func:`graph_calib.sensor_model.correct_sample`
     as the model's own loop, only the calibration vector changes from row to row.
+    ``want_jacobian`` is False, passed from Python so that ``correct_sample`` keeps the one signature that
+    :func:`graph_calib.sensor_model.correct` compiles (a literal ``False`` here would compile another).
     """
-    for j in numba.prange(m.shape[0]):
-        work = np.empty((8, 3))
-        J = np.zeros((3, 1))
-        correct_sample(rows, X[j], m[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], n_iter, out[j], J, False,
-                       work)
+    work = np.empty((8, 3))
+    J = np.zeros((3, 1))
+    for j in range(m.shape[0]):
+        correct_sample(rows, X[j], m[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], n_iter, out[j], J,
+                       want_jacobian, work)
 
 
 def prepare(experiment, *, t_ref_degC=None):
@@ -231,13 +240,13 @@ def correct_record(layout, X, record, *, n_newton=ModelOptions.n_newton):
     n = r.w_raw.shape[0]
     if X.shape != (n, layout.size):
         raise ValueError(f"X must have shape ({layout.size},) or ({n}, {layout.size}), got {X.shape}")
-    X = np.ascontiguousarray(X)
+    X = _writable(X)
     out = []
     for triad, m, ctx in (("gyro", r.w_raw, gyro), ("accel", r.f_raw, accel)):
         s = np.empty((n, 3))
         _inverse_rows(term_rows(layout, triad), X, np.ascontiguousarray(m),
                       *(np.ascontiguousarray(ctx[k]) for k in ("dT", "dTdt", "other", "domega", "dsignal")),
-                      int(n_newton), s)
+                      int(n_newton), s, False)
         out.append(s)
     return out[0], out[1]
 

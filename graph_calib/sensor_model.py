@@ -41,7 +41,11 @@ method, and its Jacobian by implicit differentiation,
 functions of ``x`` (documented in ``docs/model.md``).
 
 Everything per sample is compiled with numba; the Python-level functions here
-are vectorised wrappers for the simulator and for tests.
+are vectorised wrappers for the simulator and for tests.  :func:`invert_sample` and
+:func:`sample_features` are compiled once (``_nrt=False``: they allocate nothing, so
+passing them arrays costs no reference counting) and called by every kernel that
+needs them; the small helpers they use are inlined into them only
+(docs/performance.md, "Compiling the kernels").
 """
 
 from __future__ import annotations
@@ -229,7 +233,7 @@ def is_nonlinear(rows):
     return False
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, _nrt=False)
 def invert_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, nonlinear, s, A, Ai, err):
     """Newton inversion of one sample: ``s`` with ``s + Phi(s) x = m`` and ``Ai = (I + dPhi x/ds)^-1`` at ``s``.
 
@@ -257,7 +261,7 @@ def invert_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, nonlinear, 
         _inv3(A, Ai)
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, _nrt=False)
 def sample_features(rows, s, dT, dTdt, other, domega, dsig, feat):
     """``feat[r]``: the feature of term row ``r`` at ``s``; ``Phi[axis_r, col_r] = feat[r]``.
 
@@ -289,20 +293,20 @@ def correct_sample(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, s, J, want
             J[i, col] -= Ai[i, axis] * phi
 
 
-@numba.njit(cache=True, parallel=True)
-def _forward_many(rows, x, s, dT, dTdt, other, domega, dsig, out):
-    for j in numba.prange(s.shape[0]):
-        e = np.empty(3)
+@numba.njit(cache=True, _nrt=False)
+def _forward_many(rows, x, s, dT, dTdt, other, domega, dsig, out, e):
+    # without reference counting (``_nrt=False``, ``e`` (3,) scratch from the caller) the per-sample views cost nothing
+    for j in range(s.shape[0]):
         _error(rows, x, s[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], e)
         out[j, 0] = s[j, 0] + e[0]
         out[j, 1] = s[j, 1] + e[1]
         out[j, 2] = s[j, 2] + e[2]
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True)
 def _inverse_many(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, out, J, want_jacobian):
-    for j in numba.prange(m.shape[0]):
-        work = np.empty((8, 3))
+    work = np.empty((8, 3))
+    for j in range(m.shape[0]):
         correct_sample(rows, x, m[j], dT[j], dTdt[j], other[j], domega[j], dsig[j], n_iter,
                        out[j], J[j], want_jacobian, work)
 
@@ -347,8 +351,8 @@ def measure(layout, x, triad, signal, *, dT=None, dTdt=None, other=None, domega=
     n = signal.shape[0]
     rows = term_rows(layout, triad)
     out = np.empty_like(signal)
-    _forward_many(rows, np.asarray(x, dtype=float), signal, _as3(dT, n), _as3(dTdt, n),
-                  _as3(other, n), _as3(domega, n), _as3(dsignal, n), out)
+    _forward_many(rows, np.array(x, dtype=float), signal, _as3(dT, n), _as3(dTdt, n),
+                  _as3(other, n), _as3(domega, n), _as3(dsignal, n), out, np.empty(3))
     return out
 
 
@@ -358,7 +362,7 @@ def _inverse(layout, x, triad, measured, *, dT, dTdt, other, domega, dsignal, n_
     rows = term_rows(layout, triad)
     out = np.empty_like(measured)
     J = np.zeros((n, 3, layout.size)) if jacobian else np.zeros((n, 3, 1))
-    _inverse_many(rows, np.asarray(x, dtype=float), measured, _as3(dT, n), _as3(dTdt, n),
+    _inverse_many(rows, np.array(x, dtype=float), measured, _as3(dT, n), _as3(dTdt, n),
                   _as3(other, n), _as3(domega, n), _as3(dsignal, n), n_iter, out, J, jacobian)
     return out, J
 

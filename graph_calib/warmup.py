@@ -16,7 +16,7 @@ same process.
 active; the campaign uses it to keep compile time out of each task's seconds.
 
 Caveat (docs/performance.md): numba checks a cached kernel against its own source file only.  A kernel that
-calls or inlines kernels of another module (the preintegration kernel inlines :mod:`graph_calib.sensor_model`'s)
+calls or inlines kernels of another module (the preintegration kernel calls :mod:`graph_calib.sensor_model`'s)
 keeps its stale machine code when only that other module changes: ``make clean-cache`` deletes the caches.
 """
 

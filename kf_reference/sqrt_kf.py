@@ -251,21 +251,107 @@ def smooth_attitude(Ut0, s0, B, G, c, H, z, sigma, lo, mean_out, sigma_out):
             time_update(Ut, s, B[k], A0, G[k], c[k], work, pre)
             Up[k + 1] = Ut
             sp[k + 1] = s
-    Ps = Uf[K].T @ Uf[K]
+    Ps = np.empty((m, m))
+    Pf = np.empty((m, m))
+    Pp = np.empty((m, m))
+    BPf = np.empty((m, m))
+    C = np.empty((m, m))
+    T = np.empty((m, m))
+    d = np.empty(m)
     ms = sf[K].copy()
+    _utu(Uf[K], Ps)
     mean_out[K] = ms
     for i in range(m):
         sigma_out[K, i] = np.sqrt(Ps[i, i])
     for k in range(K - 1, -1, -1):
-        Pf = Uf[k].T @ Uf[k]
-        Pp = Up[k + 1].T @ Up[k + 1]
+        _utu(Uf[k], Pf)
+        _utu(Up[k + 1], Pp)
         # C = Pf B^T Pp^-1, i.e. Pp C^T = B Pf
-        C = np.linalg.solve(Pp, B[k] @ Pf).T
-        ms = sf[k] + C @ (ms - sp[k + 1])
-        Ps = Pf + C @ (Ps - Pp) @ C.T
+        for i in range(m):
+            for j in range(m):
+                v = 0.0
+                for r in range(m):
+                    v += B[k, i, r] * Pf[r, j]
+                BPf[i, j] = v
+        _solve_transposed(Pp, BPf, C)
+        for i in range(m):
+            d[i] = ms[i] - sp[k + 1, i]
+        for i in range(m):
+            v = 0.0
+            for j in range(m):
+                v += C[i, j] * d[j]
+            ms[i] = sf[k, i] + v
+        # Ps = Pf + C (Ps - Pp) C^T
+        for i in range(m):
+            for j in range(m):
+                v = 0.0
+                for r in range(m):
+                    v += C[i, r] * (Ps[r, j] - Pp[r, j])
+                T[i, j] = v
+        for i in range(m):
+            for j in range(m):
+                v = 0.0
+                for r in range(m):
+                    v += T[i, r] * C[j, r]
+                Ps[i, j] = Pf[i, j] + v
         mean_out[k] = ms
         for i in range(m):
             sigma_out[k, i] = np.sqrt(max(Ps[i, i], 0.0))
+
+
+@numba.njit(cache=True, _nrt=False)
+def _utu(Ut, out):
+    """``out = Ut^T Ut`` for a square ``Ut`` (the covariance ``U U^T`` from its stored transpose)."""
+    n = Ut.shape[0]
+    for i in range(n):
+        for j in range(n):
+            v = 0.0
+            for r in range(n):
+                v += Ut[r, i] * Ut[r, j]
+            out[i, j] = v
+
+
+@numba.njit(cache=True)
+def _solve_transposed(A, Y, X):
+    """``X`` with ``A X^T = Y`` for small square ``A`` (LU with partial pivoting, as LAPACK's ``gesv``).
+
+    Written out rather than ``np.linalg.solve``, whose numba implementation took most of this module's
+    compile time (docs/performance.md, "Compiling the kernels").
+    """
+    n = A.shape[0]
+    LU = A.copy()
+    Z = Y.copy()
+    for c in range(n):
+        p = c
+        big = abs(LU[c, c])
+        for r in range(c + 1, n):
+            if abs(LU[r, c]) > big:
+                big = abs(LU[r, c])
+                p = r
+        if p != c:
+            for q in range(n):
+                t = LU[c, q]
+                LU[c, q] = LU[p, q]
+                LU[p, q] = t
+                t = Z[c, q]
+                Z[c, q] = Z[p, q]
+                Z[p, q] = t
+        for r in range(c + 1, n):
+            f = LU[r, c] / LU[c, c]
+            LU[r, c] = f
+            for q in range(c + 1, n):
+                LU[r, q] -= f * LU[c, q]
+            for q in range(n):
+                Z[r, q] -= f * Z[c, q]
+    for c in range(n - 1, -1, -1):
+        for q in range(n):
+            v = Z[c, q]
+            for r in range(c + 1, n):
+                v -= LU[c, r] * Z[r, q]
+            Z[c, q] = v / LU[c, c]
+    for i in range(n):
+        for q in range(n):
+            X[q, i] = Z[i, q]
 
 
 def covariance(Ut):

@@ -1,7 +1,12 @@
-r"""The compiled per-sample preintegration kernel (numba), parallel over keyframes.
+r"""The compiled per-sample preintegration kernel (numba), one keyframe after the other.
 
 :func:`graph_calib.model.preintegration.preintegrate` calls it; nothing else should.  The
-sensor-model inversion it applies per sample is :mod:`graph_calib.sensor_model`'s.
+sensor-model inversion it applies per sample is :mod:`graph_calib.sensor_model`'s: the kernel calls
+its compiled ``invert_sample`` and ``sample_features`` (compiled once, without reference counting),
+and inlines only the small 3x3 helpers.  It is not ``parallel=True`` and does not inline the sensor
+model: numba's parfor passes and inlining took three to four minutes of compiling on two cores, and
+on the machine this was measured on (two cores, other jobs running) the second thread gained nothing
+(docs/performance.md, "Compiling the kernels").
 """
 
 from __future__ import annotations
@@ -33,11 +38,11 @@ def _add_skew_mul(a, J, B, out):
         out[2, c] = B[2, c] + (a[0] * J[1, c] - a[1] * J[0, c])
 
 
-@numba.njit(cache=True, parallel=True, error_model="numpy")
+@numba.njit(cache=True, error_model="numpy")
 def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                   w_raw, f_raw, dw_raw, df_raw, tap_idx, tap_lo, n_newton,
                   dR, JR, S, JS, S1, JS1, w_first, Jw_first, w_last, Jw_last, tapR, tapJ):
-    r"""Preintegrate every keyframe ``k`` (parallel over keyframes).
+    r"""Preintegrate every keyframe ``k``.
 
     The Jacobian outputs (``JR``, ``JS``, ``JS1``, ``Jw_*``, ``tapJ``) must be zero
     on entry; the kernel adds into the columns that ``grows`` / ``arows`` name.
@@ -80,7 +85,7 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
     na = arows.shape[0]
     g_nonlin = is_nonlinear(grows)
     a_nonlin = is_nonlinear(arows)
-    for k in numba.prange(K):
+    for k in range(K):
         w = np.empty(3)
         fc = np.empty(3)
         Aig = np.empty((3, 3))

@@ -154,7 +154,7 @@ def preintegrate(record, terms, x, *, layout, n_newton):
     -------
     Preintegrated
     """
-    x = np.ascontiguousarray(x, dtype=float)
+    x = np.array(x, dtype=float)   # a copy, C-contiguous and writable: one kernel signature
     K = record.n_keyframes
     M = record.reading_sample.size
     P = layout.size
