@@ -220,32 +220,53 @@ def _damped(gfg, values_keys, lam, dims):
     return damped
 
 
-def _calibration_covariance(graph, values, P):
-    """Marginal covariance of ``C(0)`` (P, P) at ``values``.
+def marginal_covariance(graph, values, keys):
+    """Joint marginal covariance of the vector variables ``keys`` at ``values``, (sum of dims, same).
 
     GTSAM's ``Marginals`` first.  Its Cholesky calls a system indeterminate when a direction is held
     a billion times more loosely than the rest: the heading of a short segment of a record cut
     together (``/imu/segment``), known only through its prior (pi for consumer MEMS) against rotation
-    factors of 1e8 in information.  Then the same linearised system is solved as the diagnosis does
-    (``graph_calib.diagnosis.reduced_system``): the attitudes eliminated with a sparse LU of their
-    block, the calibration's information the Schur complement, inverted.
+    factors of 1e8 in information, or a joint campaign of short subranges.  Then the same linearised
+    system is solved as the diagnosis does (``graph_calib.diagnosis.reduced_system``): every other
+    variable (the attitudes) eliminated with a sparse LU of its block, the information of ``keys`` the
+    Schur complement, inverted.
     """
+    keys = list(keys)
     try:
-        return np.asarray(gtsam.Marginals(graph, values).marginalCovariance(C(0)))
+        m = gtsam.Marginals(graph, values)
+        if len(keys) == 1:
+            return np.asarray(m.marginalCovariance(keys[0]))
+        jm = m.jointMarginalCovariance(gtsam.KeyVector(keys))
+        return np.block([[np.asarray(jm.at(a, b)) for b in keys] for a in keys])
     except RuntimeError:
         pass
     ijv = np.asarray(graph.linearize(values).sparseJacobian_())
     i, j, v = ijv[0].astype(np.int64) - 1, ijv[1].astype(np.int64) - 1, ijv[2]
-    n = values.size() - 1             # the attitudes X(0..K)
-    cols = P + 3 * n                  # C(0) first (key order), then X(0..K); the last column is b
-    keep = j < cols
-    A = sp.csc_matrix((v[keep], (i[keep], j[keep])), shape=(int(i.max()) + 1, cols))
+    # sparseJacobian_ orders the columns by key (GTSAM's KeySet); its last column is the right-hand side
+    all_keys = sorted(int(k) for k in values.keys())
+    dims = {k: (3 if values.exists(k) and _is_rot(values, k) else values.atVector(k).size) for k in all_keys}
+    start, offset = {}, 0
+    for k in all_keys:
+        start[k] = offset
+        offset += dims[k]
+    keep = j < offset
+    A = sp.csc_matrix((v[keep], (i[keep], j[keep])), shape=(int(i.max()) + 1, offset))
     H = (A.T @ A).tocsc()
-    Hxx = H[:P, :P].toarray()
-    Hax = H[P:, :P].toarray()
-    Haa = H[P:, P:].tocsc()
-    info = Hxx - Hax.T @ spla.splu(Haa).solve(Hax)
+    sel = np.concatenate([np.arange(start[int(k)], start[int(k)] + dims[int(k)]) for k in keys])
+    rest = np.setdiff1d(np.arange(offset), sel)
+    Hss = H[sel][:, sel].toarray()
+    Hrs = H[rest][:, sel].toarray()
+    Hrr = H[rest][:, rest].tocsc()
+    info = Hss - Hrs.T @ spla.splu(Hrr).solve(Hrs)
     return np.linalg.inv(0.5 * (info + info.T))
+
+
+def _is_rot(values, k):
+    try:
+        values.atRot3(k)
+        return True
+    except RuntimeError:
+        return False
 
 
 #: Attitude-only Gauss-Newton passes at most, before the first joint iteration (see :func:`_fit_attitudes`).
@@ -380,7 +401,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     x = np.asarray(values.atVector(C(0)), dtype=float)
     cache.preint = model.preintegrate(x)
     cache.invalidate()
-    cov = _calibration_covariance(graph, values, P)
+    cov = marginal_covariance(graph, values, [C(0)])
     cache.ensure(values)
     residuals = {
         "rotation": (model.t_key[cache.rot.key + 1], cache.rot.whitened()),

@@ -5,6 +5,7 @@ Short simulated subranges (``nav-campaign``, 0.05 h each at 100 Hz: 18,000 sampl
 """
 
 import json
+from dataclasses import replace
 import tomllib
 from pathlib import Path
 
@@ -13,6 +14,7 @@ import pytest
 
 from graph_calib import io
 from graph_calib.campaign import CampaignOptions, run_campaign
+from graph_calib.campaign.joint_run import truth_check
 from graph_calib.cli import main
 from graph_calib.compensation import read_compensation
 from graph_calib.compensation import read_table, write_table
@@ -236,8 +238,13 @@ def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(tmp_path)
     assert all(v == 1 for v in entry["degrees"].values()), entry["degree_choice"]
     cc = entry["cross_check"]["factor-graph"]
     assert len(cc["experiments"]) == 6 and cc["rms_z"] < 1.0 and cc["max_abs_z"] < 4.0, cc
-    # no temperature_curves in these truth files: each curve against each subrange's own truth, inside it
+    # the simulator's truth files carry temperature_curves (data-format.md): the curves against them
     tc = doc["truth_check"]["joint"]["joint"]
+    assert tc["mode"] == "temperature_curves" and tc["max_abs_z"] < 4.0 and tc["fraction_within_2sigma"] > 0.9, tc
+    # without them, each curve only against each subrange's own truth, inside that subrange's range
+    bare = {n: replace(t, extra={k: v for k, v in t.extra.items() if k != "temperature_curves"})
+            for n, t in run.truths.items()}
+    tc = truth_check(run.joint, bare, run.summaries)
     assert tc["mode"] == "per-subrange" and tc["max_abs_z"] < 4.5 and tc["fraction_within_2sigma"] > 0.9, tc
     # the report's joint section (the rest of the report is tests/test_campaign.py's)
     figures = []

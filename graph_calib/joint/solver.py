@@ -34,7 +34,8 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import S, X, Z
 
-from graph_calib.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _Cache, _damped, _noise
+from graph_calib.factor_graph import (ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _Cache, _damped, _noise,
+                                      marginal_covariance)
 from graph_calib.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout, split_element_name
@@ -400,15 +401,23 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
              else np.zeros(unknowns.nz + sum(len(s) for s in s_sigmas)))
     nz = unknowns.nz
     offs = np.cumsum([nz] + [len(s) for s in s_sigmas])
+    # GTSAM's variables are the unknowns in units of their prior sigmas, u = theta / sigma: the curve
+    # coefficients span twenty orders of magnitude in SI (a bias in rad/s, its cubic in rad/s/degC^3), so
+    # that Levenberg-Marquardt's isotropic damping and GTSAM's Cholesky see a well-scaled system (unscaled,
+    # the damping crawled for 500 iterations on the demo's 72-s subranges and the marginals called the
+    # system indeterminate)
+    sig_theta = np.concatenate([z_sigma] + list(s_sigmas))
+    maps_u = [(A * z_sigma[None, :], B * s_sigmas[e][None, :]) for e, (A, B) in enumerate(maps)]
+    u0 = theta / sig_theta
     graph = gtsam.NonlinearFactorGraph()
-    graph.add(gtsam.PriorFactorVector(Z(0), np.zeros(nz), gtsam.noiseModel.Diagonal.Sigmas(z_sigma)))
+    graph.add(gtsam.PriorFactorVector(Z(0), np.zeros(nz), gtsam.noiseModel.Unit.Create(nz)))
     values = gtsam.Values()
-    values.insert(Z(0), theta[:nz])
+    values.insert(Z(0), u0[:nz])
     caches, x_keys, s_keys, s_dims = [], [], [], []
     have_attitudes = True
-    for e, (p, (A, B)) in enumerate(zip(problems, maps)):
+    for e, (p, (A, B)) in enumerate(zip(problems, maps_u)):
         m = p.model
-        s0 = theta[offs[e]:offs[e + 1]]
+        s0 = u0[offs[e]:offs[e + 1]]
         x = A @ theta[:nz] + (B @ s0 if B.shape[1] else 0.0)
         preint = m.preintegrate(x)
         R_prior = quat_to_dcm(p.q_nb0)
@@ -421,7 +430,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         cache = _JointCache(e, m, preint, A, B)
         cache.evaluate(R, x)
         caches.append(cache)
-        _add_experiment(graph, cache, R_prior=R_prior, s_sigma=s_sigmas[e], robust=options.robust,
+        _add_experiment(graph, cache, R_prior=R_prior, s_sigma=np.ones(B.shape[1]), robust=options.robust,
                         robust_k=options.robust_k)
         for k in range(m.n_keyframes + 1):
             values.insert(_xkey(e, k), gtsam.Rot3(R[k]))
@@ -443,8 +452,9 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
             c.invalidate()
 
     def theta_of(v):
-        return np.concatenate([np.asarray(v.atVector(Z(0)), dtype=float)]
-                              + [np.asarray(v.atVector(S(c.e)), dtype=float) for c in caches if c.B.shape[1]])
+        u = np.concatenate([np.asarray(v.atVector(Z(0)), dtype=float)]
+                           + [np.asarray(v.atVector(S(c.e)), dtype=float) for c in caches if c.B.shape[1]])
+        return u * sig_theta
 
     def x_of(v, c):
         s = np.asarray(v.atVector(S(c.e)), dtype=float) if c.B.shape[1] else np.zeros(0)
@@ -458,7 +468,6 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     invalidate()
     cost = graph.error(values)
     history = [cost]
-    sig_theta = np.concatenate([z_sigma] + list(s_sigmas))
     lam = options.lambda_initial
     it, converged = 0, False
     preint_current = [c.preint for c in caches]
@@ -503,7 +512,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         if progress is not None:
             progress(ProgressEvent(solver=JOINT, iteration=it, cost=float(cost)))
         if accepted and (abs(rel) < options.rel_tol or options.step_tol_sigma > 0
-                         and np.all(np.abs(step) < options.step_tol_sigma * sig_theta)):
+                         and np.all(np.abs(step) < options.step_tol_sigma)):     # the step in sigmas
             converged = True
             break
         if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
@@ -513,10 +522,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     for c in caches:
         c.preint = c.model.preintegrate(x_of(values, c))
     invalidate()
-    marginals = gtsam.Marginals(graph, values)
-    tkeys = [Z(0)] + s_keys
-    jm = marginals.jointMarginalCovariance(gtsam.KeyVector(tkeys))
-    cov = np.block([[np.asarray(jm.at(a, b)) for b in tkeys] for a in tkeys])
+    cov = marginal_covariance(graph, values, [Z(0)] + s_keys) * np.outer(sig_theta, sig_theta)
     cov = 0.5 * (cov + cov.T)
     theta = theta_of(values)
     for c in caches:       # the marginals' linearisation left every factor evaluated at the solution
