@@ -318,6 +318,36 @@ def _fit_attitudes(graph, caches, values, *, x_keys, theta_keys, theta_dims, ord
     return values
 
 
+def _theta_covariance(graph, values, x_keys, theta_keys):
+    """Marginal covariance of the unknowns ``theta_keys`` (``Z(0)`` and the set-ups), over every attitude.
+
+    The graph linearised at ``values``; the attitudes ``x_keys`` eliminated (multifrontal, in the given
+    order: each experiment's chain); what remains is the information of the unknowns alone (a few dense
+    factors on them), inverted.  Only the unknowns' block is ever formed, never the attitudes' (GTSAM's
+    ``Marginals`` factors the whole graph again and recovers the joint marginal clique by clique).
+
+    Returns
+    -------
+    ndarray, shape (Nt, Nt)
+        In the order of ``theta_keys``.
+    """
+    gfg = graph.linearize(values)
+    eliminate = gtsam.Ordering()
+    for k in x_keys:
+        eliminate.push_back(k)
+    _, rest = gfg.eliminatePartialMultifrontal(eliminate)
+    del gfg
+    keep = gtsam.Ordering()
+    for k in theta_keys:
+        keep.push_back(k)
+    info = np.asarray(rest.hessian(keep)[0], dtype=float)
+    info = 0.5 * (info + info.T)
+    L = np.linalg.cholesky(info)
+    Linv = np.linalg.solve(L, np.eye(info.shape[0]))
+    cov = Linv.T @ Linv
+    return 0.5 * (cov + cov.T)
+
+
 def choose_degrees(unknowns, theta, covariance, *, n_measurements):
     """Each curve family's degree by the Wald test against the BIC price (module docstring).
 
@@ -461,16 +491,25 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     sig_theta = np.concatenate([z_sigma] + list(s_sigmas))
     lam = options.lambda_initial
     it, converged = 0, False
-    preint_current = [c.preint for c in caches]
-    # the caches hold every factor (residuals and Jacobians) at `values` with `preint_current` after the cost
-    # of the starting point and after an accepted step: the next linearisation reads them (a 3-h experiment's
-    # factors cost seconds to evaluate; factor_graph.solve evaluates them again there)
+    # where each experiment's current preintegration was formed; a trial that re-preintegrates an experiment
+    # replaces its preintegration (never two held per experiment: 0.3 GB each for 3 h), and a rejected trial
+    # is undone by preintegrating again at the same point (the same arrays; rejections are rare)
+    lin_x = [c.preint.x_lin for c in caches]
+
+    def restore():
+        for c, xl in zip(caches, lin_x):
+            if not np.array_equal(c.preint.x_lin, xl):
+                c.preint = None
+                c.preint = c.model.preintegrate(xl)
+        invalidate()
+
+    # the caches hold every factor (residuals and Jacobians) at `values` after the cost of the starting point
+    # and after an accepted step: the next linearisation reads them (a 3-h experiment's factors cost seconds
+    # to evaluate; factor_graph.solve evaluates them again there)
     fresh = True
     for it in range(1, options.max_iterations + 1):
         if not fresh:
-            for c, pre in zip(caches, preint_current):
-                c.preint = pre
-            invalidate()
+            restore()
         gfg = graph.linearize(values)
         while True:
             try:
@@ -480,22 +519,26 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
                     raise
                 lam = max(lam * 10.0, 1e-6)
                 continue
+            gfg = None                      # the linear system freed during the trial, rebuilt if it fails
             trial = values.retract(delta)
-            for c, pre in zip(caches, preint_current):
+            for c in caches:
                 x_t = x_of(trial, c)
-                c.preint = (c.model.preintegrate(x_t)
-                            if pre.needs_repreintegration(x_t, tol=options.repreintegrate_tol) else pre)
+                if c.preint.needs_repreintegration(x_t, tol=options.repreintegrate_tol):
+                    c.preint = None
+                    c.preint = c.model.preintegrate(x_t)
             invalidate()
             new_cost = graph.error(trial)
             if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
                 break
             lam *= 10.0
+            restore()
+            gfg = graph.linearize(values)
         step = np.concatenate([np.asarray(delta.at(Z(0)))] + [np.asarray(delta.at(k)) for k in s_keys])
         accepted = new_cost <= cost
         fresh = accepted
         if accepted:
             values = trial
-            preint_current = [c.preint for c in caches]
+            lin_x = [c.preint.x_lin for c in caches]
             lam = max(lam / 10.0, 1e-9)
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
@@ -509,17 +552,21 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
             converged = True
             break
-    # covariance: every experiment re-preintegrated at the solution so that the Jacobians are exact there
-    for c in caches:
-        c.preint = c.model.preintegrate(x_of(values, c))
+    gfg = None
+    # covariance: an experiment whose calibration moved beyond the first-order range of its preintegration
+    # (the solver's own test) is re-preintegrated at the solution, so that its Jacobians hold there; one
+    # at a time, the preintegration it replaces freed first
+    for c, xl in zip(caches, lin_x):
+        x_c = x_of(values, c)
+        if (not np.array_equal(c.preint.x_lin, xl)
+                or c.preint.needs_repreintegration(x_c, tol=options.repreintegrate_tol)):
+            c.preint = None
+            c.preint = c.model.preintegrate(x_c)
     invalidate()
-    marginals = gtsam.Marginals(graph, values)
     tkeys = [Z(0)] + s_keys
-    jm = marginals.jointMarginalCovariance(gtsam.KeyVector(tkeys))
-    cov = np.block([[np.asarray(jm.at(a, b)) for b in tkeys] for a in tkeys])
-    cov = 0.5 * (cov + cov.T)
+    cov = _theta_covariance(graph, values, x_keys, tkeys)
     theta = theta_of(values)
-    for c in caches:       # the marginals' linearisation left every factor evaluated at the solution
+    for c in caches:       # the covariance's linearisation left every factor evaluated at the solution
         c.ensure(values)
     n_meas = int(sum(3 * (c.grav.r.shape[0] + c.enc.r.shape[0]) for c in caches))
     if select_degree:
