@@ -170,7 +170,7 @@ def test_the_unknowns_covariance_is_gtsams_marginal_over_every_attitude():
                 graph.add(gtsam.BetweenFactorRot3(keys[k - 1], key, gtsam.Rot3.Expmap(rng.normal(size=3)),
                                                   gtsam.noiseModel.Isotropic.Sigma(3, 0.1)))
     tkeys = [Z(0), S(1)]
-    got = _theta_covariance(graph, values, x_keys, tkeys)
+    got = _theta_covariance(graph.linearize(values), x_keys, tkeys)
     jm = gtsam.Marginals(graph, values).jointMarginalCovariance(gtsam.KeyVector(tkeys))
     want = np.block([[np.asarray(jm.at(a, b)) for b in tkeys] for a in tkeys])
     assert got.shape == (nz + ns, nz + ns)
@@ -280,9 +280,9 @@ def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(tmp_path)
     assert all(v == 1 for v in entry["degrees"].values()), entry["degree_choice"]
     cc = entry["cross_check"]["factor-graph"]
     assert len(cc["experiments"]) == 6 and cc["rms_z"] < 1.0 and cc["max_abs_z"] < 4.0, cc
-    # no temperature_curves in these truth files: each curve against each subrange's own truth, inside it
+    # the truth files carry data-format.md's temperature_curves (linear here): each curve against them
     tc = doc["truth_check"]["joint"]["joint"]
-    assert tc["mode"] == "per-subrange" and tc["max_abs_z"] < 4.5 and tc["fraction_within_2sigma"] > 0.9, tc
+    assert tc["mode"] == "temperature_curves" and tc["max_abs_z"] < 4.5 and tc["fraction_within_2sigma"] > 0.9, tc
     # the report's joint section (the rest of the report is tests/test_campaign.py's)
     figures = []
     sections = joint_sections(run, lambda f, caption: figures.append(caption) or H.figure(f, caption=caption))
