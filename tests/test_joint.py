@@ -23,7 +23,8 @@ from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
 from graph_calib.joint import JointSolver, WarmStart, plan_unknowns, solve_joint
 from graph_calib.joint.result import joint_result, read_joint_result, write_joint_result
-from graph_calib.joint.solver import _extend, _JointCache, _priors, _theta_covariance
+from graph_calib.joint.marginal import unknowns_covariance
+from graph_calib.joint.solver import _extend, _JointCache, _priors
 from graph_calib.joint.unknowns import MAX_DEGREE, curve_label
 from graph_calib.options import CalibrationOptions
 from graph_calib.params import Layout, split_element_name
@@ -139,7 +140,7 @@ def test_chained_jacobians_match_finite_differences(linear):
 
 
 def test_the_unknowns_covariance_is_gtsams_marginal_over_every_attitude():
-    """The attitudes eliminated and the unknowns' remaining information inverted (_theta_covariance) give
+    """The attitudes eliminated and the unknowns' remaining information inverted (unknowns_covariance) give
     GTSAM's own joint marginal (Marginals, the whole graph factored), on two chains of attitudes tied to a
     shared vector and one chain's own set-up vector, with arbitrary (seeded) factor Jacobians."""
     rng = np.random.default_rng(5)
@@ -170,7 +171,7 @@ def test_the_unknowns_covariance_is_gtsams_marginal_over_every_attitude():
                 graph.add(gtsam.BetweenFactorRot3(keys[k - 1], key, gtsam.Rot3.Expmap(rng.normal(size=3)),
                                                   gtsam.noiseModel.Isotropic.Sigma(3, 0.1)))
     tkeys = [Z(0), S(1)]
-    got = _theta_covariance(graph.linearize(values), x_keys, tkeys)
+    got = unknowns_covariance(graph.linearize(values), x_keys, tkeys)
     jm = gtsam.Marginals(graph, values).jointMarginalCovariance(gtsam.KeyVector(tkeys))
     want = np.block([[np.asarray(jm.at(a, b)) for b in tkeys] for a in tkeys])
     assert got.shape == (nz + ns, nz + ns)

@@ -35,6 +35,7 @@ import numpy as np
 from gtsam.symbol_shorthand import S, X, Z
 
 from graph_calib.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _Cache, _damped, _noise
+from graph_calib.joint.marginal import unknowns_covariance
 from graph_calib.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout, split_element_name
@@ -324,34 +325,6 @@ def _fit_attitudes(graph, caches, values, *, x_keys, theta_keys, theta_dims, ord
     return values
 
 
-def _theta_covariance(gfg, x_keys, theta_keys):
-    """Marginal covariance of the unknowns ``theta_keys`` (``Z(0)`` and the set-ups), over every attitude.
-
-    ``gfg``: the graph linearised at the solution (``GaussianFactorGraph``); the attitudes ``x_keys`` eliminated (multifrontal, in the given
-    order: each experiment's chain); what remains is the information of the unknowns alone (a few dense
-    factors on them), inverted.  Only the unknowns' block is ever formed, never the attitudes' (GTSAM's
-    ``Marginals`` factors the whole graph again and recovers the joint marginal clique by clique).
-
-    Returns
-    -------
-    ndarray, shape (Nt, Nt)
-        In the order of ``theta_keys``.
-    """
-    eliminate = gtsam.Ordering()
-    for k in x_keys:
-        eliminate.push_back(k)
-    _, rest = gfg.eliminatePartialMultifrontal(eliminate)
-    keep = gtsam.Ordering()
-    for k in theta_keys:
-        keep.push_back(k)
-    info = np.asarray(rest.hessian(keep)[0], dtype=float)
-    info = 0.5 * (info + info.T)
-    L = np.linalg.cholesky(info)
-    Linv = np.linalg.solve(L, np.eye(info.shape[0]))
-    cov = Linv.T @ Linv
-    return 0.5 * (cov + cov.T)
-
-
 def choose_degrees(unknowns, theta, covariance, *, n_measurements):
     """Each curve family's degree by the Wald test against the BIC price (module docstring).
 
@@ -489,7 +462,8 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     if not have_attitudes and not all(s is not None for s in starts):
         values = _fit_attitudes(graph, caches, values, x_keys=x_keys, theta_keys=theta_keys,
                                 theta_dims=theta_dims, ordering=ordering)
-    invalidate()
+        invalidate()
+    # (else the caches already hold every factor at `values`: evaluated when the graph was built)
     cost = graph.error(values)
     history = [cost]
     sig_theta = np.concatenate([z_sigma] + list(s_sigmas))
@@ -564,13 +538,16 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     # covariance: an experiment whose calibration moved beyond the first-order range of its preintegration
     # (the solver's own test) is re-preintegrated at the solution, so that its Jacobians hold there; one
     # at a time, the preintegration it replaces freed first
+    moved = False
     for c, xl in zip(caches, lin_x):
         x_c = x_of(values, c)
         if (not np.array_equal(c.preint.x_lin, xl)
                 or c.preint.needs_repreintegration(x_c, tol=options.repreintegrate_tol)):
             c.preint = None
             c.preint = c.model.preintegrate(x_c)
-    invalidate()
+            moved = True
+    if moved or not fresh:      # else the caches hold every factor at the solution (its accepted trial)
+        invalidate()
     gfg = graph.linearize(values)      # every factor evaluated at the solution: keep what the outputs need
     attitudes = [c.R for c in caches]
     whitened = [(c.rot.whitened(), c.grav.whitened(), c.enc.whitened()) for c in caches]
@@ -578,7 +555,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     for c in caches:
         c.release()
     tkeys = [Z(0)] + s_keys
-    cov = _theta_covariance(gfg, x_keys, tkeys)
+    cov = unknowns_covariance(gfg, x_keys, tkeys)
     gfg = None
     theta = theta_of(values)
     if select_degree:
