@@ -34,8 +34,8 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import S, X, Z
 
-from graph_calib.factor_graph import (ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _Cache, _damped, _noise,
-                                      marginal_covariance)
+from graph_calib.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _Cache, _damped, _noise
+from graph_calib.joint.marginal import unknowns_covariance
 from graph_calib.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout, split_element_name
@@ -132,6 +132,12 @@ class _JointCache(_Cache):
 
     def x_of(self, z, s):
         return self.A @ z + (self.B @ s if self.has_setup else 0.0)
+
+    def release(self):
+        """Drop the evaluated factors (about 0.17 GB for 3 h): GTSAM's linear system holds them now; the next
+        call into GTSAM evaluates again."""
+        self.R = None
+        self.rot = self.grav = self.enc = None
 
     def _read(self, values):
         R = np.empty((self.K + 1, 3, 3))
@@ -465,22 +471,34 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     if not have_attitudes and not all(s is not None for s in starts):
         values = _fit_attitudes(graph, caches, values, x_keys=x_keys, theta_keys=theta_keys,
                                 theta_dims=theta_dims, ordering=ordering)
-    invalidate()
+        invalidate()
+    # (else the caches already hold every factor at `values`: evaluated when the graph was built)
     cost = graph.error(values)
     history = [cost]
     lam = options.lambda_initial
     it, converged = 0, False
-    preint_current = [c.preint for c in caches]
-    # the caches hold every factor (residuals and Jacobians) at `values` with `preint_current` after the cost
-    # of the starting point and after an accepted step: the next linearisation reads them (a 3-h experiment's
-    # factors cost seconds to evaluate; factor_graph.solve evaluates them again there)
+    # where each experiment's current preintegration was formed; a trial that re-preintegrates an experiment
+    # replaces its preintegration (never two held per experiment: 0.3 GB each for 3 h), and a rejected trial
+    # is undone by preintegrating again at the same point (the same arrays; rejections are rare)
+    lin_x = [c.preint.x_lin for c in caches]
+
+    def restore():
+        for c, xl in zip(caches, lin_x):
+            if not np.array_equal(c.preint.x_lin, xl):
+                c.preint = None
+                c.preint = c.model.preintegrate(xl)
+        invalidate()
+
+    # the caches hold every factor (residuals and Jacobians) at `values` after the cost of the starting point
+    # and after an accepted step: the next linearisation reads them (a 3-h experiment's factors cost seconds
+    # to evaluate; factor_graph.solve evaluates them again there)
     fresh = True
     for it in range(1, options.max_iterations + 1):
         if not fresh:
-            for c, pre in zip(caches, preint_current):
-                c.preint = pre
-            invalidate()
+            restore()
         gfg = graph.linearize(values)
+        for c in caches:
+            c.release()
         while True:
             try:
                 delta = _damped(gfg, keys, lam, dims).optimize(ordering)
@@ -489,22 +507,28 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
                     raise
                 lam = max(lam * 10.0, 1e-6)
                 continue
+            gfg = None                      # the linear system freed during the trial, rebuilt if it fails
             trial = values.retract(delta)
-            for c, pre in zip(caches, preint_current):
+            for c in caches:
                 x_t = x_of(trial, c)
-                c.preint = (c.model.preintegrate(x_t)
-                            if pre.needs_repreintegration(x_t, tol=options.repreintegrate_tol) else pre)
+                if c.preint.needs_repreintegration(x_t, tol=options.repreintegrate_tol):
+                    c.preint = None
+                    c.preint = c.model.preintegrate(x_t)
             invalidate()
             new_cost = graph.error(trial)
             if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
                 break
             lam *= 10.0
+            restore()
+            gfg = graph.linearize(values)
+            for c in caches:
+                c.release()
         step = np.concatenate([np.asarray(delta.at(Z(0)))] + [np.asarray(delta.at(k)) for k in s_keys])
         accepted = new_cost <= cost
         fresh = accepted
         if accepted:
             values = trial
-            preint_current = [c.preint for c in caches]
+            lin_x = [c.preint.x_lin for c in caches]
             lam = max(lam / 10.0, 1e-9)
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
@@ -518,16 +542,31 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
             converged = True
             break
-    # covariance: every experiment re-preintegrated at the solution so that the Jacobians are exact there
-    for c in caches:
-        c.preint = c.model.preintegrate(x_of(values, c))
-    invalidate()
-    cov = marginal_covariance(graph, values, [Z(0)] + s_keys) * np.outer(sig_theta, sig_theta)
-    cov = 0.5 * (cov + cov.T)
-    theta = theta_of(values)
-    for c in caches:       # the marginals' linearisation left every factor evaluated at the solution
-        c.ensure(values)
+    gfg = None
+    # covariance: an experiment whose calibration moved beyond the first-order range of its preintegration
+    # (the solver's own test) is re-preintegrated at the solution, so that its Jacobians hold there; one
+    # at a time, the preintegration it replaces freed first
+    moved = False
+    for c, xl in zip(caches, lin_x):
+        x_c = x_of(values, c)
+        if (not np.array_equal(c.preint.x_lin, xl)
+                or c.preint.needs_repreintegration(x_c, tol=options.repreintegrate_tol)):
+            c.preint = None
+            c.preint = c.model.preintegrate(x_c)
+            moved = True
+    if moved or not fresh:      # else the caches hold every factor at the solution (its accepted trial)
+        invalidate()
+    gfg = graph.linearize(values)      # every factor evaluated at the solution: keep what the outputs need
+    attitudes = [c.R for c in caches]
+    whitened = [(c.rot.whitened(), c.grav.whitened(), c.enc.whitened()) for c in caches]
     n_meas = int(sum(3 * (c.grav.r.shape[0] + c.enc.r.shape[0]) for c in caches))
+    for c in caches:
+        c.release()
+    tkeys = [Z(0)] + s_keys
+    # in GTSAM's units (prior sigmas), back to SI
+    cov = unknowns_covariance(gfg, x_keys, tkeys) * np.outer(sig_theta, sig_theta)
+    gfg = None
+    theta = theta_of(values)
     if select_degree:
         reduced, keep, th_c, cov_c, choices = choose_degrees(unknowns, theta, cov, n_measurements=n_meas)
     else:
@@ -546,10 +585,10 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         cov_e = Mfull @ cov_r[np.ix_(cols, cols)] @ Mfull.T
         outputs.append(SolverOutput(
             solver=JOINT, layout=m.layout, x=x_e, covariance=0.5 * (cov_e + cov_e.T), t_key=m.t_key.copy(),
-            attitudes=c.R.copy(),
-            residuals={"rotation": ResidualSeries(t=m.t_key[1:].copy(), values=c.rot.whitened()),
-                       "gravity": ResidualSeries(t=m.t_key[:-1].copy(), values=c.grav.whitened()),
-                       "encoder": ResidualSeries(t=m.record.reading_t.copy(), values=c.enc.whitened())},
+            attitudes=attitudes[e],
+            residuals={"rotation": ResidualSeries(t=m.t_key[1:].copy(), values=whitened[e][0]),
+                       "gravity": ResidualSeries(t=m.t_key[:-1].copy(), values=whitened[e][1]),
+                       "encoder": ResidualSeries(t=m.record.reading_t.copy(), values=whitened[e][2])},
             residual_quantity=WHITENED_RESIDUAL, iterations=it, converged=bool(converged),
             final_cost=float(cost), seconds=seconds))
     names = reduced.z_names + tuple(f"{e}/{n}" for e, s in enumerate(reduced.setup_names) for n in s)

@@ -276,9 +276,12 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
     Jl_inv = right_jacobian_inv(-r)
     H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
     # the preintegration and the corrected rate depend on the gyro columns only
+    # (summed in place: one (M, 3, G) temporary fewer, 0.1 GB for a 3-h record's readings)
+    G_w = np.swapaxes(Ew, 1, 2) @ preint.reading_J[:, :, gc]
+    G_w += (right_jacobian(phi) * record.reading_dt[:, None, None]) @ J_w
     H_x = np.zeros((M, 3, P))
-    H_x[:, :, gc] = Jr_inv @ (np.swapaxes(Ew, 1, 2) @ preint.reading_J[:, :, gc]
-                              + (right_jacobian(phi) * record.reading_dt[:, None, None]) @ J_w)
+    H_x[:, :, gc] = Jr_inv @ G_w
+    del G_w
     if "mount" in layout:
         H_x[:, :, layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
     if "time_lag.table" in layout:

@@ -231,8 +231,7 @@ class PreparedRecord:
                 continue
             self.dw_raw[a:b] = _limited_derivative(self.w_raw[a:b], e.t[a:b])
             self.df_raw[a:b] = _limited_derivative(self.f_raw[a:b], e.t[a:b])
-        T = e.sensor_temperatures()
-        self.temperatures = T
+        T = e.sensor_temperatures()     # not kept: :attr:`temperatures` reads the experiment's again
         dT = T - self.t_ref_degC
         dTdt = _moving_slope(T, h, 60.0)
         self.dTg = np.ascontiguousarray(dT[:, :3])
@@ -267,6 +266,15 @@ class PreparedRecord:
             last = self.segment_keys[1:] - 1
             self.T_key[last] = e.t[self.k0[last + 1] - 1] - t_start[self.k0[last]]
         self.w_b_fix = boundary_rate_correction(self.w_raw, self.k0, segment_keys=self.segment_keys)
+
+    @property
+    def temperatures(self):
+        """Sensor temperatures (gyro x, y, z, accel x, y, z), degC, shape (N, 6).
+
+        Formed from the experiment's channels when asked (reports, results): the factors read only
+        ``dTg``, ``dTa`` and their rates, and a stored copy would hold another 52 MB per 3-h record.
+        """
+        return self.experiment.sensor_temperatures()
 
     @property
     def n_segments(self):
