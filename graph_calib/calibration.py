@@ -246,8 +246,9 @@ def correct_record(layout, X, record, *, n_newton=ModelOptions.n_newton):
     # accelerometers first: the gyros' g-sensitivity sees the calibrated specific force
     for triad, m, ctx, s in (("accel", r.f_raw, (r.dTa, r.dTdta, r.w_raw, r.dw_raw, r.df_raw), f_b),
                              ("gyro", r.w_raw, (r.dTg, r.dTdtg, f_b, r.dw_raw, r.dw_raw), w_b)):
-        _inverse_rows(term_rows(layout, triad), X, np.ascontiguousarray(m),
-                      *(np.ascontiguousarray(c) for c in ctx), int(n_newton), s, False)
+        # fresh writable copies (f_b is one): one numba signature for both triads
+        _inverse_rows(term_rows(layout, triad), X, np.array(m, dtype=float),
+                      *(np.array(c, dtype=float) for c in ctx), int(n_newton), s, False)
     return w_b, f_b
 
 

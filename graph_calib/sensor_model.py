@@ -445,8 +445,9 @@ def correct_with_jacobian(layout, x, triad, measured, *, dT=None, dTdt=None, oth
 
 
 def _pair(layout, x, w_raw, f_raw, *, dTg, dTdtg, dTa, dTdta, domega, df, n_iter, jacobian):
-    w_raw = np.ascontiguousarray(w_raw, dtype=float)
-    f_raw = np.ascontiguousarray(f_raw, dtype=float)
+    # fresh writable copies: one numba signature whether the caller's arrays are read-only or not
+    w_raw = np.array(w_raw, dtype=float)
+    f_raw = np.array(f_raw, dtype=float)
     n = w_raw.shape[0]
     if f_raw.shape != w_raw.shape:
         raise ValueError(f"w_raw and f_raw must have the same shape (N, 3), got {w_raw.shape} and {f_raw.shape}")
@@ -454,8 +455,8 @@ def _pair(layout, x, w_raw, f_raw, *, dTg, dTdtg, dTa, dTdta, domega, df, n_iter
     shape = (n, 3, layout.size) if jacobian else (n, 3, 1)
     Jw, Jf = np.zeros(shape), np.zeros(shape)
     _inverse_pair_many(term_rows(layout, "gyro"), term_rows(layout, "accel"), np.array(x, dtype=float),
-                       w_raw, f_raw, _as3(dTg, n), _as3(dTdtg, n), _as3(dTa, n), _as3(dTdta, n),
-                       _as3(domega, n), _as3(df, n), int(n_iter), w, f, Jw, Jf, jacobian)
+                       w_raw, f_raw, *(np.array(_as3(a, n)) for a in (dTg, dTdtg, dTa, dTdta, domega, df)),
+                       int(n_iter), w, f, Jw, Jf, jacobian)
     return w, f, Jw, Jf
 
 
