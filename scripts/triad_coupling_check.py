@@ -52,9 +52,9 @@ def main():
     truth = np.array([se.truth.values[n] for n in names])
     g = np.arange(layout.size)[layout.slice(EFFECT)]
     sig = {k: np.sqrt(np.diag(o.covariance)) for k, o in scratch.items()}
+    print("truth G, rad/s per m/s^2: " + " ".join(f"{v:+.2e}" for v in truth[g]))
+    print("sigma G (factor graph):   " + " ".join(f"{v:.2e}" for v in sig["factor-graph"][g]))
     np.set_printoptions(precision=3, suppress=True, linewidth=140)
-    print(f"truth G, rad/s per m/s^2: {truth[g]}")
-    print(f"sigma G (factor graph):   {sig['factor-graph'][g]}")
     for k in SOLVERS:
         o, w = scratch[k], warm[k]
         z = (o.x - truth) / sig[k]
