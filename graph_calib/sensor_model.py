@@ -420,7 +420,8 @@ def correct(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domeg
     """Inverse model: the true signal from the measured one.
 
     Parameters are those of :func:`measure`, with ``measured`` in place of ``signal``
-    (``other``, ``domega`` and ``dsignal`` from the raw measurements).
+    (``domega`` and ``dsignal`` from the raw measurements; ``other`` the raw rate for the accelerometers,
+    the *calibrated* specific force for the gyros: :func:`correct_pair` does both triads that way).
 
     Returns
     -------
