@@ -223,32 +223,33 @@ def correct_record(layout, X, record, *, n_newton=ModelOptions.n_newton):
 
     Notes
     -----
-    The gyros get ``dT`` and ``dT/dt`` of the gyro sensors, ``other = f``,
-    ``domega = dsignal = dw/dt``; the accelerometers ``dT`` and ``dT/dt`` of
-    theirs, ``other = w``, ``domega = dw/dt``, ``dsignal = df/dt`` (``w``, ``f``
-    the raw sample means): as the solvers feed the model.  With one vector this is
-    :func:`graph_calib.sensor_model.correct` itself; with one per sample the same
-    per-sample inversion, bit for bit where the rows are equal.
+    The accelerometers are corrected first, with ``dT`` and ``dT/dt`` of their
+    sensors, ``other = w``, ``domega = dw/dt``, ``dsignal = df/dt`` (``w`` and the
+    derivatives from the raw sample means); then the gyros with ``dT`` and ``dT/dt``
+    of theirs, ``other = f_b`` (the *calibrated* specific force, for
+    ``g_sensitivity``), ``domega = dsignal = dw/dt``: as the solvers feed the model.
+    With one vector this is :func:`graph_calib.sensor_model.correct_pair` itself;
+    with one per sample the same per-sample inversion, bit for bit where the rows
+    are equal.
     """
     r = record
     X = np.asarray(X, dtype=float)
-    gyro = dict(dT=r.dTg, dTdt=r.dTdtg, other=r.f_raw, domega=r.dw_raw, dsignal=r.dw_raw)
-    accel = dict(dT=r.dTa, dTdt=r.dTdta, other=r.w_raw, domega=r.dw_raw, dsignal=r.df_raw)
     if X.ndim == 1:
-        return (sensor_model.correct(layout, X, "gyro", r.w_raw, n_iter=n_newton, **gyro),
-                sensor_model.correct(layout, X, "accel", r.f_raw, n_iter=n_newton, **accel))
+        return sensor_model.correct_pair(layout, X, r.w_raw, r.f_raw, dTg=r.dTg, dTdtg=r.dTdtg, dTa=r.dTa,
+                                         dTdta=r.dTdta, domega=r.dw_raw, df=r.df_raw, n_iter=n_newton)
     n = r.w_raw.shape[0]
     if X.shape != (n, layout.size):
         raise ValueError(f"X must have shape ({layout.size},) or ({n}, {layout.size}), got {X.shape}")
     X = _writable(X)
-    out = []
-    for triad, m, ctx in (("gyro", r.w_raw, gyro), ("accel", r.f_raw, accel)):
-        s = np.empty((n, 3))
-        _inverse_rows(term_rows(layout, triad), X, np.ascontiguousarray(m),
-                      *(np.ascontiguousarray(ctx[k]) for k in ("dT", "dTdt", "other", "domega", "dsignal")),
-                      int(n_newton), s, False)
-        out.append(s)
-    return out[0], out[1]
+    f_b = np.empty((n, 3))
+    w_b = np.empty((n, 3))
+    # accelerometers first: the gyros' g-sensitivity sees the calibrated specific force
+    for triad, m, ctx, s in (("accel", r.f_raw, (r.dTa, r.dTdta, r.w_raw, r.dw_raw, r.df_raw), f_b),
+                             ("gyro", r.w_raw, (r.dTg, r.dTdtg, f_b, r.dw_raw, r.dw_raw), w_b)):
+        # fresh writable copies (f_b is one): one numba signature for both triads
+        _inverse_rows(term_rows(layout, triad), X, np.array(m, dtype=float),
+                      *(np.array(c, dtype=float) for c in ctx), int(n_newton), s, False)
+    return w_b, f_b
 
 
 def corrected_experiment(experiment, omega_ib_b, f_b, *, note=""):

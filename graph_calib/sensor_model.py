@@ -35,10 +35,15 @@ the offset component.  The gyro-scale asymmetry ``p * sign(w) * w`` is written
 
 Solvers invert the model: they find ``s`` with ``s + Phi(s) x = m`` by Newton's
 method, and its Jacobian by implicit differentiation,
-``ds/dx = -(I + dPhi x/ds)^-1 Phi(s)``.  Features of the *other* triad
-(``f_b`` in ``GSENS``, ``w`` in ``SIZE``) and the derivatives ``dw/dt``,
-``df/dt`` are taken from the raw measured signals, so they are data, not
-functions of ``x`` (documented in ``docs/model.md``).
+``ds/dx = -(I + dPhi x/ds)^-1 Phi(s)``.  The two triads are inverted together
+(:func:`correct_pair`): the accelerometers first, then the gyros with the
+*calibrated* specific force in ``GSENS`` (``model.md``: the other triad's true
+signal).  That order is exact because no accelerometer feature depends on
+the calibrated rate: ``SIZE``'s ``w``, ``w'`` and the derivatives ``dw/dt``,
+``df/dt`` are taken from the raw measured signals (data, not functions of
+``x``; ``docs/model.md``).  The gyro Jacobian is chained,
+``dw/dx = -Ai_g (Phi_g + Gm df/dx)`` with ``Gm = d(Phi_g x)/df``
+(:func:`gsens_coupling`).
 
 Everything per sample is compiled with numba; the Python-level functions here
 are vectorised wrappers for the simulator and for tests.  :func:`invert_sample` and
@@ -311,6 +316,50 @@ def _inverse_many(rows, x, m, dT, dTdt, other, domega, dsig, n_iter, out, J, wan
                        out[j], J[j], want_jacobian, work)
 
 
+@numba.njit(cache=True, _nrt=False)
+def gsens_coupling(grows, x, Gm):
+    """``Gm = d(Phi_g x)/df`` (3, 3), the gyro error's slope in the calibrated specific force.
+
+    Filled from the ``GSENS`` rows of the gyro term rows ``grows``; returns whether there is any
+    (then the gyro inversion depends on the accelerometer's calibration).
+    """
+    for i in range(3):
+        for k in range(3):
+            Gm[i, k] = 0.0
+    coupled = False
+    for r in range(grows.shape[0]):
+        if grows[r, 2] == GSENS:
+            Gm[grows[r, 1], grows[r, 3]] += x[grows[r, 0]]
+            coupled = True
+    return coupled
+
+
+@numba.njit(cache=True)
+def _inverse_pair_many(grows, arows, x, w_raw, f_raw, dTg, dTdtg, dTa, dTdta, dw, df, n_iter,
+                       w_out, f_out, Jw, Jf, want_jacobian):
+    """Both triads, sample by sample: accelerometers, then gyros with the calibrated ``f``; chained Jacobian."""
+    work = np.empty((8, 3))
+    Gm = np.empty((3, 3))
+    B = np.empty((3, 3))
+    coupled = gsens_coupling(grows, x, Gm)
+    for j in range(w_raw.shape[0]):
+        correct_sample(arows, x, f_raw[j], dTa[j], dTdta[j], w_raw[j], dw[j], df[j], n_iter,
+                       f_out[j], Jf[j], want_jacobian, work)
+        fo = f_out[j] if coupled else f_raw[j]
+        correct_sample(grows, x, w_raw[j], dTg[j], dTdtg[j], fo, dw[j], dw[j], n_iter,
+                       w_out[j], Jw[j], want_jacobian, work)
+        if not (want_jacobian and coupled):
+            continue
+        # dw/dx += -Ai_g Gm df/dx in the accelerometer columns (no gyro term names them)
+        for i in range(3):
+            for k in range(3):
+                B[i, k] = work[5 + i, 0] * Gm[0, k] + work[5 + i, 1] * Gm[1, k] + work[5 + i, 2] * Gm[2, k]
+        for r in range(arows.shape[0]):
+            c = arows[r, 0]
+            for i in range(3):
+                Jw[j, i, c] = -(B[i, 0] * Jf[j, 0, c] + B[i, 1] * Jf[j, 1, c] + B[i, 2] * Jf[j, 2, c])
+
+
 def _as3(a, n):
     if a is None:
         return np.zeros((n, 3))
@@ -371,7 +420,8 @@ def correct(layout, x, triad, measured, *, dT=None, dTdt=None, other=None, domeg
     """Inverse model: the true signal from the measured one.
 
     Parameters are those of :func:`measure`, with ``measured`` in place of ``signal``
-    (``other``, ``domega`` and ``dsignal`` from the raw measurements).
+    (``domega`` and ``dsignal`` from the raw measurements; ``other`` the raw rate for the accelerometers,
+    the *calibrated* specific force for the gyros: :func:`correct_pair` does both triads that way).
 
     Returns
     -------
@@ -395,5 +445,63 @@ def correct_with_jacobian(layout, x, triad, measured, *, dT=None, dTdt=None, oth
                     n_iter=n_iter, jacobian=True)
 
 
-__all__ = ["term_rows", "measure", "correct", "correct_with_jacobian", "correct_sample", "invert_sample", "sample_features",
+def _pair(layout, x, w_raw, f_raw, *, dTg, dTdtg, dTa, dTdta, domega, df, n_iter, jacobian):
+    # fresh writable copies: one numba signature whether the caller's arrays are read-only or not
+    w_raw = np.array(w_raw, dtype=float)
+    f_raw = np.array(f_raw, dtype=float)
+    n = w_raw.shape[0]
+    if f_raw.shape != w_raw.shape:
+        raise ValueError(f"w_raw and f_raw must have the same shape (N, 3), got {w_raw.shape} and {f_raw.shape}")
+    w, f = np.empty_like(w_raw), np.empty_like(f_raw)
+    shape = (n, 3, layout.size) if jacobian else (n, 3, 1)
+    Jw, Jf = np.zeros(shape), np.zeros(shape)
+    _inverse_pair_many(term_rows(layout, "gyro"), term_rows(layout, "accel"), np.array(x, dtype=float),
+                       w_raw, f_raw, *(np.array(_as3(a, n)) for a in (dTg, dTdtg, dTa, dTdta, domega, df)),
+                       int(n_iter), w, f, Jw, Jf, jacobian)
+    return w, f, Jw, Jf
+
+
+def correct_pair(layout, x, w_raw, f_raw, *, dTg=None, dTdtg=None, dTa=None, dTdta=None, domega=None, df=None,
+                 n_iter=3):
+    """Both triads' true signals from the measured ones, each seeing the other's as ``model.md`` says.
+
+    The accelerometers are corrected first (their ``size_effect`` sees the raw rate ``w_raw`` and
+    ``domega``, their time lag ``df``), then the gyros with the calibrated specific force in
+    ``g_sensitivity``.
+
+    Parameters
+    ----------
+    layout : graph_calib.params.Layout
+    x : ndarray, shape (layout.size,)
+    w_raw, f_raw : ndarray, shape (N, 3)
+        Measured angular rate (rad/s) and specific force (m/s^2).
+    dTg, dTdtg, dTa, dTdta : ndarray, shape (N, 3), optional
+        Temperature offsets (degC) and rates (degC/s) of the gyro and accelerometer sensors.
+    domega, df : ndarray, shape (N, 3), optional
+        Raw angular acceleration (rad/s^2) and rate of the specific force (m/s^3).
+    n_iter : int
+
+    Returns
+    -------
+    omega_ib_b, f_b : ndarray, shape (N, 3)
+    """
+    return _pair(layout, x, w_raw, f_raw, dTg=dTg, dTdtg=dTdtg, dTa=dTa, dTdta=dTdta, domega=domega, df=df,
+                 n_iter=n_iter, jacobian=False)[:2]
+
+
+def correct_pair_with_jacobian(layout, x, w_raw, f_raw, *, dTg=None, dTdtg=None, dTa=None, dTdta=None,
+                               domega=None, df=None, n_iter=3):
+    """:func:`correct_pair` and both Jacobians in the calibration.
+
+    Returns
+    -------
+    omega_ib_b, f_b : ndarray, shape (N, 3)
+    J_omega, J_f : ndarray, shape (N, 3, layout.size)
+        ``d omega / d x`` (accelerometer columns too where ``g_sensitivity`` couples) and ``d f / d x``.
+    """
+    return _pair(layout, x, w_raw, f_raw, dTg=dTg, dTdtg=dTdtg, dTa=dTa, dTdta=dTdta, domega=domega, df=df,
+                 n_iter=n_iter, jacobian=True)
+
+
+__all__ = ["correct_pair", "correct_pair_with_jacobian", "gsens_coupling", "term_rows", "measure", "correct", "correct_with_jacobian", "correct_sample", "invert_sample", "sample_features",
            "is_nonlinear", "XYZ"]

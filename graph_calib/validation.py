@@ -296,7 +296,7 @@ def static_pose_consistency(experiment, *, poses, layout=None, x=None):
     w = e.dtheta / dt
     f = e.dv / dt
     if x is not None:
-        w, f = sm.correct(layout, x, "gyro", w, other=e.dv / dt), sm.correct(layout, x, "accel", f, other=e.dtheta / dt)
+        w, f = sm.correct_pair(layout, x, w, f)       # the gyros' g-sensitivity sees the calibrated f
     means = np.array([f[a:b].mean(axis=0) for a, b in poses])
     centres = [(a + b) // 2 for a, b in poses]
     q0 = np.array([1.0, 0.0, 0.0, 0.0])

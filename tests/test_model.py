@@ -50,6 +50,44 @@ def test_sensor_inverse_is_exact_and_its_jacobian_matches_fd(triad):
                                    err_msg=layout.element_names()[c])
 
 
+def test_pair_inverse_uses_calibrated_specific_force_and_its_jacobian_matches_fd():
+    """The gyros' g-sensitivity sees the calibrated f (model.md): the pair inversion recovers the true rate
+    of a record measured with the true f, where the raw f misses by G @ (f_raw - f), and its chained
+    Jacobian (gyro rate in the accelerometer columns) matches central differences."""
+    rng = np.random.default_rng(8)
+    layout = Layout.declared(extra=FURTHER_EFFECTS)
+    x = rng.normal(size=layout.size) * 0.01                 # percent-level: consumer-grade errors
+    x[layout.slice("gyro.g_sensitivity")] = rng.normal(size=9) * 1e-3
+    x[layout.slice("accel.bias")] = rng.normal(size=3) * 0.5     # consumer biases: ~1 m/s^2
+    n = 200
+    w, f = rng.normal(size=(n, 3)), rng.normal(size=(n, 3)) * 5.0
+    ctx = dict(dTg=rng.normal(size=(n, 3)), dTdtg=rng.normal(size=(n, 3)) * 0.01, dTa=rng.normal(size=(n, 3)),
+               dTdta=rng.normal(size=(n, 3)) * 0.01, domega=rng.normal(size=(n, 3)), df=rng.normal(size=(n, 3)))
+    w_m = sm.measure(layout, x, "gyro", w, dT=ctx["dTg"], dTdt=ctx["dTdtg"], other=f, domega=ctx["domega"],
+                     dsignal=ctx["domega"])
+    # the accelerometers' size effect sees the raw rate (documented approximation): measured with it
+    f_m = sm.measure(layout, x, "accel", f, dT=ctx["dTa"], dTdt=ctx["dTdta"], other=w_m, domega=ctx["domega"],
+                     dsignal=ctx["df"])
+    w_c, f_c, Jw, Jf = sm.correct_pair_with_jacobian(layout, x, w_m, f_m, **ctx)
+    np.testing.assert_allclose(f_c, f, atol=1e-12)
+    np.testing.assert_allclose(w_c, w, atol=1e-12)
+    w_raw_f = sm.correct(layout, x, "gyro", w_m, dT=ctx["dTg"], dTdt=ctx["dTdtg"], other=f_m,
+                         domega=ctx["domega"], dsignal=ctx["domega"])
+    assert np.abs(w_raw_f - w).max() > 1e-4                 # the raw f would be first-order wrong here
+    acc = layout.slice("accel.bias")
+    assert np.abs(Jw[:, :, acc]).max() > 1e-4                # the triads really couple
+    for c in range(layout.size):
+        xp, xm = x.copy(), x.copy()
+        xp[c] += EPS
+        xm[c] -= EPS
+        wp, fp = sm.correct_pair(layout, xp, w_m, f_m, **ctx)
+        wm, fm = sm.correct_pair(layout, xm, w_m, f_m, **ctx)
+        for J, fd in ((Jw, (wp - wm) / (2 * EPS)), (Jf, (fp - fm) / (2 * EPS))):
+            # against each column's own scale (the coupled columns are small), floored at the rounding
+            np.testing.assert_allclose(J[:, :, c], fd, rtol=0, atol=1e-6 * np.abs(fd).max() + 1e-8,
+                                       err_msg=layout.element_names()[c])
+
+
 @pytest.mark.parametrize("kind", ["rotation_factors", "gravity_factors", "encoder_factors"])
 def test_factor_jacobian_in_calibration_matches_fd(problem, kind):
     model, x, preint, R = problem
@@ -62,7 +100,9 @@ def test_factor_jacobian_in_calibration_matches_fd(problem, kind):
         xm[c] -= EPS
         fd = (f(R, model.preintegrate(xp), xp).r - f(R, model.preintegrate(xm), xm).r) / (2 * EPS)
         scale = np.abs(fd).max() + np.abs(res.H_x[:, :, c]).max() + 1e-12
-        assert np.abs(fd - res.H_x[:, :, c]).max() / scale < 1e-5, model.layout.element_names()[c]
+        # floor: the central difference's rounding, ~1e-16 |r| / EPS = 1e-10 (the columns that reach the gyro
+        # rate only through g-sensitivity, e.g. accel.bias_dtdt, are ~1e-5 here)
+        assert np.abs(fd - res.H_x[:, :, c]).max() < 1e-5 * scale + 1e-9, model.layout.element_names()[c]
 
 
 def test_encoder_jacobian_with_readings_inside_sample_intervals_matches_fd():
@@ -140,9 +180,12 @@ def _skew_mul(a, J, out):
 
 @numba.njit
 def _reference_preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta, w_raw, f_raw, dw_raw, df_raw,
-                            tap_idx, tap_lo, n_newton, nc,
+                            tap_idx, tap_lo, n_newton, nc, Gm,
                             dR, JR, S, JS, S1, JS1, w_first, Jw_first, w_last, Jw_last, tapR, tapJ):
-    """The recursion of ``model._preintegrate`` as written, full (3, nc) Jacobians through every sample."""
+    """The recursion of ``model._preintegrate`` as written, full (3, nc) Jacobians through every sample.
+
+    Each sample: accelerometers first, then gyros with the calibrated ``f`` (``Gm = d(Phi_g x)/df``), the gyro
+    Jacobian chained, ``Jw -= Ai_g Gm Jf``."""
     for k in range(k0.shape[0] - 1):
         R = np.eye(3)
         J = np.zeros((3, nc))
@@ -173,18 +216,27 @@ def _reference_preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta, w_r
         work = np.empty((8, 3))
         j0 = k0[k]
         if j0 > 0:
-            sm.correct_sample(grows, x, w_raw[j0 - 1], dTg[j0 - 1], dTdtg[j0 - 1], f_raw[j0 - 1],
-                              dw_raw[j0 - 1], dw_raw[j0 - 1], n_newton, w, Jw, True, work)
+            jp = j0 - 1
+            Jf[:] = 0.0
+            Jw[:] = 0.0
+            sm.correct_sample(arows, x, f_raw[jp], dTa[jp], dTdta[jp], w_raw[jp], dw_raw[jp], df_raw[jp],
+                              n_newton, fc, Jf, True, work)
+            sm.correct_sample(grows, x, w_raw[jp], dTg[jp], dTdtg[jp], fc,
+                              dw_raw[jp], dw_raw[jp], n_newton, w, Jw, True, work)
+            Jw -= work[5:8] @ Gm @ Jf
             pth[:] = w * dt[j0 - 1]
             pJth[:] = Jw * dt[j0 - 1]
         tau = 0.0
         tp = tap_lo[k]
         for j in range(j0, k0[k + 1]):
             h = dt[j]
-            sm.correct_sample(grows, x, w_raw[j], dTg[j], dTdtg[j], f_raw[j], dw_raw[j], dw_raw[j],
-                              n_newton, w, Jw, True, work)
+            Jf[:] = 0.0
+            Jw[:] = 0.0
             sm.correct_sample(arows, x, f_raw[j], dTa[j], dTdta[j], w_raw[j], dw_raw[j], df_raw[j],
                               n_newton, fc, Jf, True, work)
+            sm.correct_sample(grows, x, w_raw[j], dTg[j], dTdtg[j], fc, dw_raw[j], dw_raw[j],
+                              n_newton, w, Jw, True, work)
+            Jw -= work[5:8] @ Gm @ Jf
             th[:] = w * h
             vv[:] = fc * h
             Jth[:] = Jw * h
@@ -256,9 +308,14 @@ def _reference_preintegration(model, x):
                wl=np.empty((K, 3)), Jwl=np.zeros((K, 3, nc)), reading_dR=np.empty((M, 3, 3)),
                reading_J=np.zeros((M, 3, nc)))
     rec, terms = model.record, model.terms
-    _reference_preintegrate(rec.dt, rec.k0, x[terms.columns], terms.gyro_rows_compact, terms.accel_rows_compact,
+    xc = x[terms.columns]
+    Gm = np.zeros((3, 3))
+    for col, axis, code, aux in terms.gyro_rows_compact:
+        if code == sm.GSENS:
+            Gm[axis, aux] += xc[col]
+    _reference_preintegrate(rec.dt, rec.k0, xc, terms.gyro_rows_compact, terms.accel_rows_compact,
                             rec.dTg, rec.dTdtg, rec.dTa, rec.dTdta, rec.w_raw, rec.f_raw, rec.dw_raw, rec.df_raw,
-                            rec.reading_sample, rec.reading_lo, model.options.n_newton, nc, *out.values())
+                            rec.reading_sample, rec.reading_lo, model.options.n_newton, nc, Gm, *out.values())
     wf, Jwf, wl, Jwl = out.pop("wf"), out.pop("Jwf"), out.pop("wl"), out.pop("Jwl")
     out["w_b"] = np.concatenate([wf[:1], 0.5 * (wl[:-1] + wf[1:]), wl[-1:]])
     out["w_b"] += model.record.w_b_fix

@@ -15,7 +15,7 @@ import numba
 import numpy as np
 
 from graph_calib.rotations import exp_so3_nb, right_jacobian_nb
-from graph_calib.sensor_model import invert_sample, is_nonlinear, sample_features
+from graph_calib.sensor_model import gsens_coupling, invert_sample, is_nonlinear, sample_features
 
 _C12 = 1.0 / 12.0   # coning Jacobians
 _C6 = 1.0 / 6.0     # velocity-rotation Jacobians; the values divide by 6 as the recursion is written
@@ -36,6 +36,28 @@ def _add_skew_mul(a, J, B, out):
         out[0, c] = B[0, c] + (a[1] * J[2, c] - a[2] * J[1, c])
         out[1, c] = B[1, c] + (a[2] * J[0, c] - a[0] * J[2, c])
         out[2, c] = B[2, c] + (a[0] * J[1, c] - a[1] * J[0, c])
+
+
+@numba.njit(cache=True, inline="always")
+def _pending_rows(rows, feat, pG, pHs, pHs1, pT, T, N, acc):
+    """acc[r] += feat[r] * (pG pT, pHs pT, pHs1 pT)[:, axis_r]: one pending sample's rows (T scratch)."""
+    _mm3(pG, pT, T)
+    for i in range(3):
+        for a in range(3):
+            N[a, i] = T[i, a]
+    _mm3(pHs, pT, T)
+    for i in range(3):
+        for a in range(3):
+            N[a, 3 + i] = T[i, a]
+    _mm3(pHs1, pT, T)
+    for i in range(3):
+        for a in range(3):
+            N[a, 6 + i] = T[i, a]
+    for r in range(rows.shape[0]):
+        f = feat[r]
+        ax = rows[r, 1]
+        for q in range(9):
+            acc[r, q] += f * N[ax, q]
 
 
 @numba.njit(cache=True, error_model="numpy")
@@ -79,12 +101,22 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
     ``(dS, dS1)``; at the end ``J = R^T G``, ``dS = H_S - [S x] G`` and
     ``dS1 = H_S1 - [S1 x] G`` (tests/test_model.py checks this against the direct
     recursion).
+
+    With ``gyro.g_sensitivity`` the gyros see the calibrated specific force
+    (:func:`graph_calib.sensor_model.correct_pair`): each sample is inverted
+    accelerometers first, and ``dth`` gains ``h Ai_g Gm Ai_a`` per accelerometer
+    term row (``Gm`` from :func:`graph_calib.sensor_model.gsens_coupling`), so the
+    accelerometer rows also accumulate ``(G, H_S, H_S1)`` exactly like the gyro
+    rows (``accGA``, pending one sample like them).  Without the coupling that
+    path is skipped and the results are those of the uncoupled model bit for bit.
     """
     K = k0.shape[0] - 1
     ng = grows.shape[0]
     na = arows.shape[0]
     g_nonlin = is_nonlinear(grows)
     a_nonlin = is_nonlinear(arows)
+    Gm = np.empty((3, 3))
+    coupled = gsens_coupling(grows, x, Gm)
     for k in range(K):
         w = np.empty(3)
         fc = np.empty(3)
@@ -125,6 +157,12 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
         NA = np.empty((3, 6))      # per axis: the accelerometer ones
         accG = np.zeros((ng, 9))   # per gyro row: G, H_S, H_S1 (3 each)
         accA = np.zeros((na, 6))   # per accel row: dS, dS1
+        accGA = np.zeros((na, 9))  # per accel row: its G, H_S, H_S1 through g_sensitivity (coupled only)
+        pfeata = np.zeros(na)
+        Bga = np.zeros((3, 3))     # Ai_g Gm Ai_a of the current sample
+        Tga = np.zeros((3, 3))     # h Bga
+        pTga = np.zeros((3, 3))
+        NGA = np.empty((3, 9))
         s = np.zeros(3)
         s1 = np.zeros(3)
         pth = np.zeros(3)
@@ -142,14 +180,28 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                 mf[i] = f_raw[jp, i]
                 dTg_j[i] = dTg[jp, i]
                 dTdtg_j[i] = dTdtg[jp, i]
+                dTa_j[i] = dTa[jp, i]
+                dTdta_j[i] = dTdta[jp, i]
                 dw_j[i] = dw_raw[jp, i]
-            invert_sample(grows, x, mw, dTg_j, dTdtg_j, mf, dw_j, dw_j, n_newton, g_nonlin, w, A, Aig, err)
-            sample_features(grows, w, dTg_j, dTdtg_j, mf, dw_j, dw_j, pfeat)
+                df_j[i] = df_raw[jp, i]
+            fo = mf
+            if coupled:
+                invert_sample(arows, x, mf, dTa_j, dTdta_j, mw, dw_j, df_j, n_newton, a_nonlin, fc, A, Aia, err)
+                sample_features(arows, fc, dTa_j, dTdta_j, mw, dw_j, df_j, pfeata)
+                fo = fc
+            invert_sample(grows, x, mw, dTg_j, dTdtg_j, fo, dw_j, dw_j, n_newton, g_nonlin, w, A, Aig, err)
+            sample_features(grows, w, dTg_j, dTdtg_j, fo, dw_j, dw_j, pfeat)
             hp = dt[jp]
             for i in range(3):
                 pth[i] = w[i] * hp
                 for m in range(3):
                     pTg[i, m] = -hp * Aig[i, m]
+            if coupled:
+                _mm3(Aig, Gm, T1)
+                _mm3(T1, Aia, Bga)
+                for i in range(3):
+                    for m in range(3):
+                        pTga[i, m] = hp * Bga[i, m]
             has_prev = True
         tau = 0.0
         tp = tap_lo[k]
@@ -164,15 +216,22 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                 dTdta_j[i] = dTdta[j, i]
                 dw_j[i] = dw_raw[j, i]
                 df_j[i] = df_raw[j, i]
-            invert_sample(grows, x, mw, dTg_j, dTdtg_j, mf, dw_j, dw_j, n_newton, g_nonlin, w, A, Aig, err)
-            sample_features(grows, w, dTg_j, dTdtg_j, mf, dw_j, dw_j, featg)
+            # accelerometers first: the gyros' g-sensitivity sees the calibrated specific force
             invert_sample(arows, x, mf, dTa_j, dTdta_j, mw, dw_j, df_j, n_newton, a_nonlin, fc, A, Aia, err)
             sample_features(arows, fc, dTa_j, dTdta_j, mw, dw_j, df_j, feata)
+            invert_sample(grows, x, mw, dTg_j, dTdtg_j, fc, dw_j, dw_j, n_newton, g_nonlin, w, A, Aig, err)
+            sample_features(grows, w, dTg_j, dTdtg_j, fc, dw_j, dw_j, featg)
             for i in range(3):
                 th[i] = w[i] * h
                 vv[i] = fc[i] * h
                 for m in range(3):
                     Tg[i, m] = -h * Aig[i, m]
+            if coupled:
+                _mm3(Aig, Gm, T1)
+                _mm3(T1, Aia, Bga)
+                for i in range(3):
+                    for m in range(3):
+                        Tga[i, m] = h * Bga[i, m]
             if j == j0:
                 for i in range(3):
                     w_first[k, i] = w[i]
@@ -181,6 +240,12 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                     ax = grows[r, 1]
                     for i in range(3):
                         Jw_first[k, i, col] -= Aig[i, ax] * featg[r]
+                if coupled:
+                    for r in range(na):
+                        col = arows[r, 0]
+                        ax = arows[r, 1]
+                        for i in range(3):
+                            Jw_first[k, i, col] += Bga[i, ax] * feata[r]
             th0, th1, th2 = th[0], th[1], th[2]
             v0, v1, v2 = vv[0], vv[1], vv[2]
             # coning: phi = th + (pth x th) / 12
@@ -269,6 +334,8 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                     ax = grows[r, 1]
                     for q in range(9):
                         accG[r, q] += f * NG[ax, q]
+                if coupled:
+                    _pending_rows(arows, pfeata, pG, pHs, pHs1, pTga, T1, NGA, accGA)
             # this sample's share: P_j, R_{j-1} Mg + [S_j x] P_j, tm R_{j-1} Mg + [S1_j x] P_j
             _mm3(R, Mg, RMg)
             _add_skew_mul(s, P, RMg, pHs)
@@ -282,6 +349,12 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                     pTg[i, m] = Tg[i, m]
             for r in range(ng):
                 pfeat[r] = featg[r]
+            if coupled:
+                for i in range(3):
+                    for m in range(3):
+                        pTga[i, m] = Tga[i, m]
+                for r in range(na):
+                    pfeata[r] = feata[r]
             has_prev = True
             # accelerometer rows: R_{j-1} Ma (-h Aia)
             _mm3(R, Ma, T1)
@@ -316,6 +389,16 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                             gv[i] = accG[r, i] + f * T1[i, ax]
                         for i in range(3):
                             tapJ[tp, i, col] += R[0, i] * gv[0] + R[1, i] * gv[1] + R[2, i] * gv[2]
+                    if coupled:
+                        _mm3(pG, pTga, T2)
+                        for r in range(na):
+                            f = pfeata[r]
+                            ax = arows[r, 1]
+                            col = arows[r, 0]
+                            for i in range(3):
+                                gv[i] = accGA[r, i] + f * T2[i, ax]
+                            for i in range(3):
+                                tapJ[tp, i, col] += R[0, i] * gv[0] + R[1, i] * gv[1] + R[2, i] * gv[2]
                     tp += 1
         # the last sample's pending gyro rows
         _mm3(pG, pTg, T1)
@@ -338,6 +421,27 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
             JS1[k, 2, col] += accG[r, 8] + f * Rn[2, ax] - (s1[0] * g1 - s1[1] * g0)
             for i in range(3):
                 Jw_last[k, i, col] -= Aig[i, ax] * f
+        if coupled:
+            _mm3(pG, pTga, T1)
+            _mm3(pHs, pTga, T2)
+            _mm3(pHs1, pTga, Rn)
+            for r in range(na):
+                f = pfeata[r]
+                ax = arows[r, 1]
+                col = arows[r, 0]
+                for i in range(3):
+                    gv[i] = accGA[r, i] + f * T1[i, ax]
+                g0, g1, g2 = gv[0], gv[1], gv[2]
+                for i in range(3):
+                    JR[k, i, col] += R[0, i] * g0 + R[1, i] * g1 + R[2, i] * g2
+                JS[k, 0, col] += accGA[r, 3] + f * T2[0, ax] - (s[1] * g2 - s[2] * g1)
+                JS[k, 1, col] += accGA[r, 4] + f * T2[1, ax] - (s[2] * g0 - s[0] * g2)
+                JS[k, 2, col] += accGA[r, 5] + f * T2[2, ax] - (s[0] * g1 - s[1] * g0)
+                JS1[k, 0, col] += accGA[r, 6] + f * Rn[0, ax] - (s1[1] * g2 - s1[2] * g1)
+                JS1[k, 1, col] += accGA[r, 7] + f * Rn[1, ax] - (s1[2] * g0 - s1[0] * g2)
+                JS1[k, 2, col] += accGA[r, 8] + f * Rn[2, ax] - (s1[0] * g1 - s1[1] * g0)
+                for i in range(3):
+                    Jw_last[k, i, col] += Bga[i, ax] * f
         for r in range(na):
             col = arows[r, 0]
             for i in range(3):

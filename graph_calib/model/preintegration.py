@@ -16,7 +16,7 @@ import numpy as np
 
 from graph_calib.model.kernel import _preintegrate
 from graph_calib.rotations import exp_so3
-from graph_calib.sensor_model import correct_with_jacobian, term_rows
+from graph_calib.sensor_model import GSENS, correct_pair_with_jacobian, term_rows
 
 #: Largest first-order keyframe rotation change (rad) for which a preintegration is updated to first
 #: order (``dR Exp(J dx)``, ``S + J_S dx``) instead of redone; every solver uses it.
@@ -36,7 +36,9 @@ class SensorTerms:
     gyro_rows_compact, accel_rows_compact : ndarray of int64
         The same rows with columns renumbered into ``columns``.
     gyro_cols : slice
-        The columns gyro terms can touch, as one slice (columns in between are zero).
+        The columns the calibrated rate depends on, as one slice (columns in between are zero): the
+        gyro terms', and with ``gyro.g_sensitivity`` the accelerometer terms' too (the gyros see the
+        calibrated specific force).
     """
 
     gyro_rows: np.ndarray
@@ -53,6 +55,8 @@ class SensorTerms:
         accel = term_rows(layout, "accel")
         cols = np.unique(np.concatenate([gyro[:, 0], accel[:, 0]])).astype(np.int64)
         g = gyro[:, 0]
+        if np.any(gyro[:, 2] == GSENS):
+            g = np.concatenate([g, accel[:, 0]])
         gyro_cols = slice(int(g.min()), int(g.max()) + 1) if g.size else slice(0, 0)
         remap = -np.ones(layout.size, dtype=np.int64)
         remap[cols] = np.arange(cols.size)
@@ -89,7 +93,7 @@ class Preintegrated:
     w_b, J_w_b : (K+1, 3), (K+1, 3, P)  corrected angular rate omega_ib_b at each boundary, rad/s
     reading_dR, reading_J : (M, 3, 3), (M, 3, P)  partial preintegration up to each encoder reading
     reading_w, reading_Jw : (M, 3), (M, 3, G)  calibrated mean rate of the sample interval holding each
-        reading, and its Jacobian in the gyro columns ``gyro_cols``
+        reading, and its Jacobian in the columns ``gyro_cols``
     gyro_cols : slice
         The columns of ``x`` that ``reading_Jw`` covers.
     """
@@ -184,9 +188,9 @@ def preintegrate(record, terms, x, *, layout, n_newton):
     Jw_b[1:K] = 0.5 * (Jwl[:-1] + Jwf[1:])
     w_b += r.w_b_fix
     n = r.reading_interval
-    read_w, read_Jw = correct_with_jacobian(layout, x, "gyro", r.w_raw[n], dT=r.dTg[n], dTdt=r.dTdtg[n],
-                                            other=r.f_raw[n], domega=r.dw_raw[n], dsignal=r.dw_raw[n],
-                                            n_iter=n_newton)
+    read_w, _, read_Jw, _ = correct_pair_with_jacobian(layout, x, r.w_raw[n], r.f_raw[n], dTg=r.dTg[n],
+                                                       dTdtg=r.dTdtg[n], dTa=r.dTa[n], dTdta=r.dTdta[n],
+                                                       domega=r.dw_raw[n], df=r.df_raw[n], n_iter=n_newton)
     return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=JR, S=S, J_S=JS, S1=S1, J_S1=JS1, w_b=w_b, J_w_b=Jw_b,
                          reading_dR=readR, reading_J=readJ, reading_w=read_w,
                          reading_Jw=np.ascontiguousarray(read_Jw[:, :, terms.gyro_cols]), gyro_cols=terms.gyro_cols)
