@@ -440,6 +440,8 @@ class _Mixing:
             self.ref = (R.copy(), sigma_x.copy(), sigma_R.copy())
         u = self._encode(x, R)
         u_new = self.acc.next(u, self._encode(x_gn, R_gn) - u)
+        if self.acc.depth < 2:
+            return x_gn, R_gn        # one step held: the plain step, exactly
         R_ref, s_x, s_R = self.ref
         P = x.size
         return u_new[:P] * s_x, R_ref @ exp_so3(u_new[P:].reshape(-1, 3) * s_R)
