@@ -38,6 +38,8 @@ from gtsam.symbol_shorthand import C, X
 
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout
+from graph_calib.rotations import exp_so3, log_so3
+from graph_calib.solvers.acceleration import Anderson
 from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, ResidualSeries, SolverOutput
 
 
@@ -303,6 +305,51 @@ def _fit_attitudes(graph, cache, values, *, keys, dims, ordering):
     return values
 
 
+#: Steps are mixed (Anderson, :mod:`graph_calib.solvers.acceleration`) once an accepted step lowered the cost
+#: by less than this fraction (the iterations are then near the minimum, where they converge linearly).
+ACCELERATE_BELOW_REL = 1e-2
+
+
+class _Mixing:
+    """Anderson mixing of the steps in the coordinates ``D [x; log(R_ref^T R)]``.
+
+    ``D`` is the square root of the diagonal of the Gauss-Newton information ``J^T J`` at the point that
+    starts the history (every element in units of its own curvature), ``R_ref`` the attitudes there.
+    """
+
+    def __init__(self, cache, P):
+        self.acc = Anderson()
+        self.cache = cache
+        self.P = P
+        self.ref = None
+
+    def reset(self):
+        self.acc.reset()
+        self.ref = None
+
+    def _encode(self, values):
+        R, x = self.cache._read(values)
+        R_ref, D = self.ref
+        return D * np.concatenate([x, log_so3(np.swapaxes(R_ref, 1, 2) @ R).ravel()])
+
+    def next(self, values, trial, gfg):
+        """The mixed point from ``values`` and its step's ``trial``; None while only one step is held."""
+        if self.ref is None:
+            ijv = np.asarray(gfg.sparseJacobian_())
+            j, v = ijv[1].astype(np.int64) - 1, ijv[2]
+            n = self.P + 3 * values.size() - 3    # C(0) first (key order), then X(0..K); then b
+            keep = j < n
+            D = np.sqrt(np.bincount(j[keep], weights=v[keep] ** 2, minlength=n))
+            self.ref = (self.cache._read(values)[0], np.where(D > 0, D, 1.0))
+        u = self._encode(values)
+        u_new = self.acc.next(u, self._encode(trial) - u)
+        if self.acc.depth < 2:
+            return None
+        R_ref, D = self.ref
+        u_new = u_new / D
+        return _values(R_ref @ exp_so3(u_new[self.P:].reshape(-1, 3)), u_new[:self.P])
+
+
 def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     """Calibrate by Levenberg-Marquardt over the factor graph of ``model``.
 
@@ -354,10 +401,24 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     it = 0
     converged = False
     preint_current = cache.preint          # preintegrated at the current calibration: its cost is exact
+
+    def cost_at(point):
+        """Cost at ``point``, judged by an exact preintegration when it is far from ``preint_current``."""
+        x_point = np.asarray(point.atVector(C(0)))
+        if preint_current.needs_repreintegration(x_point, tol=options.repreintegrate_tol):
+            cache.preint = model.preintegrate(x_point)
+        else:
+            cache.preint = preint_current
+        cache.invalidate()
+        return graph.error(point)
+
+    mixing = _Mixing(cache, P)
+    accelerate = False
     for it in range(1, options.max_iterations + 1):
         cache.preint = preint_current
         cache.invalidate()
         gfg = graph.linearize(values)
+        mixed = False
         while True:
             try:
                 delta = _damped(gfg, keys, lam, dims).optimize(ordering)
@@ -367,14 +428,17 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
                 lam = max(lam * 10.0, 1e-6)
                 continue
             trial = values.retract(delta)
-            x_trial = np.asarray(trial.atVector(C(0)))
-            # a trial far from the preintegration point is judged by an exact preintegration
-            if preint_current.needs_repreintegration(x_trial, tol=options.repreintegrate_tol):
-                cache.preint = model.preintegrate(x_trial)
-            else:
-                cache.preint = preint_current
-            cache.invalidate()
-            new_cost = graph.error(trial)
+            if accelerate:
+                # near the minimum: the mixed point of the last steps, kept if it lowers the cost
+                accelerate = False
+                point = mixing.next(values, trial, gfg)
+                if point is not None:
+                    mixed_cost = cost_at(point)
+                    if mixed_cost <= cost:
+                        trial, new_cost, mixed = point, mixed_cost, True
+                        break
+                    mixing.reset()
+            new_cost = cost_at(trial)
             # at convergence a step may change the cost only by rounding: stop damping then
             if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
                 break
@@ -384,12 +448,20 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         if accepted:
             values = trial
             preint_current = cache.preint
-            lam = max(lam / 10.0, 1e-9)
+            if not mixed:
+                lam = max(lam / 10.0, 1e-9)
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
         history.append(cost)
         if progress is not None:
             progress(ProgressEvent(solver=FactorGraphSolver.name, iteration=it, cost=float(cost)))
+        if mixed:
+            # a mixed step that barely lowers the cost hands over to a plain step: plain steps alone decide
+            # convergence (the stopping rules below), so the mixing cannot stop the iterations short
+            accelerate = rel >= options.rel_tol
+            if not accelerate:
+                mixing.reset()
+            continue
         if accepted and (abs(rel) < options.rel_tol or np.all(np.abs(step) < options.step_tol_sigma * x_sigma)
                          and options.step_tol_sigma > 0):
             converged = True
@@ -397,6 +469,9 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
             converged = True
             break
+        accelerate = accepted and rel < ACCELERATE_BELOW_REL
+        if not accelerate:
+            mixing.reset()
     # covariance: re-preintegrate at the solution so the Jacobians are exact there
     x = np.asarray(values.atVector(C(0)), dtype=float)
     cache.preint = model.preintegrate(x)

@@ -31,7 +31,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.params import Layout
-from graph_calib.rotations import exp_so3
+from graph_calib.rotations import exp_so3, log_so3
+from graph_calib.solvers.acceleration import Anderson
 from graph_calib.solvers.interface import ProgressEvent
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
@@ -408,6 +409,42 @@ def initial_attitudes(model, *, q_nb0, preint=None, max_iterations=10, tol_rad=1
 
 #: Halvings of a pass's step before it is taken as it is.
 MAX_HALVINGS = 8
+#: The passes are mixed (Anderson, :mod:`graph_calib.solvers.acceleration`) once a pass moves every
+#: calibration element by less than this many of its sigmas (the iteration is then near its fixed point,
+#: where it is linear).
+ACCELERATE_BELOW_SIGMA = 3.0
+
+
+class _Mixing:
+    """Anderson mixing of the passes in the coordinates ``(x / sigma_x, log(R_ref^T R) / sigma_R)``.
+
+    The reference attitudes and the scales (the sigmas of the pass that started the history) are fixed
+    while a history lasts.
+    """
+
+    def __init__(self):
+        self.acc = Anderson()
+        self.ref = None
+
+    def reset(self):
+        self.acc.reset()
+        self.ref = None
+
+    def _encode(self, x, R):
+        R_ref, s_x, s_R = self.ref
+        return np.concatenate([x / s_x, (log_so3(np.swapaxes(R_ref, 1, 2) @ R) / s_R).ravel()])
+
+    def next(self, x, R, x_gn, R_gn, *, sigma_x, sigma_R):
+        """The mixed next linearisation point from the point ``(x, R)`` and its pass's ``(x_gn, R_gn)``."""
+        if self.ref is None:
+            self.ref = (R.copy(), sigma_x.copy(), sigma_R.copy())
+        u = self._encode(x, R)
+        u_new = self.acc.next(u, self._encode(x_gn, R_gn) - u)
+        if self.acc.depth < 2:
+            return x_gn, R_gn        # one step held: the plain step, exactly
+        R_ref, s_x, s_R = self.ref
+        P = x.size
+        return u_new[:P] * s_x, R_ref @ exp_so3(u_new[P:].reshape(-1, 3) * s_R)
 
 def _keep_or_drop(model, preint, x):
     """``preint`` if it still serves at ``x`` to first order, else None (preintegrate again)."""
@@ -458,6 +495,8 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     converged = False
     base = None          # (x, R, cost, dx, delta) of the last pass: the point and its Gauss-Newton step
     tau = 1.0
+    mixing = _Mixing()
+    mixed = False        # whether the current linearisation point is a mixed one
     for i in range(1, max_passes + 1):
         # Step control: a pass's Gauss-Newton step is taken whole unless it raises the batch cost (the
         # factor graph's objective, evaluated by the next linearisation at no extra cost); then it is
@@ -472,7 +511,12 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
             lin = _linearise(model, preint, R_lin, x_lin, R_prior=R_prior)
             if base is None or lin.cost <= base[2] * (1.0 + 1e-12) or tau <= 0.5**MAX_HALVINGS:
                 break
-            tau *= 0.5
+            if mixed:
+                # a mixed point that raises the cost: forget the history, take the plain step instead
+                mixing.reset()
+                mixed = False
+            else:
+                tau *= 0.5
             x_lin = base[0] + tau * base[3]
             R_lin = base[1] @ exp_so3(tau * base[4])
             preint = _keep_or_drop(model, preint, x_lin)
@@ -497,12 +541,19 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         C_filtered = R_lin @ exp_so3(p.delta_filtered)
         base = (x_lin, R_lin, p.cost, p.dx, p.delta_smoothed)
         tau = 1.0
-        x_lin = x_lin + p.dx
-        R_lin = R_lin @ exp_so3(p.delta_smoothed)
-        preint = _keep_or_drop(model, preint, x_lin)
+        x_gn = x_lin + p.dx
+        R_gn = R_lin @ exp_so3(p.delta_smoothed)
         if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol:
+            x_lin, R_lin = x_gn, R_gn        # the plain step from a point it certifies
             converged = True
             break
+        if info.max_dx_sigma < ACCELERATE_BELOW_SIGMA:
+            x_lin, R_lin = mixing.next(x_lin, R_lin, x_gn, R_gn, sigma_x=sig_x, sigma_R=p.sigma_smoothed)
+            mixed = mixing.acc.depth >= 2
+        else:
+            mixing.reset()
+            x_lin, R_lin, mixed = x_gn, R_gn, False
+        preint = _keep_or_drop(model, preint, x_lin)
     return FilterResult(
         layout=model.layout, x=x_lin, covariance=p.cov_x, t_key=model.t_key.copy(), C_nb=R_lin,
         C_nb_filtered=C_filtered, attitude_sigma_filtered=p.sigma_filtered, innovation_t=p.t,
