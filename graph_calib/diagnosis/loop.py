@@ -68,16 +68,31 @@ def _solve_graph(problem, *, options, initial=None):
 # ---------------------------------------------------------------------------
 
 
-def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None,
-                say=lambda msg: None):
-    """The stage of ``problem`` solved by the factor graph (``graph``): the filter, residuals, statistics, error."""
+def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None, kf_from=None,
+                linearised=None, say=lambda msg: None):
+    """The stage of ``problem`` solved by the factor graph (``graph``): the filter, residuals, statistics, error.
+
+    ``linearised``: ``(extended model, x embedded, its preintegration)`` of the round run at ``graph``
+    (:func:`_round`): the factor residuals are taken from it (the candidates zero, they are the current
+    model's residuals) instead of preintegrating the record once more.
+    ``kf_from``: the filter's solution of a smaller model (its ``SolverOutput``), embedded in ``problem``'s
+    layout as the filter's first linearisation point (its own solution, not the graph's: the two solvers
+    stay independent; the fixed point is the same, only fewer passes reach it).
+    """
     model = problem.model
-    series = factor_residuals(model, graph.attitudes, graph.x)
+    if linearised is None:
+        series = factor_residuals(model, graph.attitudes, graph.x)
+    else:
+        ext, x_ext, pre = linearised
+        series = factor_residuals(ext, graph.attitudes, x_ext, pre=pre)
     results = {"factor-graph": to_result(model, graph)}
     stage = Stage(layout=tuple(model.layout.names), problem=problem, graph=graph, results=results, residuals=series)
     if "sqrt-kf" in diagnosis_options.solvers:
         say("  square-root filter ...")
-        kf = solve("sqrt-kf", problem, options=options)
+        initial = None
+        if kf_from is not None:
+            initial = (kf_from.attitudes, model.layout.embed(kf_from.layout, kf_from.x))
+        kf = solve("sqrt-kf", problem, options=options, initial=initial)
         stage.results["sqrt-kf"] = to_result(model, kf)
         stage.kf = kf
         stage.innovations = filter_innovations(kf, model)
@@ -288,23 +303,29 @@ def _decide(system, candidate_tests, candidate_columns, driver_tests, driver_col
 
 
 def _round(index, *, options, problem, graph, diagnosis_options, candidates, allow_add=True):
-    """One round: linearise the extended model at the solution, test, decide."""
+    """One round: linearise the extended model at the solution, test, decide.
+
+    Returns the :class:`Round` and ``(extended model, x embedded, its preintegration)`` (for the stage's
+    factor residuals at the same solution).
+    """
     t0 = time.perf_counter()
     model = problem.model
     untested = [name for name in candidates if name not in model.layout]
     # the same prepared record, static intervals and alignment: only the layout grows
     extended = model.with_effects(tuple(options.model.extra_effects) + tuple(untested))
     x_extended = extended.layout.embed(model.layout, graph.x)
+    pre = extended.preintegrate(x_extended)
     system, drivers = linearise(extended, graph.attitudes, x_extended, q_nb0=problem.q_nb0,
-                                null_names=model.layout.names, n_segments=diagnosis_options.time_segments)
+                                null_names=model.layout.names, n_segments=diagnosis_options.time_segments, pre=pre)
     candidate_tests, candidate_columns = _test_candidates(system, extended.layout, untested,
                                                           diagnosis_options=diagnosis_options)
     driver_tests, driver_columns = _test_drivers(system, drivers, extended, diagnosis_options=diagnosis_options)
     added, decision, checks = _decide(system, candidate_tests, candidate_columns, driver_tests, driver_columns,
                                       allow_add=allow_add, diagnosis_options=diagnosis_options)
-    return Round(index=index, layout=tuple(model.layout.names), candidates=candidate_tests, drivers=driver_tests,
-                 variance_factor=system.variance_factor, chi2_per_dof=system.chi2 / max(system.dof, 1),
-                 added=added, decision=decision, checks=checks, seconds=time.perf_counter() - t0)
+    rnd = Round(index=index, layout=tuple(model.layout.names), candidates=candidate_tests, drivers=driver_tests,
+                variance_factor=system.variance_factor, chi2_per_dof=system.chi2 / max(system.dof, 1),
+                added=added, decision=decision, checks=checks, seconds=time.perf_counter() - t0)
+    return rnd, (extended, x_extended, pre)
 
 
 # ---------------------------------------------------------------------------
@@ -362,20 +383,25 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     declared = problem.model
     say(f"declared model: {declared.layout.size} parameters, {declared.n_keyframes} keyframes; factor graph ...")
     graph = _solve_graph(problem, options=options)
-    before = _make_stage(problem, graph, options=options, diagnosis_options=diagnosis, truth=truth, say=say)
-    fixed = {s: r.sigmas for s, r in before.results.items()}
     rounds, added = [], []
+    before = None
     while True:
-        rnd = _round(len(rounds) + 1, options=options, problem=problem, graph=graph, diagnosis_options=diagnosis,
-                     candidates=candidates, allow_add=len(added) < diagnosis.max_added)
+        rnd, lin = _round(len(rounds) + 1, options=options, problem=problem, graph=graph,
+                          diagnosis_options=diagnosis, candidates=candidates,
+                          allow_add=len(added) < diagnosis.max_added)
         rounds.append(rnd)
         say(f"round {rnd.index}: {rnd.decision}")
+        if before is None:      # the declared model's stage, its residuals from the first round's linearisation
+            before = _make_stage(problem, graph, options=options, diagnosis_options=diagnosis, truth=truth,
+                                 linearised=lin, say=say)
+            fixed = {s: r.sigmas for s, r in before.results.items()}
         if rnd.added is None:
             break
         added.append(rnd.added)
         options, problem, graph = _add_effect(rnd.added, options=options, problem=problem, graph=graph, say=say)
     after = before if not added else _make_stage(problem, graph, options=options, diagnosis_options=diagnosis,
-                                                 truth=truth, fixed_sigmas=fixed, say=say)
+                                                 truth=truth, fixed_sigmas=fixed, kf_from=before.kf,
+                                                 linearised=lin, say=say)
     signature = sorted((d for d in rounds[-1].drivers if d.significant), key=lambda d: d.log10_p)
     source = experiment.source.rsplit("/", 1)[-1] if experiment.source else ""
     return Diagnosis(source=source, added=added, unexplained=bool(signature), signature=signature, rounds=rounds,

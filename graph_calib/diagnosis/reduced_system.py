@@ -161,36 +161,47 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         chi2 += float(np.sum(r**2))
         m_data += r.size
         key = res.key
+        # only the columns this kind of factor touches (a rotation or encoder factor sees no accelerometer
+        # parameter, hence none of the accelerometer drivers): the columns left out are exactly zero
+        nzc = np.flatnonzero(np.any(Hx != 0.0, axis=(0, 1)))
         if drivers:
             lo = k0[key]
             if kind == "encoder":
                 hi = model.record.reading_sample + 1
             else:
                 hi = k0[key + 1]
+            dsel = np.flatnonzero(np.isin(d_bias, nzc))
+            cols = np.concatenate([nzc, P + dsel])
+        else:
+            cols = nzc
+        nc = cols.size
+        Hax_k = np.zeros((K + 1, 3, nc))
         for a in range(0, F, chunk):
             sl = slice(a, min(F, a + chunk))
-            X = Hx[sl]
+            Hx_c = Hx[sl]
+            X = Hx_c[:, :, nzc]
             if drivers:
                 means = interval_means(Phi_cs, lo[sl], hi[sl])           # (f, series)
-                XD = X[:, :, d_bias] * means[:, None, d_series]       # (f, 3, ND)
+                XD = Hx_c[:, :, d_bias[dsel]] * means[:, None, d_series[dsel]]      # (f, 3, drivers)
                 X = np.concatenate([X, XD], axis=2)
             kk = key[sl]
             A_ = HR[sl]
             rr = r[sl]
             At = np.swapaxes(A_, 1, 2)
             _add_at(Hdiag, kk, At @ A_)
-            _add_at(Hax, kk, At @ X)
+            _add_at(Hax_k, kk, At @ X)
             _add_at(ga, kk, np.einsum("fji,fj->fi", A_, rr))
             if HRn is not None:
                 B_ = HRn[sl]
                 Bt = np.swapaxes(B_, 1, 2)
                 _add_at(Hdiag, kk + 1, Bt @ B_)
                 _add_at(Hoff, kk, At @ B_)
-                _add_at(Hax, kk + 1, Bt @ X)
+                _add_at(Hax_k, kk + 1, Bt @ X)
                 _add_at(ga, kk + 1, np.einsum("fji,fj->fi", B_, rr))
-            Xf = X.reshape(-1, Q)
-            Hxx += Xf.T @ Xf
-            gx += Xf.T @ rr.reshape(-1)
+            Xf = X.reshape(-1, nc)
+            Hxx[np.ix_(cols, cols)] += Xf.T @ Xf
+            gx[cols] += Xf.T @ rr.reshape(-1)
+        Hax[:, :, cols] += Hax_k
     # priors of the current model's calibration columns
     cal_prior = model.calibration_prior(x)
     x_sigma = cal_prior.sigma
@@ -205,17 +216,14 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         Hdiag[k] += att_prior.H.T @ att_prior.H
         ga[k] += att_prior.H.T @ att_prior.r
     # eliminate the attitudes
-    rows, cols, vals = [], [], []
     base = np.arange(3)
-    for k in range(K + 1):
-        ii = 3 * k + base
-        rows.append(np.repeat(ii, 3)), cols.append(np.tile(ii, 3)), vals.append(Hdiag[k].ravel())
-    for k in range(K):
-        ii = 3 * k + base
-        jj = 3 * (k + 1) + base
-        rows.append(np.repeat(ii, 3)), cols.append(np.tile(jj, 3)), vals.append(Hoff[k].ravel())
-        rows.append(np.repeat(jj, 3)), cols.append(np.tile(ii, 3)), vals.append(Hoff[k].T.ravel())
-    Haa = sp.csc_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(na, na))
+    br, bc = np.repeat(base, 3), np.tile(base, 3)          # a 3 x 3 block, row-major
+    kd = 3 * np.arange(K + 1)[:, None]
+    ko = 3 * np.arange(K)[:, None]
+    rows = np.concatenate([(kd + br).ravel(), (ko + br).ravel(), (ko + 3 + br).ravel()])
+    cols = np.concatenate([(kd + bc).ravel(), (ko + 3 + bc).ravel(), (ko + bc).ravel()])
+    vals = np.concatenate([Hdiag.ravel(), Hoff.ravel(), np.swapaxes(Hoff, 1, 2).ravel()])
+    Haa = sp.csc_matrix((vals, (rows, cols)), shape=(na, na))
     lu = spla.splu(Haa)
     rhs = np.concatenate([Hax.reshape(na, Q), ga.reshape(na, 1)], axis=1)
     sol = lu.solve(rhs)

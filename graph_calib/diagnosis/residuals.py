@@ -18,7 +18,7 @@ from graph_calib import effects
 from graph_calib.diagnosis.drivers import keyframe_context
 
 
-def factor_residuals(model, R, x):
+def factor_residuals(model, R, x, *, pre=None):
     """Per kind: time, keyframe, SI and whitened residuals at ``(R, x)``; gravity also in body axes.
 
     Parameters
@@ -28,6 +28,8 @@ def factor_residuals(model, R, x):
         Attitudes ``C_nb`` at the keyframe boundaries.
     x : ndarray (P,)
         Calibration in ``model.layout``.
+    pre : graph_calib.model.preintegration.Preintegrated, optional
+        ``model.preintegrate(x)`` when the caller has it already.
 
     Returns
     -------
@@ -35,7 +37,8 @@ def factor_residuals(model, R, x):
         ``{kind: {"t", "key", "r", "w"}}`` with ``r``, ``w`` of shape (F, 3); gravity also
         ``"r_body"``, ``"w_body"`` and the keyframes' ``"static"`` flags.
     """
-    pre = model.preintegrate(x)
+    if pre is None:
+        pre = model.preintegrate(x)
     out = {}
     rot = model.rotation_factors(R, pre, x)
     for kind, res, t in (("rotation", rot, model.t_key[rot.key + 1]),
