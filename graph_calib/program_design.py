@@ -40,7 +40,6 @@ from __future__ import annotations
 
 import math
 import time
-import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -54,7 +53,7 @@ from graph_calib.params import grade as _grade
 from graph_calib.prediction import CONFIDENCE_SIGMA, predict
 from graph_calib.problem import build_problem
 from graph_calib.simulation.experiments import NAV_CHANNELS
-from graph_calib.simulation.program import BenchProgram, Dwell, Move, Setpoint, nominal_experiment
+from graph_calib.simulation.program import BenchProgram, Dwell, Move, Setpoint, nominal_experiment, read_toml
 
 #: Gyro channels' time constants of the simulated unit, s (x, y, z): the thermal lag a program must beat.
 GYRO_TAU_S = tuple(ch[1] * 60.0 for ch in NAV_CHANNELS[:3])
@@ -117,12 +116,7 @@ _SPEC_KEYS = ("grade", "gyro_noise", "encoder_noise", "start_degC", "span_degC",
 def read_spec(path):
     """A :class:`DesignSpec` from a TOML file (keys of :class:`DesignSpec` under ``[spec]``); InputError on faults."""
     path = Path(path)
-    if not path.exists():
-        raise InputError("no such file", path=path)
-    try:
-        doc = tomllib.loads(path.read_text())
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise InputError(f"not valid TOML: {exc}", path=path) from None
+    doc = read_toml(path)
     spec = doc.get("spec")
     if not isinstance(spec, dict) or set(doc) - {"spec"}:
         raise InputError("a design spec holds one [spec] table", path=path)

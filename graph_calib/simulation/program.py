@@ -250,16 +250,21 @@ def parse_program(doc, *, path=""):
                         description=desc, source=str(path), **kw)
 
 
-def read_program(path):
-    """Read and check a program file (:func:`parse_program`); :class:`InputError` naming the file on any fault."""
+def read_toml(path):
+    """The parsed TOML document of ``path`` (dict); :class:`InputError` naming the file if it is missing or
+    not TOML (bench programs here, design specs in :mod:`graph_calib.program_design`)."""
     path = Path(path)
     if not path.exists():
         raise InputError("no such file", path=path)
     try:
-        doc = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
         raise InputError(f"not valid TOML: {exc}", path=path) from None
-    return parse_program(doc, path=path)
+
+
+def read_program(path):
+    """Read and check a program file (:func:`parse_program`); :class:`InputError` naming the file on any fault."""
+    return parse_program(read_toml(path), path=Path(path))
 
 
 def _f(v):
