@@ -8,7 +8,7 @@ Run by hand, after ``benchmarks/bench_campaign.py`` simulated (and calibrated) t
 Reads the six experiments, builds each problem (static detection, alignment, the prepared record), and
 solves them jointly (``graph_calib.joint.solve_joint``), warm-started from the campaign's per-subrange
 factor-graph results when ``--campaign`` holds them (the campaign runs them anyway; ``--cold`` starts
-from the priors instead).  Samples the resident memory of this process every 0.2 s.  Prints the time of
+from the priors instead).  Samples the resident memory of this process (and any children) every 0.2 s.  Prints the time of
 each stage (reading, problems, joint solve) and the peak memory; docs/performance.md records what it
 measured.  Targets: the joint solve within 60 s, under 4 GB.
 """
@@ -18,13 +18,12 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
-import psutil
 
+from _memory import MemoryMonitor
 from _report import report
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -36,28 +35,6 @@ from graph_calib.joint import WarmStart, solve_joint  # noqa: E402
 from graph_calib.joint.result import joint_element_at, joint_result  # noqa: E402
 from graph_calib.model.calibration_model import CalibrationModel  # noqa: E402
 from graph_calib.problem import build_problem  # noqa: E402
-
-
-class Peak:
-    """Peak resident memory of this process, sampled in a thread."""
-
-    def __init__(self, interval=0.2):
-        self.proc, self.interval, self.peak = psutil.Process(), interval, 0
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._run, daemon=True)
-
-    def _run(self):
-        while not self._stop.is_set():
-            self.peak = max(self.peak, self.proc.memory_info().rss)
-            self._stop.wait(self.interval)
-
-    def __enter__(self):
-        self._thread.start()
-        return self
-
-    def __exit__(self, *exc):
-        self._stop.set()
-        self._thread.join()
 
 
 class Stages:
@@ -105,7 +82,7 @@ def main(argv=None):
     manifest = io.read_manifest(Path(args.data) / "campaign.toml")
     print(f"load average {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f} {os.getloadavg()[2]:.2f} on "
           f"{os.cpu_count()} cores")
-    with Peak() as mem:
+    with MemoryMonitor() as mem:
         t0 = time.perf_counter()
         problems, starts, n, ranges, truths, graphs = [], [], 0, [], [], []
         for e in manifest.experiments:
@@ -128,7 +105,7 @@ def main(argv=None):
     warm = sum(s is not None for s in starts)
     print(f"{len(problems)} experiments, {n:,} samples; warm start from {warm} per-subrange result(s)")
     print(f"read + problems {t1 - t0:.1f} s; joint solve {t2 - t1:.1f} s ({out.iterations} iterations, "
-          f"converged {out.converged}, marginals and degree choice included); peak RSS {mem.peak / 2**30:.2f} GB")
+          f"converged {out.converged}, marginals and degree choice included); peak RSS {mem.peak_total / 2**30:.2f} GB")
     print("inside the solve:", stages.text())
     print("degrees:", {c.family: c.degree for c in out.degree_choices})
     print(f"load average after {os.getloadavg()[0]:.2f}")
@@ -139,7 +116,7 @@ def main(argv=None):
     _figures(res, names, graphs, truths)
     report("joint_solve_s", t2 - t1, "s", f"joint solve of {len(problems)} x 3 h ({n:,} samples), warm {warm}")
     report("joint_problems_s", t1 - t0, "s", "reading the experiments and building the problems")
-    report("joint_peak_memory_gb", mem.peak / 2**30, "GB", "peak resident memory of the joint solve's process")
+    report("joint_peak_memory_gb", mem.peak_total / 2**30, "GB", "peak resident memory of the joint solve's process")
     return 0
 
 
