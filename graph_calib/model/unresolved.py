@@ -82,15 +82,18 @@ def without_data_along(covariance, prior_sigma, directions):
     directions = np.atleast_2d(np.asarray(directions, dtype=float))
     if directions.size == 0:
         return covariance
-    Lp = np.diag(1.0 / np.asarray(prior_sigma, dtype=float) ** 2)
-    Ld = np.linalg.inv(covariance) - Lp
-    for u in directions:
+    # in units of the prior sigmas (x = D x_n): the prior information is I, and the elements' scales,
+    # which span many decades, do not reach the inversions
+    D = np.asarray(prior_sigma, dtype=float)
+    Ld = np.linalg.inv(covariance / np.outer(D, D))
+    Ld = 0.5 * (Ld + Ld.T) - np.eye(D.size)
+    for u in directions / D:
         Lu = Ld @ u
         uLu = float(u @ Lu)
         if uLu > 0.0:
             Ld = Ld - np.outer(Lu, Lu) / uLu
-    out = np.linalg.inv(0.5 * (Ld + Ld.T) + Lp)
-    return 0.5 * (out + out.T)
+    out = np.linalg.inv(Ld + np.eye(D.size))
+    return 0.5 * (out + out.T) * np.outer(D, D)
 
 
 __all__ = ["heading_drift_direction", "without_data_along"]
