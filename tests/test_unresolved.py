@@ -9,19 +9,22 @@
 - only a record without a heading reference whose gyros cannot gyrocompass lists the direction;
 - end to end (issue #13): ``consumer-ferraris`` with ``gyro.g_sensitivity`` estimated, seed 4, the
   filter: every element within 3 sigma of the truth (``G`` was 8.0 sigma off with the linearised
-  covariance), and the isotropic part of ``G`` keeps its prior sigma.
+  covariance), the isotropic part of ``G`` keeps its prior sigma, and the result file names the
+  direction (``unresolved``, round trip).
 """
 
 import numpy as np
 import pytest
 
 from graph_calib.calibrate import CalibrationOptions, build_problem
+from graph_calib.io.result_file import read_result, write_result
 from graph_calib.model import ModelOptions
 from graph_calib.model.unresolved import heading_drift_direction, without_data_along
 from graph_calib.params import Layout
 from graph_calib.sensor_model import measure
 from graph_calib.simulation import simulate
 from graph_calib.solvers.registry import solve
+from graph_calib.solvers.results import to_result
 
 EFFECT = "gyro.g_sensitivity"
 
@@ -96,7 +99,7 @@ def test_only_a_record_without_heading_reference_lists_the_drift(ferraris4):
     assert no_g.unresolved_directions(no_g.layout.zeros())[1].shape[0] == 0
 
 
-def test_ferraris_session_with_g_sensitivity_is_within_3_sigma(ferraris4):
+def test_ferraris_session_with_g_sensitivity_is_within_3_sigma(ferraris4, tmp_path):
     se = ferraris4
     problem, opts = _problem(se, "consumer")
     out = solve("sqrt-kf", problem, options=opts)
@@ -115,3 +118,10 @@ def test_ferraris_session_with_g_sensitivity_is_within_3_sigma(ferraris4):
     g = np.arange(layout.size)[layout.slice(EFFECT)]
     off = g[[1, 2, 3, 5, 6, 7]]
     assert np.all(sigma[off] < 0.05 * prior[off])
+    # the result file says so
+    res = to_result(problem.model, out)
+    direction = res.extra["unresolved"]["heading drift"]
+    assert set(direction) == set(layout.element_names()[i] for i in g)
+    np.testing.assert_allclose([direction[names[i]] for i in g], U[0][g])
+    write_result(res, tmp_path / "fg.json")
+    assert read_result(tmp_path / "fg.json").extra["unresolved"] == res.extra["unresolved"]
