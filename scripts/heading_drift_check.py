@@ -10,7 +10,7 @@ solver gives it, without ``CalibrationModel.resolved_covariance``.  A dozen seed
 Usage::
 
     PYTHONPATH=. .venv/bin/python scripts/heading_drift_check.py [--solver sqrt-kf] [--seeds 1-12]
-        [--effect-scale 1] [--linearised]
+        [--effect-scale 1] [--linearised] [--cut]
 """
 
 from __future__ import annotations
@@ -38,11 +38,12 @@ def main():
     ap.add_argument("--seeds", default="1-12", help="a range 1-12 or a list 1,3,4")
     ap.add_argument("--effect-scale", type=float, default=1.0)
     ap.add_argument("--linearised", action="store_true", help="the solver's own covariance")
+    ap.add_argument("--cut", action="store_true", help="the session cut into its nine sections (segments)")
     a = ap.parse_args()
     zs = []
     for seed in _seeds(a.seeds):
         se = simulate("consumer-ferraris", rng=np.random.default_rng(seed), effects=(EFFECT,),
-                      effect_scale=a.effect_scale).run()[0]
+                      effect_scale=a.effect_scale, cut=a.cut).run()[0]
         opts = CalibrationOptions(model=ModelOptions(grade="consumer", extra_effects=(EFFECT,)),
                                   t_ref_degC=se.truth.t_ref_degC)
         problem = build_problem(se.experiment, options=opts)
