@@ -10,6 +10,8 @@ Modules, from the data up:
   correction in the calibration, and :func:`preintegrate`;
 - :mod:`graph_calib.model.factors`: the rotation, gravity and encoder factors and the priors, each a
   residual with its Jacobians (equations in that module's docstring);
+- :mod:`graph_calib.model.unresolved`: the directions a record cannot resolve (a heading drift that
+  looks like a g-sensitivity) and the covariance with their data information removed;
 - :mod:`graph_calib.model.calibration_model`: :class:`CalibrationModel`, the thin problem object
   (layout, priors, noise) the solvers call.
 """

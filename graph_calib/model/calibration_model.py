@@ -18,12 +18,18 @@ from graph_calib.model import factors
 from graph_calib.model.options import ModelOptions
 from graph_calib.model.preintegration import SensorTerms, preintegrate
 from graph_calib.model.record import PreparedRecord
+from graph_calib.model.unresolved import heading_drift_direction, without_data_along
 from graph_calib.params import Layout, grade as _grade
 from graph_calib.rotations import quat_to_dcm
 
 #: Prior sigma of the first attitude when valid table readings give it (faceplate
 #: attitude through the nominal mounting; the mounting error is estimated), rad.
 TABLE_ALIGNMENT_SIGMA = 0.05
+
+#: Gyrocompass heading sigma (rad, :func:`gyrocompass_attitude_sigma`) from which on the Earth rate is
+#: taken not to resolve the heading: the linearised covariance is then not trusted along a heading
+#: drift (:meth:`CalibrationModel.unresolved_directions`).
+HEADING_UNRESOLVED_SIGMA = 1.0
 
 
 def gyrocompass_attitude_sigma(options, *, latitude_rad):
@@ -163,6 +169,56 @@ class CalibrationModel:
             return TABLE_ALIGNMENT_SIGMA
         return gyrocompass_attitude_sigma(self.options, latitude_rad=experiment.latitude_rad)
 
+    # -- what the record cannot resolve -------------------------------------
+
+    def unresolved_directions(self, x):
+        """Calibration directions this record cannot resolve beyond their priors.
+
+        A heading drift is a g-sensitivity ``kappa (I + S + M_g)`` to the gyros
+        (:mod:`graph_calib.model.unresolved`); only a heading reference or the Earth rate tells them
+        apart.  Listed when the layout holds ``gyro.g_sensitivity``, the record has no valid table
+        reading and the gyros cannot gyrocompass (:func:`gyrocompass_attitude_sigma` at least
+        :data:`HEADING_UNRESOLVED_SIGMA`): a hand-held consumer record.
+
+        Parameters
+        ----------
+        x : ndarray, shape (P,)
+            The calibration (the direction depends on its gyro scale and misalignment).
+
+        Returns
+        -------
+        names : tuple of str
+            ``("heading drift",)`` or ``()``.
+        directions : ndarray, shape (D, P)
+            Unit directions.
+        """
+        if ("gyro.g_sensitivity" not in self.layout or self.record.has_valid_readings
+                or gyrocompass_attitude_sigma(self.options, latitude_rad=self.experiment.latitude_rad)
+                < HEADING_UNRESOLVED_SIGMA):
+            return (), np.zeros((0, self.layout.size))
+        return ("heading drift",), heading_drift_direction(self.layout, np.asarray(x, dtype=float))[None, :]
+
+    def resolved_covariance(self, x, covariance):
+        """A solver's covariance with the data's information along :meth:`unresolved_directions` removed.
+
+        :func:`graph_calib.model.unresolved.without_data_along` with this model's prior sigmas: such a
+        direction keeps its prior sigma, every other element what the data give with it free.
+        Unchanged (the same array) when nothing is unresolved.
+
+        Parameters
+        ----------
+        x : ndarray, shape (P,)
+        covariance : ndarray, shape (P, P)
+
+        Returns
+        -------
+        ndarray, shape (P, P)
+        """
+        _, U = self.unresolved_directions(x)
+        if U.shape[0] == 0:
+            return covariance
+        return without_data_along(covariance, self.prior()[1], U)
+
     # -- priors -------------------------------------------------------------
 
     def prior(self):
@@ -264,4 +320,4 @@ class CalibrationModel:
         return factors.encoder_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise)
 
 
-__all__ = ["CalibrationModel", "gyrocompass_attitude_sigma", "TABLE_ALIGNMENT_SIGMA"]
+__all__ = ["CalibrationModel", "gyrocompass_attitude_sigma", "TABLE_ALIGNMENT_SIGMA", "HEADING_UNRESOLVED_SIGMA"]

@@ -104,7 +104,9 @@ class SolverOutput:
     x : ndarray, shape (P,)
         Calibration estimate, SI, ``layout`` order.
     covariance : ndarray, shape (P, P)
-        Its covariance (marginal over the attitudes).
+        Its covariance (marginal over the attitudes); through :func:`graph_calib.solvers.registry.solve`
+        without the data's information along the directions the record cannot resolve
+        (``CalibrationModel.resolved_covariance``).
     t_key : ndarray, shape (K+1,)
         Keyframe boundary times, s.
     attitudes : ndarray, shape (K+1, 3, 3)

@@ -13,6 +13,7 @@ here imports a solver: the layers stay one-way.  A new solver is a class with ``
 
 from __future__ import annotations
 
+from dataclasses import replace
 from functools import lru_cache
 from importlib.metadata import entry_points
 
@@ -63,8 +64,16 @@ def solve(name, problem, *, options, progress=None, initial=None):
     Returns
     -------
     graph_calib.solvers.interface.SolverOutput
+        As the solver gave it, its covariance with the data's information removed along the directions
+        the record cannot resolve (``problem.model.resolved_covariance``: a heading drift that looks
+        like a g-sensitivity on a hand-held consumer record; docs/model.md), one place for every solver.
     """
-    return get_solver(name).solve(problem, options=options, progress=progress, initial=initial)
+    output = get_solver(name).solve(problem, options=options, progress=progress, initial=initial)
+    model = getattr(problem, "model", None)
+    if model is None or output.layout.names != model.layout.names:
+        return output
+    covariance = model.resolved_covariance(output.x, output.covariance)
+    return output if covariance is output.covariance else replace(output, covariance=covariance)
 
 
 __all__ = ["ENTRY_POINT_GROUP", "DEFAULT_SOLVERS", "solver_names", "get_solver", "solve"]

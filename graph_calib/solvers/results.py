@@ -91,6 +91,10 @@ def to_result(model, output, *, extra=None):
           "noise": {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
                     "encoder_rad": model.encoder_noise,
                     "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0}}
+    unresolved, U = model.unresolved_directions(output.x)
+    if unresolved:      # only then, so that every other result file stays as it was
+        ex["unresolved"] = {name: {n: float(v) for n, v in zip(names, u) if v != 0.0}
+                            for name, u in zip(unresolved, U)}
     ex.update(extra or {})
     return Result(
         source=model.experiment.source.rsplit("/", 1)[-1] if model.experiment.source else "",
