@@ -94,6 +94,8 @@ class _Cache:
         self.x = None
         self.enc_groups = None
         self.evaluations = 0
+        self._values = None     # the values object the evaluation is held for (see prepare)
+        self._preint = None
 
     def _read(self, values):
         R = np.empty((self.K + 1, 3, 3))
@@ -104,6 +106,20 @@ class _Cache:
     def invalidate(self):
         """Forget the evaluation: the next callback evaluates at the values GTSAM then hands over."""
         self.R = None
+        self._values = None
+
+    def prepare(self, values):
+        """Hand GTSAM ``values`` (a ``gtsam.Values`` never changed after it is made) with ``self.preint`` next.
+
+        The evaluation is kept when it was made at this very object with the same preintegration: the
+        linearisation at an accepted trial reads what judging the trial evaluated (the model computes
+        residuals and Jacobians together), instead of evaluating every factor again.  Otherwise as
+        :meth:`invalidate`.
+        """
+        if self.R is not None and values is self._values and self.preint is self._preint:
+            return
+        self.invalidate()
+        self._values, self._preint = values, self.preint
 
     def ensure(self, values):
         """Make sure the cache holds the factors at ``values`` (evaluated once per call into GTSAM)."""
@@ -220,6 +236,24 @@ def _damped(gfg, values_keys, lam, dims):
     for key, d in zip(values_keys, dims):
         damped.add(gtsam.JacobianFactor(key, s * np.eye(d), np.zeros(d), gtsam.noiseModel.Unit.Create(d)))
     return damped
+
+
+class _Damping:
+    """:func:`_damped` with the damping factors built once per ``lam`` (rebuilding them cost a quarter of a
+    trial step on the Xsens session: about 1,000 ``JacobianFactor`` made in Python); the same factors in
+    the same order, so the same linear system."""
+
+    def __init__(self, keys, dims):
+        self.keys, self.dims, self.made = keys, dims, {}
+
+    def __call__(self, gfg, lam):
+        factors = self.made.get(lam)
+        if factors is None:
+            factors = self.made[lam] = _damped(gtsam.GaussianFactorGraph(), self.keys, lam, self.dims)
+        damped = gtsam.GaussianFactorGraph()
+        damped.push_back(gfg)
+        damped.push_back(factors)
+        return damped
 
 
 def marginal_covariance(graph, values, keys):
@@ -394,7 +428,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     values = _values(R, x)
     if initial is None:
         values = _fit_attitudes(graph, cache, values, keys=keys, dims=dims, ordering=ordering)
-        cache.invalidate()
+        cache.prepare(values)
     cost = graph.error(values)
     history = [cost]
     lam = options.lambda_initial
@@ -409,19 +443,20 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
             cache.preint = model.preintegrate(x_point)
         else:
             cache.preint = preint_current
-        cache.invalidate()
+        cache.prepare(point)
         return graph.error(point)
 
     mixing = _Mixing(cache, P)
+    damping = _Damping(keys, dims)
     accelerate = False
     for it in range(1, options.max_iterations + 1):
         cache.preint = preint_current
-        cache.invalidate()
+        cache.prepare(values)              # after an accepted trial: its evaluation at cost_at
         gfg = graph.linearize(values)
         mixed = False
         while True:
             try:
-                delta = _damped(gfg, keys, lam, dims).optimize(ordering)
+                delta = damping(gfg, lam).optimize(ordering)
             except RuntimeError:            # numerically indeterminate: damp harder
                 if lam > 1e8:
                     raise
