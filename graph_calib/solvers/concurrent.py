@@ -40,7 +40,7 @@ def _worker(conn, name, problem, options):
         try:
             conn.send(("error", exc))
         except Exception:          # an exception that does not pickle: its text
-            conn.send(("error", "".join(traceback.format_exception(exc))))
+            conn.send(("error", f"{name} failed in its worker process:\n" + "".join(traceback.format_exception(exc))))
     finally:
         conn.close()
 
@@ -89,6 +89,7 @@ def solve_pair(names, problem, *, options, progress=None):
                 else:
                     result = (kind, payload)
         except EOFError:
+            proc.join()
             result = ("error", f"the {first} worker process ended without a result (exit code {proc.exitcode})")
         except BaseException as exc:   # a failing progress callback: raised here as in a sequential run
             result = ("error", exc)
@@ -130,7 +131,7 @@ def solve_pair(names, problem, *, options, progress=None):
             err = state["error"]
             if isinstance(err, BaseException):
                 raise err
-            raise RuntimeError(f"{first} failed in its worker process:\n{err}")
+            raise RuntimeError(err)
         if error_second is not None:
             raise error_second
         return [state["output"], out_second]
