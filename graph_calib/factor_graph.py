@@ -96,12 +96,22 @@ class _Cache:
         self.evaluations = 0
         self._values = None     # the values object the evaluation is held for (see prepare)
         self._preint = None
+        self._x_keys = [X(k) for k in range(self.K + 1)]
+        self._reads = []        # (values, (R, x)) of the last few objects read through read()
 
     def _read(self, values):
-        R = np.empty((self.K + 1, 3, 3))
-        for k in range(self.K + 1):
-            R[k] = values.atRot3(X(k)).matrix()
+        R = np.array([values.atRot3(k).matrix() for k in self._x_keys]).reshape(self.K + 1, 3, 3)
         return R, np.asarray(values.atVector(C(0)), dtype=float)
+
+    def read(self, values):
+        """``(R (K+1, 3, 3), x (P,))`` of ``values``, a ``gtsam.Values`` never changed after it is made: the
+        last few objects read are remembered (a trial is read by the mixing and again to judge it)."""
+        for v, got in self._reads:
+            if v is values:
+                return got
+        got = self._read(values)
+        self._reads = [(values, got)] + self._reads[:2]
+        return got
 
     def invalidate(self):
         """Forget the evaluation: the next callback evaluates at the values GTSAM then hands over."""
@@ -124,7 +134,8 @@ class _Cache:
     def ensure(self, values):
         """Make sure the cache holds the factors at ``values`` (evaluated once per call into GTSAM)."""
         if self.R is None:
-            R, x = self._read(values)
+            # the object handed over by prepare() is the one GTSAM passes on; read it through the memo
+            R, x = self.read(self._values) if self._values is not None else self._read(values)
             self.evaluate(R, x)
 
     def evaluate(self, R, x):
@@ -371,7 +382,7 @@ class _Mixing:
         self.ref = None
 
     def _encode(self, values):
-        R, x = self.cache._read(values)
+        R, x = self.cache.read(values)
         R_ref, D = self.ref
         return D * np.concatenate([x, log_so3(np.swapaxes(R_ref, 1, 2) @ R).ravel()])
 
@@ -383,7 +394,7 @@ class _Mixing:
             n = self.P + 3 * values.size() - 3    # C(0) first (key order), then X(0..K); then b
             keep = j < n
             D = np.sqrt(np.bincount(j[keep], weights=v[keep] ** 2, minlength=n))
-            self.ref = (self.cache._read(values)[0], np.where(D > 0, D, 1.0))
+            self.ref = (self.cache.read(values)[0], np.where(D > 0, D, 1.0))
         u = self._encode(values)
         u_new = self.acc.next(u, self._encode(trial) - u)
         if self.acc.depth < 2:
