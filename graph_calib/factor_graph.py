@@ -337,9 +337,10 @@ def _fit_attitudes(graph, cache, values, *, keys, dims, ordering):
     P = dims[-1]
     hold = gtsam.JacobianFactor(x_key, 1e8 * np.eye(P), np.zeros(P), gtsam.noiseModel.Unit.Create(P))
     x = np.asarray(values.atVector(x_key), dtype=float)
+    damping = _Damping(keys[:-1], dims[:-1])
     for _ in range(ATTITUDE_FIT_ITERATIONS):
         cache.invalidate()
-        gfg = _damped(graph.linearize(values), keys[:-1], 1e-9, dims[:-1])
+        gfg = damping(graph.linearize(values), 1e-9)
         gfg.add(hold)
         delta = gfg.optimize(ordering)
         moved = max(float(np.linalg.norm(delta.at(k))) for k in keys[:-1])
