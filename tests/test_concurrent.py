@@ -1,5 +1,7 @@
 """Two solvers at once (graph_calib.solvers.concurrent): what a sequential run gives, outputs, progress, errors."""
 
+import os
+
 import numpy as np
 import pytest
 
@@ -9,7 +11,13 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.solvers import concurrent
 from graph_calib.solvers.interface import ProgressEvent
 
-pytestmark = pytest.mark.skipif(not concurrent.fork_available(), reason="needs fork (Linux)")
+
+
+@pytest.fixture(autouse=True)
+def forking():
+    """Each test here needs the worker: a platform that forks and a test process without other threads."""
+    if not concurrent.fork_available():
+        pytest.skip("solve_pair runs sequentially here: no fork, or other threads running (fork_available)")
 
 
 @pytest.fixture(scope="module")
@@ -42,7 +50,7 @@ def _fake(fail=None, error=None):
             progress(ProgressEvent(solver=name, iteration=i + 1, cost=float(10 - i)))
         if name == fail:
             raise error
-        return f"output of {name}"
+        return f"output of {name}", os.getpid()
     return solve
 
 
@@ -50,7 +58,8 @@ def test_every_event_of_the_first_solver_comes_before_any_of_the_second(monkeypa
     monkeypatch.setattr(concurrent, "solve", _fake())
     events = []
     outs = concurrent.solve_pair(("a", "b"), None, options=None, progress=events.append)
-    assert outs == ["output of a", "output of b"]
+    assert [o[0] for o in outs] == ["output of a", "output of b"]
+    assert outs[0][1] != os.getpid() and outs[1][1] == os.getpid()     # the first ran in the worker
     assert [(e.solver, e.iteration) for e in events] == [("a", 1), ("a", 2), ("a", 3), ("b", 1), ("b", 2), ("b", 3)]
 
 
@@ -72,8 +81,6 @@ def test_an_error_of_the_second_solver_is_raised_after_every_event_of_the_first(
 
 
 def test_a_worker_that_dies_is_an_error_naming_the_solver(monkeypatch):
-    import os
-
     def solve(name, problem, *, options, progress=None):
         if name == "a":
             os._exit(7)

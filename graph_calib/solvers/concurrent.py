@@ -14,7 +14,8 @@ run one after the other gives:
   (the second is stopped at its next progress event and its events are never shown); an error of the
   second is raised after the first has finished, as in a sequential run.
 
-Without ``fork`` (not on Linux), or inside a daemonic worker process, the two run one after the other.
+Without ``fork`` (not on Linux), inside a daemonic worker process or with other threads running
+(:func:`fork_available`), the two run one after the other.
 """
 
 from __future__ import annotations
@@ -46,9 +47,12 @@ def _worker(conn, name, problem, options):
 
 
 def fork_available():
-    """Whether :func:`solve_pair` can run the first solver in a forked worker: the platform forks, and
-    this process is not itself a daemonic worker (a campaign's), which may not have children."""
-    return "fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
+    """Whether :func:`solve_pair` can run the first solver in a forked worker: the platform forks, this
+    process is not itself a daemonic worker (a campaign's), which may not have children, and it runs no
+    other Python thread (a fork copies only the forking thread: a lock another thread held at that moment,
+    a Dask cluster's say, would stay locked in the worker for ever)."""
+    return ("fork" in multiprocessing.get_all_start_methods() and not multiprocessing.current_process().daemon
+            and threading.active_count() == 1)
 
 
 def solve_pair(names, problem, *, options, progress=None):
