@@ -88,3 +88,18 @@ def test_a_worker_that_dies_is_an_error_naming_the_solver(monkeypatch):
     monkeypatch.setattr(concurrent, "solve", solve)
     with pytest.raises(RuntimeError, match="a worker process ended without a result .exit code 7"):
         concurrent.solve_pair(("a", "b"), None, options=None)
+
+
+class _Unpicklable(Exception):
+    def __init__(self, message, *, code):
+        super().__init__(message)
+        self.code = code
+
+    def __reduce__(self):
+        return (_Unpicklable, (str(self),))     # loses the keyword: unpickling fails
+
+
+def test_an_error_that_does_not_unpickle_comes_back_as_its_traceback(monkeypatch):
+    monkeypatch.setattr(concurrent, "solve", _fake("a", _Unpicklable("odd failure", code=3)))
+    with pytest.raises(RuntimeError, match="(?s)a failed in its worker process:.*odd failure"):
+        concurrent.solve_pair(("a", "b"), None, options=None)

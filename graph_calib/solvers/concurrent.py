@@ -21,6 +21,7 @@ Without ``fork`` (not on Linux), inside a daemonic worker process or with other 
 from __future__ import annotations
 
 import multiprocessing
+import pickle
 import threading
 import traceback
 
@@ -39,6 +40,7 @@ def _worker(conn, name, problem, options):
         conn.send(("done", out))
     except BaseException as exc:   # every error goes back to the parent, which raises it
         try:
+            pickle.loads(pickle.dumps(exc))    # it must also unpickle there
             conn.send(("error", exc))
         except Exception:          # an exception that does not pickle: its text
             conn.send(("error", f"{name} failed in its worker process:\n" + "".join(traceback.format_exception(exc))))
