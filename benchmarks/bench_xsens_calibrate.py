@@ -6,7 +6,8 @@ The session is imported from ``../shared/data/real/imu_tk_xsens`` into a tempora
 command is timed whole (``python -m graph_calib.cli calibrate``, a fresh process, kernels from the
 on-disk cache: warm), and its parts in this process: start-up (importing the command and building its
 parser, in a fresh process), reading, the grade choice, ``build_problem`` (static detection, alignment,
-the plausibility check, the model), each solver (seconds, iterations, preintegrations) and writing.
+the plausibility check, the model), each solver (seconds, iterations, preintegrations), both at once as
+the command runs them (``solve_pair``: the filter in a forked worker) and writing.
 Figures in docs/performance.md, 'calibrate on the Xsens session'.
 """
 
@@ -26,6 +27,7 @@ from graph_calib.importers import import_xsens
 from graph_calib.model import CalibrationModel
 from graph_calib.options import CalibrationOptions, ModelOptions
 from graph_calib.solvers import solve, to_result
+from graph_calib.solvers.concurrent import solve_pair
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "data" / "real" / "imu_tk_xsens"
@@ -77,6 +79,8 @@ def main():
             print(f"  {out.iterations} iterations, {calls['n']} preintegrations, converged {out.converged}")
             solved[s] = (out, el, calls["n"])
         CalibrationModel.preintegrate = original
+        _, t_pair = timed("both at once (solve_pair)", lambda: solve_pair(("sqrt-kf", "factor-graph"), problem,
+                                                                         options=opts))
         _, t_write = timed("results written", lambda: [io.write_result(to_result(problem.model, o),
                                                                        Path(d) / f"{s}.json")
                                                        for s, (o, _, _) in solved.items()])
@@ -85,6 +89,7 @@ def main():
     report("build_s", t_build, "s", "build_problem")
     for s, (o, el, n) in solved.items():
         report(f"{s}_s", el, "s", f"{s} solve ({o.iterations} iterations, {n} preintegrations)")
+    report("both_at_once_s", t_pair, "s", "both solvers at once, the filter in a forked worker (calibrate's way)")
 
 
 if __name__ == "__main__":

@@ -18,6 +18,7 @@ from typing import Mapping
 from graph_calib.experiment import Result
 from graph_calib.options import CalibrationOptions
 from graph_calib.problem import Problem, build_problem
+from graph_calib.solvers.concurrent import solve_pair
 from graph_calib.solvers.interface import SolverOutput
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
 from graph_calib.solvers.results import compare, to_result
@@ -48,7 +49,8 @@ class CalibrationRun:
     verdict: Verdict
 
 
-def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None):
+def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None,
+                  concurrent=False):
     """Solve a built ``problem`` with each of ``solvers`` (names) and compare the first two.
 
     Parameters
@@ -59,16 +61,21 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
         Registered solver names (:func:`graph_calib.solvers.solver_names`).
     progress : callable, optional
         Called with each solver's :class:`graph_calib.solvers.interface.ProgressEvent`.
+    concurrent : bool
+        With two solvers, run the first in a forked worker process while the second runs here
+        (:func:`graph_calib.solvers.concurrent.solve_pair`: the same outputs, progress events and errors
+        as one after the other; one after the other where the platform cannot fork).
 
     Returns
     -------
     CalibrationRun
     """
-    outputs, results = {}, {}
-    for name in solvers:
-        out = solve(name, problem, options=options, progress=progress)
-        outputs[name] = out
-        results[name] = to_result(problem.model, out)
+    solvers = tuple(solvers)
+    if concurrent and len(solvers) == 2:
+        outputs = dict(zip(solvers, solve_pair(solvers, problem, options=options, progress=progress)))
+    else:
+        outputs = {name: solve(name, problem, options=options, progress=progress) for name in solvers}
+    results = {name: to_result(problem.model, out) for name, out in outputs.items()}
     names = list(results)
     comparison = compare(results[names[0]], results[names[1]]) if len(names) >= 2 else None
     verdict = verdict_of(results, comparison)

@@ -68,7 +68,8 @@ def run(args):
     m = problem.model
     print(f"{path.name}: {exp.n_samples} samples, {exp.t[-1] - exp.t[0] + 1 / exp.rate_hz:.0f} s, "
           f"{m.n_keyframes} keyframes, {m.layout.size} parameters, T_ref {m.t_ref_degC:.2f} degC", file=sys.stderr)
-    calibration = solve_problem(problem, options=options, solvers=solvers, progress=_print_progress)
+    calibration = solve_problem(problem, options=options, solvers=solvers, progress=_print_progress,
+                                concurrent=True)
     for s, res in calibration.results.items():
         if choice is not None:
             res = replace(res, extra={**res.extra, "grade_choice": choice.to_json()})

@@ -1,0 +1,105 @@
+"""Two solvers at once (graph_calib.solvers.concurrent): what a sequential run gives, outputs, progress, errors."""
+
+import os
+
+import numpy as np
+import pytest
+
+from graph_calib.calibrate import build_problem, solve_problem
+from graph_calib.errors import InputError
+from graph_calib.options import CalibrationOptions
+from graph_calib.solvers import concurrent
+from graph_calib.solvers.interface import ProgressEvent
+
+
+
+@pytest.fixture(autouse=True)
+def forking():
+    """Each test here needs the worker: a platform that forks and a test process without other threads."""
+    if not concurrent.fork_available():
+        pytest.skip("solve_pair runs sequentially here: no fork, or other threads running (fork_available)")
+
+
+@pytest.fixture(scope="module")
+def problem():
+    from conftest import make_experiment
+    return build_problem(make_experiment(n=3000, seed=4), options=CalibrationOptions())
+
+
+def test_real_solvers_give_the_sequential_outputs_and_events_bit_for_bit(problem):
+    opts = CalibrationOptions()
+    seq_events, par_events = [], []
+    seq = solve_problem(problem, options=opts, progress=seq_events.append)
+    par = solve_problem(problem, options=opts, progress=par_events.append, concurrent=True)
+    assert list(par.outputs) == ["sqrt-kf", "factor-graph"]
+    for name in par.outputs:
+        a, b = seq.outputs[name], par.outputs[name]
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.covariance, b.covariance)
+        assert np.array_equal(a.attitudes, b.attitudes)
+        assert (a.iterations, a.converged, a.final_cost) == (b.iterations, b.converged, b.final_cost)
+        for kind in a.residuals:
+            assert np.array_equal(a.residuals[kind].values, b.residuals[kind].values)
+    assert par_events == seq_events
+    assert par.verdict == seq.verdict and par.comparison == seq.comparison
+
+
+def _fake(fail=None, error=None):
+    """A stand-in for registry.solve: three progress events per solver, then its name or ``error``."""
+    def solve(name, problem, *, options, progress=None):
+        for i in range(3):
+            progress(ProgressEvent(solver=name, iteration=i + 1, cost=float(10 - i)))
+        if name == fail:
+            raise error
+        return f"output of {name}", os.getpid()
+    return solve
+
+
+def test_every_event_of_the_first_solver_comes_before_any_of_the_second(monkeypatch):
+    monkeypatch.setattr(concurrent, "solve", _fake())
+    events = []
+    outs = concurrent.solve_pair(("a", "b"), None, options=None, progress=events.append)
+    assert [o[0] for o in outs] == ["output of a", "output of b"]
+    assert outs[0][1] != os.getpid() and outs[1][1] == os.getpid()     # the first ran in the worker
+    assert [(e.solver, e.iteration) for e in events] == [("a", 1), ("a", 2), ("a", 3), ("b", 1), ("b", 2), ("b", 3)]
+
+
+def test_an_error_of_the_first_solver_is_raised_with_its_message_and_the_second_is_not_shown(monkeypatch):
+    monkeypatch.setattr(concurrent, "solve", _fake("a", InputError("no static interval", dataset="/imu")))
+    events = []
+    with pytest.raises(InputError, match="/imu: no static interval") as info:
+        concurrent.solve_pair(("a", "b"), None, options=None, progress=events.append)
+    assert info.value.dataset == "/imu"
+    assert [e.solver for e in events] == ["a"] * 3
+
+
+def test_an_error_of_the_second_solver_is_raised_after_every_event_of_the_first(monkeypatch):
+    monkeypatch.setattr(concurrent, "solve", _fake("b", RuntimeError("indeterminate system")))
+    events = []
+    with pytest.raises(RuntimeError, match="indeterminate system"):
+        concurrent.solve_pair(("a", "b"), None, options=None, progress=events.append)
+    assert [e.solver for e in events] == ["a"] * 3 + ["b"] * 3
+
+
+def test_a_worker_that_dies_is_an_error_naming_the_solver(monkeypatch):
+    def solve(name, problem, *, options, progress=None):
+        if name == "a":
+            os._exit(7)
+        return name
+    monkeypatch.setattr(concurrent, "solve", solve)
+    with pytest.raises(RuntimeError, match="a worker process ended without a result .exit code 7"):
+        concurrent.solve_pair(("a", "b"), None, options=None)
+
+
+class _Unpicklable(Exception):
+    def __init__(self, message, *, code):
+        super().__init__(message)
+        self.code = code
+
+    def __reduce__(self):
+        return (_Unpicklable, (str(self),))     # loses the keyword: unpickling fails
+
+
+def test_an_error_that_does_not_unpickle_comes_back_as_its_traceback(monkeypatch):
+    monkeypatch.setattr(concurrent, "solve", _fake("a", _Unpicklable("odd failure", code=3)))
+    with pytest.raises(RuntimeError, match="(?s)a failed in its worker process:.*odd failure"):
+        concurrent.solve_pair(("a", "b"), None, options=None)
