@@ -116,39 +116,50 @@ def retract(R, dR):
     return R @ exp_so3(dR)
 
 
-class _Accumulator:
-    """Sums one experiment's whitened factors into its normal equations."""
+def _sum_by_key(target, key, vals):
+    """``target[key[i]] += vals[i]`` for keys in non-decreasing order (every factor kind's are): one sum per
+    run of equal keys (``np.add.at`` took half the time of a 3 h experiment's linearisation)."""
+    if key.size == 0:
+        return
+    if np.any(key[1:] < key[:-1]):
+        np.add.at(target, key, vals)
+        return
+    starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+    target[key[starts]] += np.add.reduceat(vals, starts, axis=0)
 
-    def __init__(self, n_keys, M_u):
-        self.M = M_u
-        nt = M_u.shape[1]
+
+class _Accumulator:
+    """Sums one experiment's whitened factors into its normal equations, in the calibration vector's
+    columns (P): ``theta_e``'s blocks are ``M_u^T (.) M_u`` of them, formed once at the end."""
+
+    def __init__(self, n_keys, P):
         self.D = np.zeros((n_keys, 3, 3))           # diagonal blocks of H_RR
         self.O = np.zeros((max(n_keys - 1, 0), 3, 3))    # (k, k+1) blocks
-        self.H_Rt = np.zeros((n_keys, 3, nt))
+        self.H_Rx = np.zeros((n_keys, 3, P))
         self.g_R = np.zeros((n_keys, 3))
-        self.H_tt = np.zeros((nt, nt))
-        self.g_t = np.zeros(nt)
+        self.H_xx = np.zeros((P, P))
+        self.g_x = np.zeros(P)
         self.cost = 0.0
 
     def add(self, key, r, H_R, H_x, s, H_next=None):
         """Rows ``s * (r, H_R, H_x)`` (``s`` (F, 3): 1/sigma times the square root of any robust weight)."""
         r = r * s
         HR = H_R * s[:, :, None]
-        At = (H_x * s[:, :, None]) @ self.M
+        Hx = H_x * s[:, :, None]
         HRT = np.swapaxes(HR, 1, 2)
-        np.add.at(self.D, key, HRT @ HR)
-        np.add.at(self.H_Rt, key, HRT @ At)
-        np.add.at(self.g_R, key, np.einsum("fji,fj->fi", HR, r))
+        _sum_by_key(self.D, key, HRT @ HR)
+        _sum_by_key(self.H_Rx, key, HRT @ Hx)
+        _sum_by_key(self.g_R, key, np.einsum("fji,fj->fi", HR, r))
         if H_next is not None:
             Hn = H_next * s[:, :, None]
             HnT = np.swapaxes(Hn, 1, 2)
-            np.add.at(self.D, key + 1, HnT @ Hn)
-            np.add.at(self.O, key, HRT @ Hn)
-            np.add.at(self.H_Rt, key + 1, HnT @ At)
-            np.add.at(self.g_R, key + 1, np.einsum("fji,fj->fi", Hn, r))
-        flat = At.reshape(-1, At.shape[-1])
-        self.H_tt += flat.T @ flat
-        self.g_t += flat.T @ r.reshape(-1)
+            _sum_by_key(self.D, key + 1, HnT @ Hn)
+            _sum_by_key(self.O, key, HRT @ Hn)
+            _sum_by_key(self.H_Rx, key + 1, HnT @ Hx)
+            _sum_by_key(self.g_R, key + 1, np.einsum("fji,fj->fi", Hn, r))
+        flat = Hx.reshape(-1, Hx.shape[-1])
+        self.H_xx += flat.T @ flat
+        self.g_x += flat.T @ r.reshape(-1)
 
     def add_factors(self, res, *, robust=None, k=None, group=None):
         """A kind of factors (:class:`graph_calib.model.factors.Residuals`), whitened, in chunks.
@@ -177,7 +188,7 @@ class _Accumulator:
                      None if res.H_R_next is None else res.H_R_next[sl])
         return w
 
-    def system(self, whitened):
+    def system(self, M_u, whitened):
         n = self.D.shape[0]
         band = np.zeros((BAND + 1, 3 * n))
         idx = 3 * np.arange(n)
@@ -187,8 +198,9 @@ class _Accumulator:
         for a in range(3):
             for b in range(3):
                 band[BAND - (3 + b - a), idx[1:] + b] = self.O[:, a, b]
-        return ExperimentSystem(cost=self.cost, band=band, H_Rt=self.H_Rt.reshape(3 * n, -1),
-                                g_R=self.g_R.reshape(-1), H_tt=0.5 * (self.H_tt + self.H_tt.T), g_t=self.g_t,
+        H_tt = M_u.T @ self.H_xx @ M_u
+        return ExperimentSystem(cost=self.cost, band=band, H_Rt=self.H_Rx.reshape(3 * n, -1) @ M_u,
+                                g_R=self.g_R.reshape(-1), H_tt=0.5 * (H_tt + H_tt.T), g_t=M_u.T @ self.g_x,
                                 whitened=whitened)
 
 
@@ -213,7 +225,7 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
         Its threshold for one 3-row factor; an encoder factor of ``m`` readings uses ``robust_k sqrt(m)``
         (:func:`graph_calib.factor_graph.build_graph`).
     """
-    acc = _Accumulator(R.shape[0], M_u)
+    acc = _Accumulator(R.shape[0], M_u.shape[0])
     prior = model.attitude_prior(R[0], R_prior=R_prior)
     acc.D[0] += prior.H.T @ prior.H
     acc.g_R[0] += prior.H.T @ prior.r
@@ -231,7 +243,7 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
         k_enc = robust_k * np.sqrt(counts)
     w_enc = acc.add_factors(enc, robust=robust, k=k_enc, group=group)
     del enc
-    return acc.system((w_rot, w_grav, w_enc))
+    return acc.system(M_u, (w_rot, w_grav, w_enc))
 
 
 __all__ = ["BAND", "ExperimentSystem", "linearise", "retract"]
