@@ -254,9 +254,8 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
                          H_x=np.zeros((0, 3, P)), sigma=z)
     # the turn from the sample end to the reading, with the calibrated rate of that sample interval
     # (preintegrated with its Jacobian in the gyro columns, updated to first order like the rest)
-    readR, w_c = preint.readings_corrected(x)
+    readR, w_c, J_w = preint.readings_corrected(x)
     gc = preint.gyro_cols
-    J_w = preint.reading_Jw
     phi = w_c * record.reading_dt[:, None] + record.reading_phi_shape
     Ew = exp_so3(phi)
     Bp = readR @ Ew
