@@ -49,7 +49,7 @@ def _robust(e, kind, k):
     raise ValueError(f"unknown robust loss {kind!r}")
 
 
-@dataclass
+@dataclass(frozen=True)
 class ExperimentSystem:
     """One experiment's normal equations at one point (module docstring).
 

@@ -1,6 +1,7 @@
 r"""The joint campaign solver: every experiment of a campaign in one factor graph (GTSAM).
 
-Variables: the keyframe attitudes of every experiment (``Rot3``), the shared unknowns ``Z(0)`` (the
+Variables: the keyframe attitudes of every experiment (eliminated by the solver, experiment by
+experiment: :mod:`graph_calib.joint.reduced`), the shared unknowns ``Z(0)`` (the
 temperature curves' coefficients and the shared elements, :mod:`graph_calib.joint.unknowns`) and each
 experiment's set-up ``S(e)`` (mount, lever arm, table lag, damper stiffness where its layout has them).
 Each experiment keeps its own :class:`graph_calib.model.CalibrationModel`, its layout extended by the
