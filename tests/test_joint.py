@@ -193,6 +193,19 @@ def test_linear_truth_keeps_linear_curves_and_agrees_with_each_subrange_graph(li
     assert z_all.max() < 4.0, z_all.max()
 
 
+def test_warm_started_at_its_own_solution_the_joint_solver_starts_there(curved):
+    """Handed its own solution (each experiment's view: calibration, sigmas, attitudes) as the warm start, the
+    solver's first cost is the solution's: the factors are evaluated at the warm calibration, as GTSAM's
+    values hold it (a start once preintegrated at the prior-scaled map applied to SI unknowns, near a zero
+    calibration, began orders of magnitude higher and re-preintegrated every experiment)."""
+    _, _, problems, _, out = curved
+    starts = [WarmStart(layout=o.layout, x=o.x, sigma=o.sigma, attitudes=o.attitudes) for o in out.outputs]
+    again = JointSolver().solve_campaign(problems, options=OPTS, initial=starts)
+    assert again.converged
+    assert again.cost_history[0] == pytest.approx(out.final_cost, rel=0.05), (again.cost_history, out.final_cost)
+    assert again.final_cost == pytest.approx(out.final_cost, rel=1e-6)
+
+
 def test_curved_truth_the_joint_curves_follow_the_truth_curves(curved):
     sim, runs, problems, graphs, out = curved
     assert out.converged
