@@ -26,6 +26,7 @@ from graph_calib.errors import InputError
 from graph_calib.joint import JointSolver, WarmStart, plan_unknowns, solve_joint
 from graph_calib.joint.result import joint_result, read_joint_result, write_joint_result
 from graph_calib.joint.marginal import unknowns_covariance
+from graph_calib.joint.reduced import ExperimentSystem
 from graph_calib.joint.solver import _extend, _priors
 from graph_calib.joint.unknowns import MAX_DEGREE, curve_label
 from graph_calib.options import CalibrationOptions
@@ -204,6 +205,27 @@ def test_warm_started_at_its_own_solution_the_joint_solver_starts_there(curved):
     assert again.converged
     assert again.cost_history[0] == pytest.approx(out.final_cost, rel=0.05), (again.cost_history, out.final_cost)
     assert again.final_cost == pytest.approx(out.final_cost, rel=1e-6)
+
+
+def test_a_rejected_trial_is_undone_and_the_solve_ends_where_it_would(curved, monkeypatch):
+    """The first trial spoiled (every attitude step off by 0.05 rad: its cost far higher, rejected): the solver
+    damps harder, rebuilds the linearised systems it freed for the trial and ends at the same solution."""
+    _, _, problems, graphs, out = curved
+    original = ExperimentSystem.attitude_step
+    calls = []
+
+    def spoiled(Y, d_theta):
+        calls.append(1)
+        return original(Y, d_theta) + (0.05 if len(calls) <= len(problems) else 0.0)
+
+    monkeypatch.setattr(ExperimentSystem, "attitude_step", staticmethod(spoiled))
+    again = JointSolver().solve_campaign(problems, options=OPTS,
+                                         initial=[WarmStart(layout=g.layout, x=g.x, sigma=g.sigma) for g in graphs])
+    assert again.converged and len(calls) >= (again.iterations + 1) * len(problems)
+    assert again.theta_names == out.theta_names
+    z = (again.theta - out.theta) / np.sqrt(np.diag(out.covariance))
+    assert np.abs(z).max() < 1e-2, np.abs(z).max()
+    np.testing.assert_allclose(np.diag(again.covariance), np.diag(out.covariance), rtol=1e-4)
 
 
 def test_curved_truth_the_joint_curves_follow_the_truth_curves(curved):

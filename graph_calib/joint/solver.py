@@ -428,6 +428,8 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
     for it in range(1, options.max_iterations + 1):
         if not fresh:
             restore()
+            if systems is None:
+                systems = [c.linearise(values, c.R, options) for c in exps]
         prior_lin = prior_graph.linearize(values)
         while True:
             try:
@@ -440,7 +442,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
                 continue
             gfg = None
             R_trial = [retract(c.R, ExperimentSystem.attitude_step(Y, c.theta_of(delta))) for c, Y in zip(exps, Ys)]
-            Ys = None
+            Ys = systems = None     # freed during the trial (0.1 GB for six 3 h experiments), rebuilt if it fails
             trial = values.retract(delta)
             for c in exps:
                 x_t = c.x_of(trial)
@@ -454,6 +456,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
             lam *= 10.0
             trial_systems = None
             restore()
+            systems = [c.linearise(values, c.R, options) for c in exps]
         step = np.concatenate([np.asarray(delta.at(Z(0)))] + [np.asarray(delta.at(k)) for k in s_keys])
         accepted = new_cost <= cost
         fresh = accepted
@@ -479,6 +482,8 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
     # covariance: an experiment whose calibration moved beyond the first-order range of its preintegration
     # (the solver's own test) is re-preintegrated at the solution, so that its Jacobians hold there; one
     # at a time, the preintegration it replaces freed first
+    if systems is None:         # the last trial failed: the systems at the solution were not kept
+        systems = [None] * len(exps)
     for i, (c, xl) in enumerate(zip(exps, lin_x)):
         x_c = c.x_of(values)
         if (not np.array_equal(c.preint.x_lin, xl)
@@ -486,6 +491,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
             c.preint = None
             c.preint = c.model.preintegrate(x_c)
             systems[i] = None
+        if systems[i] is None:
             systems[i] = c.linearise(values, c.R, options)
     attitudes = [c.R for c in exps]
     whitened = [s.whitened for s in systems]
