@@ -16,7 +16,6 @@ import pytest
 from gtsam.symbol_shorthand import S, X, Z
 
 from graph_calib.factor_graph import _damped, _noise
-from graph_calib.joint import solver as joint_solver
 from graph_calib.joint.marginal import unknowns_covariance
 from graph_calib.joint.reduced import ExperimentSystem
 from graph_calib.joint.solver import _Experiment, _extend, _priors, _reduced_graph
@@ -174,15 +173,3 @@ def test_reduced_system_gives_gtsams_cost_step_and_covariance(point, robust):
     gfg0, _ = _reduced_graph(exps, systems, prior_graph.linearize(values), 0.0)
     got_cov = unknowns_covariance(gfg0, [], tkeys)
     np.testing.assert_allclose(got_cov, want_cov, rtol=1e-6, atol=1e-8 * np.abs(want_cov).max())
-
-
-def test_experiments_linearised_in_threads_give_the_serial_solution_bit_for_bit(monkeypatch):
-    sim = simulate("nav-campaign", rng=np.random.default_rng(6), hours=0.02, curvature=False)
-    problems = [build_problem(s.experiment, options=CalibrationOptions()) for s in sim.run()[:3]]
-    outs = []
-    for threads in (1, 2):
-        monkeypatch.setattr(joint_solver, "LINEARISE_THREADS", threads)
-        outs.append(joint_solver.solve_joint(problems, options=GraphOptions()))
-    assert outs[0].iterations == outs[1].iterations
-    assert np.array_equal(outs[0].theta, outs[1].theta)
-    assert np.array_equal(outs[0].covariance, outs[1].covariance)

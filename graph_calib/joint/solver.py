@@ -32,7 +32,6 @@ Curve degree by evidence
 from __future__ import annotations
 
 import time
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import gtsam
@@ -51,8 +50,6 @@ from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, Resi
 
 #: Name of the solver (entry point ``graph_calib.solvers``).
 JOINT = "joint"
-#: Experiments linearised at once (threads; each holds its factors, 0.2 GB for a 3 h experiment, meanwhile).
-LINEARISE_THREADS = 2
 @dataclass(frozen=True)
 class DegreeChoice:
     """The evidence for one curve family's degree.
@@ -327,23 +324,16 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
 
     Notes
     -----
-    The experiments are linearised ``LINEARISE_THREADS`` at a time (threads).  BLAS runs on one thread inside
-    the solve: its products are of a few tens of columns (an experiment's
+    BLAS runs on one thread inside the solve: its products are of a few tens of columns (an experiment's
     unknowns), where OpenBLAS's threads gain nothing on two cores and, on a machine shared with other
     work, spin: ``H_Rt^T Y`` of a 3 h experiment took 0.4-2.4 s with its threads instead of 0.04 s.
     """
-    with threadpool_limits(limits=1, user_api="blas"), ThreadPoolExecutor(LINEARISE_THREADS) as pool:
+    with threadpool_limits(limits=1, user_api="blas"):
         return _solve_joint(problems, options=options, progress=progress, initial=initial,
-                            select_degree=select_degree, pool=pool)
+                            select_degree=select_degree)
 
 
-def _linearise_all(pool, exps, values, Rs, options):
-    """Every experiment's :class:`graph_calib.joint.reduced.ExperimentSystem`, ``LINEARISE_THREADS`` at a time
-    (numpy releases the GIL; each experiment's own arrays only, so the systems are those of a serial loop)."""
-    return list(pool.map(lambda cR: cR[0].linearise(values, cR[1], options), zip(exps, Rs)))
-
-
-def _solve_joint(problems, *, options, progress, initial, select_degree, pool):
+def _solve_joint(problems, *, options, progress, initial, select_degree):
     t_start = time.perf_counter()
     problems = list(problems)
     if not problems:
@@ -418,7 +408,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree, pool):
             if moved < ATTITUDE_FIT_TOL:
                 break
     # each experiment's linearised system at `values` (a few tens of MB for 3 h; its factors released)
-    systems = _linearise_all(pool, exps, values, [c.R for c in exps], options)
+    systems = [c.linearise(values, c.R, options) for c in exps]
     cost = prior_graph.error(values) + sum(s.cost for s in systems)
     history = [cost]
     lam = options.lambda_initial
@@ -439,7 +429,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree, pool):
         if not fresh:
             restore()
             if systems is None:
-                systems = _linearise_all(pool, exps, values, [c.R for c in exps], options)
+                systems = [c.linearise(values, c.R, options) for c in exps]
         prior_lin = prior_graph.linearize(values)
         while True:
             try:
@@ -459,14 +449,14 @@ def _solve_joint(problems, *, options, progress, initial, select_degree, pool):
                 if c.preint.needs_repreintegration(x_t, tol=options.repreintegrate_tol):
                     c.preint = None
                     c.preint = c.model.preintegrate(x_t)
-            trial_systems = _linearise_all(pool, exps, trial, R_trial, options)
+            trial_systems = [c.linearise(trial, Rt, options) for c, Rt in zip(exps, R_trial)]
             new_cost = prior_graph.error(trial) + sum(s.cost for s in trial_systems)
             if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
                 break
             lam *= 10.0
             trial_systems = None
             restore()
-            systems = _linearise_all(pool, exps, values, [c.R for c in exps], options)
+            systems = [c.linearise(values, c.R, options) for c in exps]
         step = np.concatenate([np.asarray(delta.at(Z(0)))] + [np.asarray(delta.at(k)) for k in s_keys])
         accepted = new_cost <= cost
         fresh = accepted
