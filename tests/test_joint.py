@@ -26,7 +26,8 @@ from graph_calib.errors import InputError
 from graph_calib.joint import JointSolver, WarmStart, plan_unknowns, solve_joint
 from graph_calib.joint.result import joint_result, read_joint_result, write_joint_result
 from graph_calib.joint.marginal import unknowns_covariance
-from graph_calib.joint.solver import _extend, _JointCache, _priors
+from graph_calib.joint.reduced import ExperimentSystem
+from graph_calib.joint.solver import _extend, _priors
 from graph_calib.joint.unknowns import MAX_DEGREE, curve_label
 from graph_calib.options import CalibrationOptions
 from graph_calib.params import Layout, split_element_name
@@ -107,37 +108,32 @@ def test_chained_jacobians_match_finite_differences(linear):
     x = A @ z + B @ s
     preint = m.preintegrate(x)
     R = m.propagate(np.eye(3), preint, x)
-    c = _JointCache(1, m, preint, A, B)
-    c.evaluate(R, x)
+    kinds = {"rot": m.rotation_factors, "grav": m.gravity_factors, "enc": m.encoder_factors}
+
+    def chained(kind, x):     # the joint solver's chaining, H_z = H_x A, H_s = H_x B
+        H = kinds[kind](R, preint, x).H_x
+        return H @ A, H @ B
+
     idx = u.z_index()
     z_cols = [idx[curve_label("gyro.bias.x", j)] for j in range(4)] + [idx[curve_label("accel.bias.y", 2)],
                                                                        idx["gyro.misalignment.xy"]]
     for kind in ("rot", "grav", "enc"):
-        Hz, Hs = c.chained(kind)
+        Hz, Hs = chained(kind, x)
         for col in z_cols:
             h = 1e-3 * z_sigma[col]
-            for sign, store in ((1, "p"), (-1, "m")):
-                zz = z.copy()
-                zz[col] += sign * h
-                c.evaluate(R, A @ zz + B @ s)
-                if store == "p":
-                    rp = getattr(c, kind).r.copy()
-                else:
-                    rm = getattr(c, kind).r.copy()
-            fd = (rp - rm) / (2 * h)
+            zp, zm = z.copy(), z.copy()
+            zp[col] += h
+            zm[col] -= h
+            fd = (kinds[kind](R, preint, A @ zp + B @ s).r - kinds[kind](R, preint, A @ zm + B @ s).r) / (2 * h)
             np.testing.assert_allclose(Hz[:, :, col], fd, rtol=1e-3, atol=1e-5 * np.abs(fd).max() + 1e-300,
                                        err_msg=f"{kind} d/d{u.z_names[col]}")
-        c.evaluate(R, x)
-    Hz, Hs = c.chained("enc")
+    Hz, Hs = chained("enc", x)
     mount = list(u.setup_names[1]).index("mount.y")
     h = 1e-5 * s_sigmas[1][mount]
     sp, sm = s.copy(), s.copy()
     sp[mount] += h
     sm[mount] -= h
-    c.evaluate(R, A @ z + B @ sp)
-    rp = c.enc.r.copy()
-    c.evaluate(R, A @ z + B @ sm)
-    fd = (rp - c.enc.r) / (2 * h)
+    fd = (m.encoder_factors(R, preint, A @ z + B @ sp).r - m.encoder_factors(R, preint, A @ z + B @ sm).r) / (2 * h)
     np.testing.assert_allclose(Hs[:, :, mount], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
 
 
@@ -196,6 +192,40 @@ def test_linear_truth_keeps_linear_curves_and_agrees_with_each_subrange_graph(li
     # subrange's noise less what the others add, well inside the subrange's sigma on the whole
     assert np.sqrt(np.mean(z_all ** 2)) < 1.0, np.sqrt(np.mean(z_all ** 2))
     assert z_all.max() < 4.0, z_all.max()
+
+
+def test_warm_started_at_its_own_solution_the_joint_solver_starts_there(curved):
+    """Handed its own solution (each experiment's view: calibration, sigmas, attitudes) as the warm start, the
+    solver's first cost is the solution's: the factors are evaluated at the warm calibration, as GTSAM's
+    values hold it (a start once preintegrated at the prior-scaled map applied to SI unknowns, near a zero
+    calibration, began orders of magnitude higher and re-preintegrated every experiment)."""
+    _, _, problems, _, out = curved
+    starts = [WarmStart(layout=o.layout, x=o.x, sigma=o.sigma, attitudes=o.attitudes) for o in out.outputs]
+    again = JointSolver().solve_campaign(problems, options=OPTS, initial=starts)
+    assert again.converged
+    assert again.cost_history[0] == pytest.approx(out.final_cost, rel=0.05), (again.cost_history, out.final_cost)
+    assert again.final_cost == pytest.approx(out.final_cost, rel=1e-6)
+
+
+def test_a_rejected_trial_is_undone_and_the_solve_ends_where_it_would(curved, monkeypatch):
+    """The first trial spoiled (every attitude step off by 0.05 rad: its cost far higher, rejected): the solver
+    damps harder, rebuilds the linearised systems it freed for the trial and ends at the same solution."""
+    _, _, problems, graphs, out = curved
+    original = ExperimentSystem.attitude_step
+    calls = []
+
+    def spoiled(Y, d_theta):
+        calls.append(1)
+        return original(Y, d_theta) + (0.05 if len(calls) <= len(problems) else 0.0)
+
+    monkeypatch.setattr(ExperimentSystem, "attitude_step", staticmethod(spoiled))
+    again = JointSolver().solve_campaign(problems, options=OPTS,
+                                         initial=[WarmStart(layout=g.layout, x=g.x, sigma=g.sigma) for g in graphs])
+    assert again.converged and len(calls) >= (again.iterations + 1) * len(problems)
+    assert again.theta_names == out.theta_names
+    z = (again.theta - out.theta) / np.sqrt(np.diag(out.covariance))
+    assert np.abs(z).max() < 1e-2, np.abs(z).max()
+    np.testing.assert_allclose(np.diag(again.covariance), np.diag(out.covariance), rtol=1e-4)
 
 
 def test_curved_truth_the_joint_curves_follow_the_truth_curves(curved):

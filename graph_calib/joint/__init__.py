@@ -3,7 +3,10 @@
 - :mod:`graph_calib.joint.unknowns`: the curves and shared elements, the set-ups, each experiment's
   calibration vector as an exact affine map of them;
 - :mod:`graph_calib.joint.solver`: the graph, its Levenberg-Marquardt loop, the degree chosen by evidence
-  (``JointSolver``, registered as ``"joint"``).
+  (``JointSolver``, registered as ``"joint"``);
+- :mod:`graph_calib.joint.reduced`: one experiment's factors linearised with its attitudes eliminated
+  (the reduced factor GTSAM solves with the others);
+- :mod:`graph_calib.joint.marginal`: the unknowns' covariance.
 """
 
 from graph_calib.joint.solver import JOINT, DegreeChoice, JointOutput, JointSolver, WarmStart, choose_degrees, solve_joint

@@ -19,7 +19,8 @@ def unknowns_covariance(gfg, x_keys, theta_keys):
     gfg : gtsam.GaussianFactorGraph
         The graph linearised at the solution.
     x_keys : sequence of int
-        The attitudes' keys.
+        The attitudes' keys (none when the graph holds them eliminated already,
+        :mod:`graph_calib.joint.reduced`).
     theta_keys : sequence of int
         The unknowns' keys (vectors), in the order wanted.
 
@@ -28,10 +29,12 @@ def unknowns_covariance(gfg, x_keys, theta_keys):
     ndarray, shape (Nt, Nt)
         In the order of ``theta_keys``.
     """
-    eliminate = gtsam.Ordering()
-    for k in x_keys:
-        eliminate.push_back(k)
-    _, rest = gfg.eliminatePartialMultifrontal(eliminate)
+    rest = gfg
+    if len(x_keys):
+        eliminate = gtsam.Ordering()
+        for k in x_keys:
+            eliminate.push_back(k)
+        _, rest = gfg.eliminatePartialMultifrontal(eliminate)
     keep = gtsam.Ordering()
     for k in theta_keys:
         keep.push_back(k)

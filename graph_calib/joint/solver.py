@@ -1,6 +1,7 @@
 r"""The joint campaign solver: every experiment of a campaign in one factor graph (GTSAM).
 
-Variables: the keyframe attitudes of every experiment (``Rot3``), the shared unknowns ``Z(0)`` (the
+Variables: the keyframe attitudes of every experiment (eliminated by the solver, experiment by
+experiment: :mod:`graph_calib.joint.reduced`), the shared unknowns ``Z(0)`` (the
 temperature curves' coefficients and the shared elements, :mod:`graph_calib.joint.unknowns`) and each
 experiment's set-up ``S(e)`` (mount, lever arm, table lag, damper stiffness where its layout has them).
 Each experiment keeps its own :class:`graph_calib.model.CalibrationModel`, its layout extended by the
@@ -10,9 +11,13 @@ encoder) with the parameter Jacobians chained, ``H_z = H_x A_e``, ``H_s = H_x B_
 grade's (or the manifest's) prior of each unknown, once: a curve coefficient of order ``j`` takes the
 prior of the family's ``*_tc<j>`` about ``t0``; the alignment of each experiment's first attitude.
 
-The Levenberg-Marquardt loop is :mod:`graph_calib.factor_graph`'s: our own around ``graph.linearize``,
-the factors read from one vectorised cache per experiment (that module's), each experiment
-re-preintegrated when its own calibration moves too far from its preintegration point.
+The Levenberg-Marquardt loop is :mod:`graph_calib.factor_graph`'s (the same damping of every variable, the
+same acceptance and stopping rules, each experiment re-preintegrated when its own calibration moves too far
+from its preintegration point), on the graph linearised with every experiment's attitudes eliminated
+(:mod:`graph_calib.joint.reduced`: each experiment's factors evaluated vectorised and reduced to one GTSAM
+factor on the unknowns it touches, the attitude chain's band factored directly); GTSAM solves the reduced
+graph of the unknowns, the attitudes' steps follow by back-substitution.  The cost is the graph's error:
+the unknowns' priors (GTSAM's factors) plus each experiment's factors and attitude prior.
 
 Curve degree by evidence
     The solve estimates every family at the highest degree the registry has (biases cubic, scales
@@ -28,14 +33,15 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, replace
-from functools import partial
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import S, X, Z
+from gtsam.symbol_shorthand import S, Z
+from threadpoolctl import threadpool_limits
 
-from graph_calib.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _Cache, _damped, _noise
+from graph_calib.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _damped
 from graph_calib.joint.marginal import unknowns_covariance
+from graph_calib.joint.reduced import ExperimentSystem, linearise, retract
 from graph_calib.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout, split_element_name
@@ -44,14 +50,6 @@ from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, Resi
 
 #: Name of the solver (entry point ``graph_calib.solvers``).
 JOINT = "joint"
-#: Keys of experiment ``e``'s attitudes: ``X(e * KEY_STRIDE + k)``.
-KEY_STRIDE = 10**8
-
-
-def _xkey(e, k):
-    return X(e * KEY_STRIDE + k)
-
-
 @dataclass(frozen=True)
 class DegreeChoice:
     """The evidence for one curve family's degree.
@@ -119,98 +117,53 @@ class JointOutput:
         return slice(start, start + len(self.unknowns.setup_names[e]))
 
 
-class _JointCache(_Cache):
-    """One experiment's factors at one set of values (:class:`graph_calib.factor_graph._Cache`), read from
-    its own keys; the callbacks chain the parameter Jacobians onto ``z`` and ``s_e`` factor by factor
-    (``H_x A``, ``H_x B``: storing them chained for every factor would hold another 160 MB per 3-h
-    experiment)."""
+class _Experiment:
+    """One experiment of the joint graph: its model, its current preintegration, its attitudes (K+1, 3, 3)
+    and ``M_u = d x_e / d theta_e`` (P, Nt), ``theta_e = (u_z, u_s)`` the unknowns it touches in GTSAM's
+    units.  Its factors are linearised by :func:`graph_calib.joint.reduced.linearise` one experiment at a
+    time (their Jacobians, 0.2 GB for 3 h, released at once)."""
 
-    def __init__(self, e, model, preint, A, B):
-        super().__init__(model, preint)
-        self.e, self.A, self.B = e, A, B
-        self.has_setup = B.shape[1] > 0
+    def __init__(self, e, model, preint, M_u, nz, R, R_prior):
+        self.e, self.model, self.preint, self.M_u, self.nz = e, model, preint, M_u, nz
+        self.R, self.R_prior = R, R_prior
+        self.has_setup = M_u.shape[1] > nz
 
-    def x_of(self, z, s):
-        return self.A @ z + (self.B @ s if self.has_setup else 0.0)
+    def theta_of(self, v):
+        """``theta_e`` from GTSAM's ``Values`` or a ``VectorValues`` step."""
+        get = v.atVector if isinstance(v, gtsam.Values) else v.at
+        parts = [np.asarray(get(Z(0)), dtype=float)]
+        if self.has_setup:
+            parts.append(np.asarray(get(S(self.e)), dtype=float))
+        return np.concatenate(parts)
 
-    def release(self):
-        """Drop the evaluated factors (about 0.17 GB for 3 h): GTSAM's linear system holds them now; the next
-        call into GTSAM evaluates again."""
-        self.R = None
-        self.rot = self.grav = self.enc = None
+    def x_of(self, v):
+        return self.M_u @ self.theta_of(v)
 
-    def _read(self, values):
-        R = np.empty((self.K + 1, 3, 3))
-        for k in range(self.K + 1):
-            R[k] = values.atRot3(_xkey(self.e, k)).matrix()
-        z = np.asarray(values.atVector(Z(0)), dtype=float)
-        s = np.asarray(values.atVector(S(self.e)), dtype=float) if self.has_setup else np.zeros(0)
-        return R, self.x_of(z, s)
+    def linearise(self, values, R, options):
+        return linearise(self.model, self.preint, R, self.x_of(values), self.M_u, R_prior=self.R_prior,
+                         robust=options.robust, robust_k=options.robust_k)
 
-    def chained(self, kind):
-        """``(H_z (F, 3, nz), H_s (F, 3, ns))`` of every factor ``kind`` (``rot``, ``grav``, ``enc``), at once."""
-        H = getattr(self, kind).H_x
-        flat = H.reshape(-1, H.shape[-1])
-        return (flat @ self.A).reshape(H.shape[0], 3, -1), (flat @ self.B).reshape(H.shape[0], 3, -1)
-
-
-def _rotation_error(cache, k, this, values, H):
-    cache.ensure(values)
-    f = cache.rot
-    if H is not None:
-        H[0] = f.H_R[k]
-        H[1] = f.H_R_next[k]
-        H[2] = f.H_x[k] @ cache.A
-        if cache.has_setup:
-            H[3] = f.H_x[k] @ cache.B
-    return f.r[k]
+    def reduced_factor(self, H, g):
+        """The experiment's Schur complement as a GTSAM factor on ``Z(0)`` (and ``S(e)``)."""
+        nz = self.nz
+        if not self.has_setup:
+            return gtsam.HessianFactor(Z(0), H, -g, 0.0)
+        return gtsam.HessianFactor(Z(0), S(self.e), H[:nz, :nz], H[:nz, nz:], -g[:nz], H[nz:, nz:], -g[nz:], 0.0)
 
 
-def _gravity_error(cache, k, this, values, H):
-    cache.ensure(values)
-    f = cache.grav
-    if H is not None:
-        H[0] = f.H_R[k]
-        H[1] = f.H_x[k] @ cache.A
-        if cache.has_setup:
-            H[2] = f.H_x[k] @ cache.B
-    return f.r[k]
+def _reduced_graph(exps, systems, prior_lin, lam):
+    """The linearised graph with every experiment's attitudes eliminated (``lam`` their damping):
+    the priors of the unknowns and one reduced factor per experiment; and each experiment's
+    back-substitution ``Y`` (:meth:`graph_calib.joint.reduced.ExperimentSystem.reduce`)."""
+    gfg = gtsam.GaussianFactorGraph()
+    gfg.push_back(prior_lin)
+    Ys = []
+    for c, sysm in zip(exps, systems):
+        H, g, Y = sysm.reduce(lam)
+        gfg.add(c.reduced_factor(H, g))
+        Ys.append(Y)
+    return gfg, Ys
 
-
-def _encoder_error(cache, lo, hi, this, values, H):
-    cache.ensure(values)
-    f = cache.enc
-    if H is not None:
-        Hx = f.H_x[lo:hi].reshape(-1, f.H_x.shape[2])
-        H[0] = f.H_R[lo:hi].reshape(-1, 3)
-        H[1] = Hx @ cache.A
-        if cache.has_setup:
-            H[2] = Hx @ cache.B
-    return f.r[lo:hi].reshape(-1)
-
-
-def _add_experiment(graph, cache, *, R_prior, s_sigma, robust, robust_k):
-    """Experiment ``cache.e``'s factors: its first attitude's prior, its set-up's prior, the model's factors."""
-    e, m = cache.e, cache.model
-    graph.add(gtsam.PriorFactorRot3(_xkey(e, 0), gtsam.Rot3(R_prior),
-                                    gtsam.noiseModel.Isotropic.Sigma(3, m.initial_attitude_sigma)))
-    theta = [Z(0)]
-    if s_sigma.size:
-        graph.add(gtsam.PriorFactorVector(S(e), np.zeros(s_sigma.size), gtsam.noiseModel.Diagonal.Sigmas(s_sigma)))
-        theta.append(S(e))
-    for k in range(m.n_keyframes):
-        graph.add(gtsam.CustomFactor(gtsam.noiseModel.Diagonal.Sigmas(cache.rot.sigma[k]),
-                                     [_xkey(e, k), _xkey(e, k + 1)] + theta, partial(_rotation_error, cache, k)))
-        graph.add(gtsam.CustomFactor(_noise(cache.grav.sigma[k], robust, robust_k), [_xkey(e, k)] + theta,
-                                     partial(_gravity_error, cache, k)))
-    keys = cache.enc.key
-    if keys.size:
-        bounds = np.flatnonzero(np.diff(keys)) + 1
-        for lo, hi in zip(np.concatenate([[0], bounds]), np.concatenate([bounds, [keys.size]])):
-            k_m = robust_k * np.sqrt(hi - lo)     # as in graph_calib.factor_graph.build_graph
-            graph.add(gtsam.CustomFactor(_noise(cache.enc.sigma[lo:hi].reshape(-1), robust, k_m),
-                                         [_xkey(e, int(keys[lo]))] + theta,
-                                         partial(_encoder_error, cache, int(lo), int(hi))))
 
 
 def _extend(problem, unknowns_degrees):
@@ -304,27 +257,6 @@ def _warm_theta(unknowns, models, maps, starts, priors):
     return np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
 
 
-def _fit_attitudes(graph, caches, values, *, x_keys, theta_keys, theta_dims, ordering):
-    """:func:`graph_calib.factor_graph._fit_attitudes` over every experiment: attitudes only, unknowns held."""
-    holds = [gtsam.JacobianFactor(k, 1e8 * np.eye(d), np.zeros(d), gtsam.noiseModel.Unit.Create(d))
-             for k, d in zip(theta_keys, theta_dims)]
-    held = {k: np.asarray(values.atVector(k), dtype=float) for k in theta_keys}
-    for _ in range(ATTITUDE_FIT_ITERATIONS):
-        for c in caches:
-            c.invalidate()
-        gfg = _damped(graph.linearize(values), x_keys, 1e-9, [3] * len(x_keys))
-        for h in holds:
-            gfg.add(h)
-        delta = gfg.optimize(ordering)
-        moved = max(float(np.linalg.norm(delta.at(k))) for k in x_keys)
-        values = values.retract(delta)
-        for k, v in held.items():
-            values.update(k, v)
-        if moved < ATTITUDE_FIT_TOL:
-            break
-    return values
-
-
 def choose_degrees(unknowns, theta, covariance, *, n_measurements):
     """Each curve family's degree by the Wald test against the BIC price (module docstring).
 
@@ -389,7 +321,19 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     Returns
     -------
     JointOutput
+
+    Notes
+    -----
+    BLAS runs on one thread inside the solve: its products are of a few tens of columns (an experiment's
+    unknowns), where OpenBLAS's threads gain nothing on two cores and, on a machine shared with other
+    work, spin: ``H_Rt^T Y`` of a 3 h experiment took 0.4-2.4 s with its threads instead of 0.04 s.
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _solve_joint(problems, options=options, progress=progress, initial=initial,
+                            select_degree=select_degree)
+
+
+def _solve_joint(problems, *, options, progress, initial, select_degree):
     t_start = time.perf_counter()
     problems = list(problems)
     if not problems:
@@ -413,123 +357,116 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     # the damping crawled for 500 iterations on the demo's 72-s subranges and the marginals called the
     # system indeterminate)
     sig_theta = np.concatenate([z_sigma] + list(s_sigmas))
-    maps_u = [(A * z_sigma[None, :], B * s_sigmas[e][None, :]) for e, (A, B) in enumerate(maps)]
     u0 = theta / sig_theta
-    graph = gtsam.NonlinearFactorGraph()
-    graph.add(gtsam.PriorFactorVector(Z(0), np.zeros(nz), gtsam.noiseModel.Unit.Create(nz)))
+    # the graph's factors on the unknowns alone (their priors); every experiment's own factors (its
+    # attitudes' prior, rotation, gravity, encoder) enter linearised with its attitudes eliminated
+    prior_graph = gtsam.NonlinearFactorGraph()
+    prior_graph.add(gtsam.PriorFactorVector(Z(0), np.zeros(nz), gtsam.noiseModel.Unit.Create(nz)))
     values = gtsam.Values()
     values.insert(Z(0), u0[:nz])
-    caches, x_keys, s_keys, s_dims = [], [], [], []
+    exps, s_keys, s_dims = [], [], []
     have_attitudes = True
-    for e, (p, (A, B)) in enumerate(zip(problems, maps_u)):
+    for e, (p, (A, B)) in enumerate(zip(problems, maps)):
         m = p.model
-        s0 = u0[offs[e]:offs[e + 1]]
-        x = A @ theta[:nz] + (B @ s0 if B.shape[1] else 0.0)
+        ns = B.shape[1]
+        M_u = np.hstack([A * z_sigma[None, :], B * s_sigmas[e][None, :]])
+        u_e = np.concatenate([u0[:nz], u0[offs[e]:offs[e + 1]]])
+        x = M_u @ u_e
         preint = m.preintegrate(x)
         R_prior = quat_to_dcm(p.q_nb0)
         ws = starts[e]
         if ws is not None and ws.attitudes is not None and ws.attitudes.shape == (m.n_keyframes + 1, 3, 3):
-            R = np.asarray(ws.attitudes, dtype=float)
+            R = np.array(ws.attitudes, dtype=float)
         else:
             R = m.propagate(R_prior, preint, x)
             have_attitudes = False
-        cache = _JointCache(e, m, preint, A, B)
-        cache.evaluate(R, x)
-        caches.append(cache)
-        _add_experiment(graph, cache, R_prior=R_prior, s_sigma=np.ones(B.shape[1]), robust=options.robust,
-                        robust_k=options.robust_k)
-        for k in range(m.n_keyframes + 1):
-            values.insert(_xkey(e, k), gtsam.Rot3(R[k]))
-            x_keys.append(_xkey(e, k))
-        if B.shape[1]:
-            values.insert(S(e), s0)
+        exps.append(_Experiment(e, m, preint, M_u, nz, R, R_prior))
+        if ns:
+            prior_graph.add(gtsam.PriorFactorVector(S(e), np.zeros(ns), gtsam.noiseModel.Unit.Create(ns)))
+            values.insert(S(e), u0[offs[e]:offs[e + 1]])
             s_keys.append(S(e))
-            s_dims.append(B.shape[1])
+            s_dims.append(ns)
     theta_keys = s_keys + [Z(0)]
     theta_dims = s_dims + [nz]
-    keys = x_keys + theta_keys
-    dims = [3] * len(x_keys) + theta_dims
     ordering = gtsam.Ordering()
-    for k in keys:
+    for k in theta_keys:
         ordering.push_back(k)
 
-    def invalidate():
-        for c in caches:
-            c.invalidate()
-
     def theta_of(v):
-        u = np.concatenate([np.asarray(v.atVector(Z(0)), dtype=float)]
-                           + [np.asarray(v.atVector(S(c.e)), dtype=float) for c in caches if c.B.shape[1]])
+        u = np.concatenate([np.asarray(v.atVector(k), dtype=float) for k in [Z(0)] + s_keys])
         return u * sig_theta
 
-    def x_of(v, c):
-        s = np.asarray(v.atVector(S(c.e)), dtype=float) if c.B.shape[1] else np.zeros(0)
-        return c.x_of(np.asarray(v.atVector(Z(0)), dtype=float), s)
-
     # attitudes dead-reckoned with a warm calibration (every experiment's own solution) stay within the
-    # alignment's error of the truth: no fit needed there (it costs a linearisation of the whole graph per pass)
+    # alignment's error of the truth: no fit needed there (graph_calib.factor_graph._fit_attitudes)
     if not have_attitudes and not all(s is not None for s in starts):
-        values = _fit_attitudes(graph, caches, values, x_keys=x_keys, theta_keys=theta_keys,
-                                theta_dims=theta_dims, ordering=ordering)
-        invalidate()
-    # (else the caches already hold every factor at `values`: evaluated when the graph was built)
-    cost = graph.error(values)
+        for _ in range(ATTITUDE_FIT_ITERATIONS):
+            moved = 0.0
+            for c in exps:
+                d = c.linearise(values, c.R, options).attitude_only_step(1e-9)
+                c.R = retract(c.R, d)
+                moved = max(moved, float(np.max(np.linalg.norm(d, axis=1))))
+            if moved < ATTITUDE_FIT_TOL:
+                break
+    # each experiment's linearised system at `values` (a few tens of MB for 3 h; its factors released)
+    systems = [c.linearise(values, c.R, options) for c in exps]
+    cost = prior_graph.error(values) + sum(s.cost for s in systems)
     history = [cost]
     lam = options.lambda_initial
     it, converged = 0, False
     # where each experiment's current preintegration was formed; a trial that re-preintegrates an experiment
     # replaces its preintegration (never two held per experiment: 0.3 GB each for 3 h), and a rejected trial
     # is undone by preintegrating again at the same point (the same arrays; rejections are rare)
-    lin_x = [c.preint.x_lin for c in caches]
+    lin_x = [c.preint.x_lin for c in exps]
 
     def restore():
-        for c, xl in zip(caches, lin_x):
+        for c, xl in zip(exps, lin_x):
             if not np.array_equal(c.preint.x_lin, xl):
                 c.preint = None
                 c.preint = c.model.preintegrate(xl)
-        invalidate()
 
-    # the caches hold every factor (residuals and Jacobians) at `values` after the cost of the starting point
-    # and after an accepted step: the next linearisation reads them (a 3-h experiment's factors cost seconds
-    # to evaluate; factor_graph.solve evaluates them again there)
     fresh = True
     for it in range(1, options.max_iterations + 1):
         if not fresh:
             restore()
-        gfg = graph.linearize(values)
-        for c in caches:
-            c.release()
+            if systems is None:
+                systems = [c.linearise(values, c.R, options) for c in exps]
+        prior_lin = prior_graph.linearize(values)
         while True:
             try:
-                delta = _damped(gfg, keys, lam, dims).optimize(ordering)
+                gfg, Ys = _reduced_graph(exps, systems, prior_lin, lam)
+                delta = _damped(gfg, theta_keys, lam, theta_dims).optimize(ordering)
             except RuntimeError:            # numerically indeterminate: damp harder
                 if lam > 1e8:
                     raise
                 lam = max(lam * 10.0, 1e-6)
                 continue
-            gfg = None                      # the linear system freed during the trial, rebuilt if it fails
+            gfg = None
+            R_trial = [retract(c.R, ExperimentSystem.attitude_step(Y, c.theta_of(delta))) for c, Y in zip(exps, Ys)]
+            Ys = systems = None     # freed during the trial (0.1 GB for six 3 h experiments), rebuilt if it fails
             trial = values.retract(delta)
-            for c in caches:
-                x_t = x_of(trial, c)
+            for c in exps:
+                x_t = c.x_of(trial)
                 if c.preint.needs_repreintegration(x_t, tol=options.repreintegrate_tol):
                     c.preint = None
                     c.preint = c.model.preintegrate(x_t)
-            invalidate()
-            new_cost = graph.error(trial)
+            trial_systems = [c.linearise(trial, Rt, options) for c, Rt in zip(exps, R_trial)]
+            new_cost = prior_graph.error(trial) + sum(s.cost for s in trial_systems)
             if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
                 break
             lam *= 10.0
+            trial_systems = None
             restore()
-            gfg = graph.linearize(values)
-            for c in caches:
-                c.release()
+            systems = [c.linearise(values, c.R, options) for c in exps]
         step = np.concatenate([np.asarray(delta.at(Z(0)))] + [np.asarray(delta.at(k)) for k in s_keys])
         accepted = new_cost <= cost
         fresh = accepted
         if accepted:
-            values = trial
-            lin_x = [c.preint.x_lin for c in caches]
+            values, systems = trial, trial_systems
+            for c, Rt in zip(exps, R_trial):
+                c.R = Rt
+            lin_x = [c.preint.x_lin for c in exps]
             lam = max(lam / 10.0, 1e-9)
+        trial_systems = R_trial = None
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
         history.append(cost)
@@ -542,29 +479,28 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
             converged = True
             break
-    gfg = None
     # covariance: an experiment whose calibration moved beyond the first-order range of its preintegration
     # (the solver's own test) is re-preintegrated at the solution, so that its Jacobians hold there; one
     # at a time, the preintegration it replaces freed first
-    moved = False
-    for c, xl in zip(caches, lin_x):
-        x_c = x_of(values, c)
+    if systems is None:         # the last trial failed: the systems at the solution were not kept
+        systems = [None] * len(exps)
+    for i, (c, xl) in enumerate(zip(exps, lin_x)):
+        x_c = c.x_of(values)
         if (not np.array_equal(c.preint.x_lin, xl)
                 or c.preint.needs_repreintegration(x_c, tol=options.repreintegrate_tol)):
             c.preint = None
             c.preint = c.model.preintegrate(x_c)
-            moved = True
-    if moved or not fresh:      # else the caches hold every factor at the solution (its accepted trial)
-        invalidate()
-    gfg = graph.linearize(values)      # every factor evaluated at the solution: keep what the outputs need
-    attitudes = [c.R for c in caches]
-    whitened = [(c.rot.whitened(), c.grav.whitened(), c.enc.whitened()) for c in caches]
-    n_meas = int(sum(3 * (c.grav.r.shape[0] + c.enc.r.shape[0]) for c in caches))
-    for c in caches:
-        c.release()
+            systems[i] = None
+        if systems[i] is None:
+            systems[i] = c.linearise(values, c.R, options)
+    attitudes = [c.R for c in exps]
+    whitened = [s.whitened for s in systems]
+    n_meas = int(sum(3 * (w[1].shape[0] + w[2].shape[0]) for w in whitened))
     tkeys = [Z(0)] + s_keys
-    # in GTSAM's units (prior sigmas), back to SI
-    cov = unknowns_covariance(gfg, x_keys, tkeys) * np.outer(sig_theta, sig_theta)
+    # the graph linearised at the solution, every attitude eliminated; in GTSAM's units (prior sigmas), back to SI
+    gfg, _ = _reduced_graph(exps, systems, prior_graph.linearize(values), 0.0)
+    systems = None
+    cov = unknowns_covariance(gfg, [], tkeys) * np.outer(sig_theta, sig_theta)
     gfg = None
     theta = theta_of(values)
     if select_degree:
@@ -575,7 +511,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     seconds = time.perf_counter() - t_start
     outputs = []
     offs_r = np.cumsum([reduced.nz] + [len(s) for s in reduced.setup_names])
-    for e, c in enumerate(caches):
+    for e, c in enumerate(exps):
         m = c.model
         A, B = reduced.experiment_map(e, m.layout, m.t_ref_degC)
         sl = slice(offs_r[e], offs_r[e + 1])

@@ -65,6 +65,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from graph_calib.model.preintegration import READING_BLOCK
 from graph_calib.rotations import exp_so3, log_so3, right_jacobian, right_jacobian_inv, skew
 
 
@@ -252,53 +253,74 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
         z = np.zeros((0, 3))
         return Residuals(r=z, key=np.zeros(0, dtype=np.int64), H_R=np.zeros((0, 3, 3)), H_R_next=None,
                          H_x=np.zeros((0, 3, P)), sigma=z)
+    # reading by reading, in blocks (the (m, 3, G) temporaries of the gyro columns' chain: 0.4 GB for a
+    # 3-h record's 85,000 readings at once)
+    r = np.empty((M, 3))
+    H_R = np.empty((M, 3, 3))
+    H_x = np.zeros((M, 3, P))
+    for lo in range(0, M, READING_BLOCK):
+        sl = slice(lo, min(lo + READING_BLOCK, M))
+        r[sl], H_R[sl] = _encoder_block(record, R, preint, x, sl, layout, H_x[sl])
+    var = noise.encoder**2 + noise.gyro**2 * record.reading_tau
+    sigma = np.sqrt(var)[:, None] * np.ones(3)
+    return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+
+
+
+def _encoder_block(record, R, preint, x, sl, layout, H_x):
+    """Residuals (m, 3) and attitude Jacobians (m, 3, 3) of the readings ``sl`` (a slice) of
+    :func:`encoder_factors`; their calibration Jacobians written into ``H_x`` (m, 3, P), zero on entry."""
+    m = sl.stop - sl.start
+    rec_reading_dt = record.reading_dt[sl]
+    rec_reading_phi_shape = record.reading_phi_shape[sl]
+    rec_reading_key = record.reading_key[sl]
+    rec_reading_E = record.reading_E[sl]
+    rec_reading_w_nb_offset = record.reading_w_nb_offset[sl]
+    rec_reading_alpha = record.reading_alpha[sl]
+    rec_reading_f = record.reading_f[sl]
+    rec_reading_C_nb_nominal = record.reading_C_nb_nominal[sl]
     # the turn from the sample end to the reading, with the calibrated rate of that sample interval
     # (preintegrated with its Jacobian in the gyro columns, updated to first order like the rest)
-    readR, w_c = preint.readings_corrected(x)
+    readR, w_c, J_w = preint.readings_corrected(x, sl)
     gc = preint.gyro_cols
-    J_w = preint.reading_Jw
-    phi = w_c * record.reading_dt[:, None] + record.reading_phi_shape
+    phi = w_c * rec_reading_dt[:, None] + rec_reading_phi_shape
     Ew = exp_so3(phi)
     Bp = readR @ Ew
-    Rk = R[record.reading_key]
-    C_pred = record.reading_E @ Rk @ Bp
+    Rk = R[rec_reading_key]
+    C_pred = rec_reading_E @ Rk @ Bp
     mount = layout.get(x, "mount", np.zeros(3))
     lag = layout.get(x, "time_lag.table", np.zeros(1))[0]
     Kd = layout.get(x, "damping.stiffness", np.zeros(9)).reshape(3, 3)
-    w_nb = w_c + record.reading_w_nb_offset                                  # calibrated, at the reading
-    a_lag = w_nb * lag - (0.5 * lag * lag) * record.reading_alpha               # the turn over the lag before t_m
-    a_damp = record.reading_f @ Kd.T
-    Ed = exp_so3(a_damp) if np.any(Kd) else np.broadcast_to(np.eye(3), (M, 3, 3))
+    w_nb = w_c + rec_reading_w_nb_offset                                  # calibrated, at the reading
+    a_lag = w_nb * lag - (0.5 * lag * lag) * rec_reading_alpha               # the turn over the lag before t_m
+    a_damp = rec_reading_f @ Kd.T
+    Ed = exp_so3(a_damp) if np.any(Kd) else np.broadcast_to(np.eye(3), (m, 3, 3))
     B = exp_so3(a_lag) @ Ed if lag != 0.0 else Ed
-    C_meas = record.reading_C_nb_nominal @ (exp_so3(mount) @ B)
+    C_meas = rec_reading_C_nb_nominal @ (exp_so3(mount) @ B)
     r = log_so3(np.swapaxes(C_meas, 1, 2) @ C_pred)
     Jr_inv = right_jacobian_inv(r)
     Jl_inv = right_jacobian_inv(-r)
     H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
     # the preintegration and the corrected rate depend on the gyro columns only
     # (summed in place: one (M, 3, G) temporary fewer, 0.1 GB for a 3-h record's readings)
-    G_w = np.swapaxes(Ew, 1, 2) @ preint.reading_J[:, :, gc]
-    G_w += (right_jacobian(phi) * record.reading_dt[:, None, None]) @ J_w
-    H_x = np.zeros((M, 3, P))
+    G_w = np.swapaxes(Ew, 1, 2) @ preint.reading_J[sl, :, gc]
+    G_w += (right_jacobian(phi) * rec_reading_dt[:, None, None]) @ J_w
     H_x[:, :, gc] = Jr_inv @ G_w
     del G_w
     if "mount" in layout:
         H_x[:, :, layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
     if "time_lag.table" in layout:
         G_lag = -Jl_inv @ np.swapaxes(Ed, 1, 2) @ right_jacobian(a_lag)  # d r / d a_lag
-        da = w_nb - lag * record.reading_alpha
+        da = w_nb - lag * rec_reading_alpha
         H_x[:, :, layout.slice("time_lag.table")] = G_lag @ da[..., None]
         if lag != 0.0:
             H_x[:, :, gc] += G_lag @ (lag * J_w)                       # the calibrated rate in the lag
     if "damping.stiffness" in layout:
-        G = -Jl_inv @ right_jacobian(a_damp)                   # (M, 3, 3) per d(a_damp)
+        G = -Jl_inv @ right_jacobian(a_damp)                   # (m, 3, 3) per d(a_damp)
         # a_damp_i = sum_j K_ij f_j  ->  d a_damp / d K_ij = e_i f_j
-        dK = np.einsum("mab,mj->mabj", G, record.reading_f).reshape(M, 3, 9)
+        dK = np.einsum("mab,mj->mabj", G, rec_reading_f).reshape(m, 3, 9)
         H_x[:, :, layout.slice("damping.stiffness")] = dK
-    var = noise.encoder**2 + noise.gyro**2 * record.reading_tau
-    sigma = np.sqrt(var)[:, None] * np.ones(3)
-    return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
-
+    return r, H_R
 
 
 @dataclass(frozen=True)

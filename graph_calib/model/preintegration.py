@@ -92,10 +92,13 @@ class Preintegrated:
     S1, J_S1 : (K, 3), (K, 3, P)   the same weighted by time since the keyframe start, m s
     w_b, J_w_b : (K+1, 3), (K+1, 3, P)  corrected angular rate omega_ib_b at each boundary, rad/s
     reading_dR, reading_J : (M, 3, 3), (M, 3, P)  partial preintegration up to each encoder reading
-    reading_w, reading_Jw : (M, 3), (M, 3, G)  calibrated mean rate of the sample interval holding each
-        reading, and its Jacobian in the columns ``gyro_cols``
+    reading_w : (M, 3)  calibrated mean rate of the sample interval holding each reading; its Jacobian
+        in the columns ``gyro_cols`` is formed when asked (:meth:`reading_rate_jacobian`), not stored
+        (0.1 GB for a 3-h record's readings)
     gyro_cols : slice
-        The columns of ``x`` that ``reading_Jw`` covers.
+        The columns of ``x`` the calibrated rate depends on.
+    record, layout, n_newton
+        What the preintegration was formed from (references; for :meth:`reading_rate_jacobian`).
     """
 
     x_lin: np.ndarray
@@ -110,8 +113,10 @@ class Preintegrated:
     reading_dR: np.ndarray
     reading_J: np.ndarray
     reading_w: np.ndarray
-    reading_Jw: np.ndarray
     gyro_cols: slice
+    record: object
+    layout: object
+    n_newton: int
 
     def needs_repreintegration(self, x, *, tol=REPREINTEGRATE_TOL):
         """Whether ``x`` moved so far from ``x_lin`` that first-order updates lose accuracy.
@@ -133,12 +138,48 @@ class Preintegrated:
         return Corrected(dR=self.dR @ exp_so3(self.J_dR @ dx), S=self.S + self.J_S @ dx,
                          S1=self.S1 + self.J_S1 @ dx, w_b=self.w_b + self.J_w_b @ dx)
 
-    def readings_corrected(self, x):
-        """``(reading_dR Exp(reading_J dx), reading_w + reading_Jw dx)`` at ``x``: the encoder readings' part."""
+    def reading_rate_jacobian(self, readings=slice(None)):
+        """``d reading_w / d x`` in the columns ``gyro_cols``, (m, 3, G), at ``x_lin``, of the readings
+        ``readings`` (a slice): the sensor model's inversion of their sample intervals again, the same call
+        as :func:`preintegrate`'s (bit for bit the same values)."""
+        return _reading_rates(self.record, self.layout, self.x_lin, self.n_newton, self.gyro_cols, readings)[1]
+
+    def readings_corrected(self, x, readings=slice(None)):
+        """The encoder readings' part at ``x`` (of the readings ``readings``, a slice):
+        ``(reading_dR Exp(reading_J dx), reading_w + J_w dx, J_w)`` with ``J_w`` :meth:`reading_rate_jacobian`."""
         dx = np.asarray(x) - self.x_lin
+        J_w = self.reading_rate_jacobian(readings)
         if not np.any(dx):
-            return self.reading_dR, self.reading_w
-        return self.reading_dR @ exp_so3(self.reading_J @ dx), self.reading_w + self.reading_Jw @ dx[self.gyro_cols]
+            return self.reading_dR[readings], self.reading_w[readings], J_w
+        return (self.reading_dR[readings] @ exp_so3(self.reading_J[readings] @ dx),
+                self.reading_w[readings] + J_w @ dx[self.gyro_cols], J_w)
+
+
+#: Readings per block in :func:`_reading_rates` and the encoder factors (the sensor model's (n, 3, P)
+#: Jacobians and the gyro columns' chain are temporaries: 0.35-0.4 GB for a 3-h record's readings at once).
+READING_BLOCK = 8192
+
+
+def _reading_rates(record, layout, x, n_newton, gyro_cols, readings=slice(None), *, jacobian=True):
+    """Calibrated mean rate of each reading's sample interval (m, 3) and its Jacobian in ``gyro_cols``
+    (m, 3, G; None without ``jacobian``), of the readings ``readings`` (a slice).
+
+    Sample by sample (the sensor model's inversion is per sample), in blocks of :data:`READING_BLOCK`.
+    """
+    r = record
+    n_all = r.reading_interval[readings]
+    M = n_all.size
+    w = np.empty((M, 3))
+    J = np.empty((M, 3, gyro_cols.stop - gyro_cols.start)) if jacobian else None
+    for lo in range(0, M, READING_BLOCK):
+        n = n_all[lo:lo + READING_BLOCK]
+        wb, _, Jb, _ = correct_pair_with_jacobian(layout, x, r.w_raw[n], r.f_raw[n], dTg=r.dTg[n], dTdtg=r.dTdtg[n],
+                                                  dTa=r.dTa[n], dTdta=r.dTdta[n], domega=r.dw_raw[n],
+                                                  df=r.df_raw[n], n_iter=n_newton)
+        w[lo:lo + n.size] = wb
+        if jacobian:
+            J[lo:lo + n.size] = Jb[:, :, gyro_cols]
+    return w, J
 
 
 def preintegrate(record, terms, x, *, layout, n_newton):
@@ -187,13 +228,10 @@ def preintegrate(record, terms, x, *, layout, n_newton):
     w_b[1:K] = 0.5 * (wl[:-1] + wf[1:])
     Jw_b[1:K] = 0.5 * (Jwl[:-1] + Jwf[1:])
     w_b += r.w_b_fix
-    n = r.reading_interval
-    read_w, _, read_Jw, _ = correct_pair_with_jacobian(layout, x, r.w_raw[n], r.f_raw[n], dTg=r.dTg[n],
-                                                       dTdtg=r.dTdtg[n], dTa=r.dTa[n], dTdta=r.dTdta[n],
-                                                       domega=r.dw_raw[n], df=r.df_raw[n], n_iter=n_newton)
+    read_w, _ = _reading_rates(r, layout, x, n_newton, terms.gyro_cols, jacobian=False)
     return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=JR, S=S, J_S=JS, S1=S1, J_S1=JS1, w_b=w_b, J_w_b=Jw_b,
-                         reading_dR=readR, reading_J=readJ, reading_w=read_w,
-                         reading_Jw=np.ascontiguousarray(read_Jw[:, :, terms.gyro_cols]), gyro_cols=terms.gyro_cols)
+                         reading_dR=readR, reading_J=readJ, reading_w=read_w, gyro_cols=terms.gyro_cols,
+                         record=record, layout=layout, n_newton=int(n_newton))
 
 
-__all__ = ["REPREINTEGRATE_TOL", "SensorTerms", "Preintegrated", "Corrected", "preintegrate"]
+__all__ = ["READING_BLOCK", "REPREINTEGRATE_TOL", "SensorTerms", "Preintegrated", "Corrected", "preintegrate"]
