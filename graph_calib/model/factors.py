@@ -41,7 +41,11 @@ Encoder measurement
     it ``a_lag = w_nb lag - alpha lag^2 / 2``, ``w_nb = w + alpha (dt_m - h/2) -
     (C_nf C_fb)^T omega_ie_n`` (the rate against the level frame at ``t_m``);
     ``f_m`` is the raw specific force of that interval and ``K``
-    ``damping.stiffness`` when modelled.  Covariance ``sigma_enc^2 + q_g^2 (t_m - t_k)``.
+    ``damping.stiffness`` when modelled.  Covariance ``Sigma_enc + q_g^2 (t_m - t_k) I``, where
+    ``Sigma_enc`` is a static dwell's scatter, or the declared ``sigma_enc^2`` about the table's axes
+    when they are known, or ``sigma_enc^2 I`` (readings in motion), principal variances floored
+    (:mod:`graph_calib.model.encoder_noise`); residual and Jacobians are turned into its principal
+    axes, ``U^T r``, so that each component has its own sigma.
 
 Jacobians are with respect to the right perturbation of ``R_k``
 (``R_k Exp(delta)``) and the calibration vector; the preintegration carries its
@@ -295,9 +299,23 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
         # a_damp_i = sum_j K_ij f_j  ->  d a_damp / d K_ij = e_i f_j
         dK = np.einsum("mab,mj->mabj", G, record.reading_f).reshape(M, 3, 9)
         H_x[:, :, layout.slice("damping.stiffness")] = dK
-    var = noise.encoder**2 + noise.gyro**2 * record.reading_tau
-    sigma = np.sqrt(var)[:, None] * np.ones(3)
+    # the reading noise in its principal axes (graph_calib.model.encoder_noise): residual and Jacobians
+    # turned by the data-only U^T, each component then independent with its own sigma
+    frame = record.encoder_noise_frame(noise.encoder)
+    rows = np.flatnonzero(frame.rotated)
+    if rows.size:
+        for a in range(0, rows.size, _ROTATE_CHUNK):
+            rc = rows[a:a + _ROTATE_CHUNK]
+            Ut = np.swapaxes(frame.U[rc], 1, 2)
+            r[rc] = np.einsum("mij,mj->mi", Ut, r[rc])
+            H_R[rc] = Ut @ H_R[rc]
+            H_x[rc] = Ut @ H_x[rc]
+    sigma = np.sqrt(frame.var + (noise.gyro**2 * record.reading_tau)[:, None])
     return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+
+
+#: Readings turned into their noise's principal axes at a time (bounds the temporaries of ``H_x``).
+_ROTATE_CHUNK = 8192
 
 
 
