@@ -64,21 +64,26 @@ class DwellScatter:
 
     Attributes
     ----------
-    cov_b : ndarray, shape (M, 3, 3)
-        Per reading, its dwell's scatter covariance in body axes (rad^2); zero where ``n`` is 0.
-    n : ndarray of int, shape (M,)
-        Readings in that dwell, 0 where the reading is in none (case 3 of the module docstring).
+    cov_b : ndarray, shape (D, 3, 3)
+        Each dwell's scatter covariance in body axes, rad^2.
+    size : ndarray of int, shape (D,)
+        Readings in each dwell.
     dwell : ndarray of int, shape (M,)
-        The dwell of each reading, -1 where none.
+        The dwell of each reading, -1 where none (case 3 of the module docstring).
     """
 
     cov_b: np.ndarray
-    n: np.ndarray
+    size: np.ndarray
     dwell: np.ndarray
 
     @property
     def n_dwells(self):
-        return int(self.dwell.max() + 1) if self.dwell.size else 0
+        return int(self.size.size)
+
+    @property
+    def n(self):
+        """Readings in each reading's dwell, 0 where it is in none, shape (M,)."""
+        return np.where(self.dwell >= 0, self.size[np.maximum(self.dwell, 0)] if self.size.size else 0, 0)
 
 
 def dwell_scatter(t, C_nf, at_rest, *, C_fb, group=None, min_readings=MIN_DWELL_READINGS):
@@ -104,11 +109,10 @@ def dwell_scatter(t, C_nf, at_rest, *, C_fb, group=None, min_readings=MIN_DWELL_
     DwellScatter
     """
     M = t.size
-    cov = np.zeros((M, 3, 3))
-    n_of = np.zeros(M, dtype=np.int64)
     dwell = np.full(M, -1, dtype=np.int64)
+    none = DwellScatter(cov_b=np.zeros((0, 3, 3)), size=np.zeros(0, dtype=np.int64), dwell=dwell)
     if M < min_readings:
-        return DwellScatter(cov_b=cov, n=n_of, dwell=dwell)
+        return none
     gap = np.diff(t)
     max_gap = 2.0 * float(np.median(gap))
     # a new run starts at every reading not at rest, after a long gap, or after a reading not at rest
@@ -122,7 +126,7 @@ def dwell_scatter(t, C_nf, at_rest, *, C_fb, group=None, min_readings=MIN_DWELL_
     keep_run = (sizes >= min_readings) & at_rest[starts]
     sel = keep_run[run]
     if not np.any(sel):
-        return DwellScatter(cov_b=cov, n=n_of, dwell=dwell)
+        return none
     idx = np.flatnonzero(sel)
     r_sel = run[idx]
     e = log_so3(np.swapaxes(C_nf[starts[r_sel]], 1, 2) @ C_nf[idx])        # (m, 3) in f, small
@@ -136,11 +140,8 @@ def dwell_scatter(t, C_nf, at_rest, *, C_fb, group=None, min_readings=MIN_DWELL_
     mean = s1 / n[:, None]
     S = (s2 - n[:, None, None] * mean[:, :, None] * mean[:, None, :]) / (n - 1)[:, None, None]
     S *= ((n - 1) / (n - 5))[:, None, None]
-    which = np.repeat(np.arange(n.size), n)
-    cov[idx] = S[which]
-    n_of[idx] = n[which]
-    dwell[idx] = which
-    return DwellScatter(cov_b=cov, n=n_of, dwell=dwell)
+    dwell[idx] = np.repeat(np.arange(n.size), n)
+    return DwellScatter(cov_b=S, size=n.astype(np.int64), dwell=dwell)
 
 
 @dataclass(frozen=True)
@@ -199,19 +200,19 @@ def noise_frame(scatter, axes_b, *, encoder_noise, floor_fraction=FLOOR_FRACTION
     -------
     NoiseFrame
     """
-    M = scatter.n.size
     s2 = float(encoder_noise) ** 2
+    M = scatter.dwell.size
     U = np.broadcast_to(np.eye(3), (M, 3, 3)).copy()
     var = np.full((M, 3), s2)
     floored = np.zeros((M, 3), dtype=bool)
     source = np.full(M, 3, dtype=np.int8)
-    rows = np.flatnonzero(scatter.n > 0)          # readings of a static dwell
+    rows = np.flatnonzero(scatter.dwell >= 0)     # readings of a static dwell
     if axes_b is not None:
         a = axes_b[rows]
         S = s2 * np.einsum("mai,maj->mij", a, a)
         source[rows] = 2
     else:
-        S = scatter.cov_b[rows]
+        S = scatter.cov_b[scatter.dwell[rows]]
         source[rows] = 1
     if rows.size:
         V, lam, fl = _principal(S, (floor_fraction * float(encoder_noise)) ** 2)
