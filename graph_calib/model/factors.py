@@ -83,7 +83,8 @@ class Noise:
     accel : float
         Velocity random walk, m/s/sqrt(s).
     encoder : float
-        Table reading noise, rad (one sigma per axis).
+        Declared table reading noise, rad (one sigma per axis): the readings' noise where no static
+        dwell shows it, and the scale of the floor where one does (:mod:`graph_calib.model.encoder_noise`).
     """
 
     gyro: float
