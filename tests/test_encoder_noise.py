@@ -58,6 +58,15 @@ def test_dwell_scatter_finds_the_two_axes_and_floors_the_third():
         assert np.all(np.diag(U) > 0) and np.argmax(np.abs(U[:, 2])) == 2     # ordered nearest the body axes
 
 
+def test_a_dwell_without_scatter_keeps_the_declared_noise():
+    """Identical readings (noiseless, or quantised coarser than the noise) show nothing about the noise."""
+    C = np.broadcast_to(exp_so3(np.array([0.1, 0.2, 0.3])), (100, 3, 3)).copy()
+    sc = dwell_scatter(np.arange(100) * 0.1, C, np.ones(100, bool), C_fb=np.eye(3))
+    assert sc.n_dwells == 1
+    fr = noise_frame(sc, None, encoder_noise=2 * SIGMA)
+    assert np.all(fr.source == 3) and np.all(fr.var == (2 * SIGMA) ** 2) and not np.any(fr.rotated)
+
+
 def test_readings_in_motion_and_short_runs_keep_the_declared_noise():
     rng = np.random.default_rng(4)
     C, _ = _two_axis_readings(rng, n=200, beta=0.0)
@@ -177,9 +186,11 @@ def test_program_prediction_takes_the_noise_about_the_programs_axes(program_pred
     np.testing.assert_allclose(np.einsum("mi,mi->m", axes[:, 0], axes[:, 1]), 0.0, atol=1e-15)
     fr = out["program"][0].model.record.encoder_noise_frame(out["program"][0].model.encoder_noise)
     assert np.mean(fr.source == 2) > 0.5 and np.all(fr.floored[fr.source == 2].sum(axis=1) == 1)
-    # without the axes the noiseless readings show no scatter and every direction would sit at the floor
+    # without the axes the noiseless readings show no scatter in any direction: that says nothing about
+    # the noise, so the declared noise stands (isotropic, the former model) and the mount is predicted worse
     fr_iso = out["program, no axes"][0].model.record.encoder_noise_frame(out["program"][0].model.encoder_noise)
-    assert np.all(fr_iso.floored[fr_iso.source == 1])
+    assert np.all(fr_iso.source == 3) and not np.any(fr_iso.rotated)
+    assert out["program, no axes"][1]["mount.y"] > 1.15 * out["program"][1]["mount.y"]
     # the program's prediction is what a noisy run of it predicts from its dwells' scatter (within the
     # scatter's sampling error and the run's own truth), on every element
     prog, run = out["program"][1], out["noisy run"][1]

@@ -21,8 +21,10 @@ Per valid reading the covariance of the attitude noise, in body axes (the encode
    (:attr:`graph_calib.experiment.Table.axes_f`: a bench program simulated without noise for
    ``predict``, which knows its axes and has no scatter to show; never read from a file): the
    declared ``encoder_noise`` squared about each axis;
-3. otherwise (readings in motion, short runs, a table without axes) the declared ``encoder_noise``
-   squared on all three components, as before.
+3. otherwise (readings in motion, short runs, a dwell whose readings scatter less than the floor
+   below in every direction: noiseless simulated readings, or encoders quantised coarser than their
+   noise, whose error is then constant over the dwell) the declared ``encoder_noise`` squared on all
+   three components, as before.
 
 In 1 and 2 each principal variance is floored at ``(FLOOR_FRACTION * encoder_noise)^2``: a
 direction in which the readings do not scatter is not known perfectly (a real table's axes wobble and
@@ -207,15 +209,21 @@ def noise_frame(scatter, axes_b, *, encoder_noise, floor_fraction=FLOOR_FRACTION
     floored = np.zeros((M, 3), dtype=bool)
     source = np.full(M, 3, dtype=np.int8)
     rows = np.flatnonzero(scatter.dwell >= 0)     # readings of a static dwell
+    floor_var = (floor_fraction * float(encoder_noise)) ** 2
     if axes_b is not None:
         a = axes_b[rows]
         S = s2 * np.einsum("mai,maj->mij", a, a)
         source[rows] = 2
     else:
+        # a dwell whose readings scatter less than the floor in every direction shows no noise at all
+        # (noiseless simulated readings, or encoders quantised coarser than their noise, whose error is
+        # then constant over the dwell): it says nothing about the noise, so the declared noise stands
+        shows = np.linalg.eigvalsh(scatter.cov_b)[:, -1] >= floor_var if scatter.n_dwells else np.zeros(0, bool)
+        rows = rows[shows[scatter.dwell[rows]]]
         S = scatter.cov_b[scatter.dwell[rows]]
         source[rows] = 1
     if rows.size:
-        V, lam, fl = _principal(S, (floor_fraction * float(encoder_noise)) ** 2)
+        V, lam, fl = _principal(S, floor_var)
         U[rows], var[rows], floored[rows] = V, lam, fl
     rotated = source < 3
     return NoiseFrame(U=U, var=var, rotated=rotated, floored=floored, source=source)
