@@ -26,12 +26,17 @@ class Table:
         Whether the reading may be used.
     q_fb_nominal : ndarray, shape (4,)
         Nominal mounting of the IMU on the faceplate.
+    axes_f : ndarray, shape (M, A, 3), or None
+        The table's axes (unit vectors in ``f``) at each reading, when known: set only for a bench
+        program simulated without noise (``predict`` on a program), never read from or written to a
+        file; the model takes the reading noise about them (:mod:`graph_calib.model.encoder_noise`).
     """
 
     t: np.ndarray
     q_nf: np.ndarray
     valid: np.ndarray
     q_fb_nominal: np.ndarray = field(default_factory=lambda: np.array([1.0, 0.0, 0.0, 0.0]))
+    axes_f: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -135,7 +140,8 @@ class Experiment:
             t0 = self.t[start] - (self.t[start] - self.t[start - 1] if start > 0 else 1.0 / self.rate_hz)
             t1 = self.t[stop - 1]
             m = (table.t > t0) & (table.t <= t1)
-            table = Table(table.t[m], table.q_nf[m], table.valid[m], table.q_fb_nominal)
+            table = Table(table.t[m], table.q_nf[m], table.valid[m], table.q_fb_nominal,
+                          None if table.axes_f is None else table.axes_f[m])
         return replace(
             self, t=self.t[start:stop], dtheta=self.dtheta[start:stop], dv=self.dv[start:stop],
             temperature=self.temperature[start:stop], table=table,

@@ -1,6 +1,7 @@
 """Monte Carlo check of ``graph-calib predict``: (estimate - truth) / predicted sigma over many seeds.
 
-``PYTHONPATH=. python scripts/predict_monte_carlo.py [--seeds 20] [--hours 0.25] [--solver factor-graph]``
+``PYTHONPATH=. python scripts/predict_monte_carlo.py [--seeds 20] [--hours 0.25] [--solver factor-graph]
+[--elements] [--save z.npz]``
 
 Each seed simulates the shortened navigation-grade programme (``nav-subrange-short``, noise on, linear
 temperature truth), predicts its accuracy (:func:`graph_calib.prediction.predict`) and calibrates it;
@@ -28,6 +29,8 @@ def main(argv=None):
     p.add_argument("--first-seed", type=int, default=2000)
     p.add_argument("--hours", type=float, default=0.25)
     p.add_argument("--solver", default="factor-graph")
+    p.add_argument("--elements", action="store_true", help="print every element's RMS(z) too")
+    p.add_argument("--save", help="write the z table (seeds x elements) and the names to this .npz")
     args = p.parse_args(argv)
     z, t_pred, t_solve = [], 0.0, 0.0
     for seed in range(args.first_seed, args.first_seed + args.seeds):
@@ -54,6 +57,11 @@ def main(argv=None):
         cols = [i for i, nm in enumerate(names) if nm.startswith(g + ".")]
         print(f"  {g:<24}{len(cols):>6}  {np.sqrt(np.mean(z[:, cols] ** 2)):.3f}")
     rms = np.sqrt(np.mean(z**2, axis=0))
+    if args.elements:
+        for nm, v in zip(names, rms):
+            print(f"    {nm:<28}{v:.3f}")
+    if args.save:
+        np.savez(args.save, z=z, names=np.array(names))
     lo, hi = np.sqrt(chi2.ppf([0.0005, 0.9995], n) / n)
     i, j = int(np.argmin(rms)), int(np.argmax(rms))
     print(f"per element RMS(z): {rms.min():.3f} ({names[i]}) .. {rms.max():.3f} ({names[j]}); "

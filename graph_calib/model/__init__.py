@@ -5,6 +5,8 @@ Modules, from the data up:
 - :mod:`graph_calib.model.options`: :class:`ModelOptions`;
 - :mod:`graph_calib.model.record`: :class:`PreparedRecord`, the data of one experiment prepared once
   (rates, temperatures and their slopes, keyframes, table readings), whatever the layout;
+- :mod:`graph_calib.model.encoder_noise`: the table readings' noise covariance (each static dwell's
+  scatter, or the declared noise about a program's axes, floored) and the principal axes that whiten it;
 - :mod:`graph_calib.model.kernel`: the compiled per-sample preintegration kernel;
 - :mod:`graph_calib.model.preintegration`: :class:`Preintegrated`, which owns its first-order
   correction in the calibration, and :func:`preintegrate`;

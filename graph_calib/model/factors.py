@@ -41,7 +41,11 @@ Encoder measurement
     it ``a_lag = w_nb lag - alpha lag^2 / 2``, ``w_nb = w + alpha (dt_m - h/2) -
     (C_nf C_fb)^T omega_ie_n`` (the rate against the level frame at ``t_m``);
     ``f_m`` is the raw specific force of that interval and ``K``
-    ``damping.stiffness`` when modelled.  Covariance ``sigma_enc^2 + q_g^2 (t_m - t_k)``.
+    ``damping.stiffness`` when modelled.  Covariance ``Sigma_enc + q_g^2 (t_m - t_k) I``, where
+    ``Sigma_enc`` is a static dwell's scatter, or the declared ``sigma_enc^2`` about the table's axes
+    when they are known, or ``sigma_enc^2 I`` (readings in motion), principal variances floored
+    (:mod:`graph_calib.model.encoder_noise`); residual and Jacobians are turned into its principal
+    axes, ``U^T r``, so that each component has its own sigma.
 
 Jacobians are with respect to the right perturbation of ``R_k``
 (``R_k Exp(delta)``) and the calibration vector; the preintegration carries its
@@ -80,7 +84,8 @@ class Noise:
     accel : float
         Velocity random walk, m/s/sqrt(s).
     encoder : float
-        Table reading noise, rad (one sigma per axis).
+        Declared table reading noise, rad (one sigma per axis): the readings' noise where no static
+        dwell shows it, and the scale of the floor where one does (:mod:`graph_calib.model.encoder_noise`).
     """
 
     gyro: float
@@ -261,8 +266,18 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
     for lo in range(0, M, READING_BLOCK):
         sl = slice(lo, min(lo + READING_BLOCK, M))
         r[sl], H_R[sl] = _encoder_block(record, R, preint, x, sl, layout, H_x[sl])
-    var = noise.encoder**2 + noise.gyro**2 * record.reading_tau
-    sigma = np.sqrt(var)[:, None] * np.ones(3)
+    # the reading noise in its principal axes (graph_calib.model.encoder_noise): residual and Jacobians
+    # turned by the data-only U^T, each component then independent with its own sigma
+    frame = record.encoder_noise_frame(noise.encoder)
+    rows = np.flatnonzero(frame.rotated)
+    if rows.size:
+        for a in range(0, rows.size, _ROTATE_CHUNK):
+            rc = rows[a:a + _ROTATE_CHUNK]
+            Ut = np.swapaxes(frame.U[rc], 1, 2)
+            r[rc] = np.einsum("mij,mj->mi", Ut, r[rc])
+            H_R[rc] = Ut @ H_R[rc]
+            H_x[rc] = Ut @ H_x[rc]
+    sigma = np.sqrt(frame.var + (noise.gyro**2 * record.reading_tau)[:, None])
     return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
 
 
@@ -321,6 +336,10 @@ def _encoder_block(record, R, preint, x, sl, layout, H_x):
         dK = np.einsum("mab,mj->mabj", G, rec_reading_f).reshape(m, 3, 9)
         H_x[:, :, layout.slice("damping.stiffness")] = dK
     return r, H_R
+
+#: Readings turned into their noise's principal axes at a time (bounds the temporaries of ``H_x``).
+_ROTATE_CHUNK = 8192
+
 
 
 @dataclass(frozen=True)

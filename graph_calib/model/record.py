@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
+from graph_calib.model.encoder_noise import dwell_scatter, noise_frame
 from graph_calib.rotations import exp_so3, quat_to_dcm
 
 
@@ -174,7 +175,9 @@ class PreparedRecord:
         the last sample ending before it, ``reading_interval`` the sample interval holding it,
         ``reading_key`` its keyframe, ``reading_C_nf`` the faceplate attitude, and the data-only pieces
         of the encoder factor (``reading_dt``, ``reading_tau``, ``reading_alpha``, ``reading_phi_shape``,
-        ``reading_f``, ``reading_w_nb_offset``, ``reading_E``, ``reading_C_nb_nominal``, ``reading_lo``).
+        ``reading_f``, ``reading_w_nb_offset``, ``reading_E``, ``reading_C_nb_nominal``, ``reading_lo``);
+        ``reading_scatter`` the static dwells' scatter and ``reading_axes_b`` the table's axes when known
+        (:mod:`graph_calib.model.encoder_noise`, :meth:`encoder_noise_frame`).
     static_key : ndarray of bool, shape (K,)
         Whether each keyframe is static.
     segment_bounds : ndarray of int, shape (S, 2)
@@ -198,6 +201,7 @@ class PreparedRecord:
         self._prepare_keyframes()
         self._prepare_table()
         self._static_keyframes(static_mask)
+        self._prepare_reading_noise()
 
     @property
     def has_valid_readings(self):
@@ -333,6 +337,35 @@ class PreparedRecord:
         # the nominal faceplate-to-level attitude
         self.reading_E = self.earth_turn(self.reading_tau)
         self.reading_C_nb_nominal = self.reading_C_nf @ self.C_fb
+
+    def _prepare_reading_noise(self):
+        """The static dwells' scatter of the valid readings (:mod:`graph_calib.model.encoder_noise`)."""
+        M = self.reading_sample.size
+        tab = self.experiment.table
+        if M:
+            w_nb_b = self.w_raw[self.reading_interval] + self.reading_w_nb_offset
+            at_rest = self.static_key[self.reading_key] & (np.linalg.norm(w_nb_b, axis=1) <= self.LAG_RATE_THRESHOLD)
+        else:
+            at_rest = np.zeros(0, dtype=bool)
+        #: the dwells' scatter (:class:`graph_calib.model.encoder_noise.DwellScatter`); a dwell never
+        #: spans a segment boundary (/imu/segment)
+        segment = np.searchsorted(self.segment_keys, self.reading_key, side="right") - 1
+        self.reading_scatter = dwell_scatter(self.reading_t, self.reading_C_nf, at_rest, C_fb=self.C_fb,
+                                             group=segment)
+        #: the table's axes in body axes at each reading (M, A, 3), when the experiment carries them
+        self.reading_axes_b = None
+        if M and tab.axes_f is not None:
+            tm = tab.t[tab.valid]
+            keep = np.isin(tm, self.reading_t)
+            self.reading_axes_b = tab.axes_f[tab.valid][keep] @ self.C_fb
+        self._noise_frames = {}
+
+    def encoder_noise_frame(self, encoder_noise):
+        """The readings' :class:`~graph_calib.model.encoder_noise.NoiseFrame` for a declared noise (rad), cached."""
+        key = float(encoder_noise)
+        if key not in self._noise_frames:
+            self._noise_frames[key] = noise_frame(self.reading_scatter, self.reading_axes_b, encoder_noise=key)
+        return self._noise_frames[key]
 
     def _static_keyframes(self, static_mask):
         if static_mask is None:

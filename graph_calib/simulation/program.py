@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import partial
 from pathlib import Path
 
@@ -31,7 +31,7 @@ from graph_calib.simulation.experiments import NAV_CHANNELS, _make_table_experim
 from graph_calib.simulation.scenarios import ExperimentPlan, Simulation, _check_common
 from graph_calib.simulation.thermal import ThermalModel
 from graph_calib.simulation.truth import draw_imu
-from graph_calib.simulation.turntable import INNER, OUTER, ProgramBuilder
+from graph_calib.simulation.turntable import INNER, OUTER, ProgramBuilder, encoder_axes_f
 
 #: The ``format`` key of a program file.
 PROGRAM_FORMAT = "graph-calib-program"
@@ -338,9 +338,17 @@ def program_simulation(program, *, rng, noise=True, errors=True, effects=(), eff
 
 
 def nominal_experiment(program, *, channels=None):
-    """The program's experiment without noise or sensor errors (what :mod:`graph_calib.prediction` needs)."""
-    return program_simulation(program, rng=np.random.default_rng(0), noise=False, errors=False,
-                              channels=channels).run()[0].experiment
+    """The program's experiment without noise or sensor errors (what :mod:`graph_calib.prediction` needs).
+
+    Its table carries the axes the encoders read at each reading (``Table.axes_f``): without noise the
+    readings show no scatter, so the model takes the declared encoder noise about the program's own
+    two axes (:mod:`graph_calib.model.encoder_noise`), as it would find it in a recorded run's dwells.
+    """
+    se = program_simulation(program, rng=np.random.default_rng(0), noise=False, errors=False,
+                            channels=channels).run()[0]
+    exp = se.experiment
+    axes = encoder_axes_f(se.signals.motion, exp.table.t)
+    return replace(exp, table=replace(exp.table, axes_f=axes))
 
 
 def steps_of(table_program):

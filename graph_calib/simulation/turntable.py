@@ -441,5 +441,26 @@ def encoder_readings(motion, *, t_end, rate_hz=10.0, time_lag=0.0, noise_rad=0.0
     return t, q, ok
 
 
+def encoder_axes_f(motion, t, *, time_lag=0.0):
+    """The two axes the encoders read, as unit vectors in the faceplate frame, at reading times ``t``.
+
+    With ``C_nf = C_n0 R_x(alpha) R_z(beta)`` an outer-angle error turns the faceplate about
+    ``R_z(beta)^T e_x = [cos beta, -sin beta, 0]`` and an inner-angle error about ``e_z``; nothing turns
+    it about their cross product.
+
+    Returns
+    -------
+    ndarray, shape (M, 2, 3)
+        Outer axis, inner axis.
+    """
+    ang, _, _ = motion.program.angles(np.asarray(t, dtype=float) - time_lag)
+    b = ang[:, 1]
+    axes = np.zeros((b.size, 2, 3))
+    axes[:, 0, 0] = np.cos(b)
+    axes[:, 0, 1] = -np.sin(b)
+    axes[:, 1, 2] = 1.0
+    return axes
+
+
 __all__ = ["OUTER", "INNER", "rot_z", "TableProgram", "ProgramBuilder", "Kinematics",
-           "TurntableMotion", "encoder_readings"]
+           "TurntableMotion", "encoder_readings", "encoder_axes_f"]

@@ -9,8 +9,9 @@ The residual test is the batch fit's chi-square per degree of freedom,
 whitened residuals, priors included): the measurements are the gravity and encoder factors, and the
 rotation factors and priors bring as many equations as the attitudes and the calibration have
 unknowns.  It is near 1 when the noise model fits (0.66-0.71 on the simulated navigation-grade
-subranges, whose encoder noise the model overstates a little: the simulator puts it on two axes, the
-model on three), and it grows with what the model lacks (3.8 on the measured MPU-6050 session, 2.1-2.9
+subranges: the simulator's two encoders read no noise about the direction perpendicular to both axes,
+and the model floors that component of every static reading at a quarter of the declared encoder noise,
+docs/model.md, so a third of the encoder components carry almost no chi-square), and it grows with what the model lacks (3.8 on the measured MPU-6050 session, 2.1-2.9
 on the measured Xsens session cut short; both lack the gyro g-sensitivity the diagnosis finds).  Above
 :data:`RESIDUAL_CHI2_LIMIT` the reported sigmas are too small by more than ``sqrt(2)``: the verdict
 fails.  Far below 1 the noise model is overstated and the sigmas are conservative: said, not failed.
