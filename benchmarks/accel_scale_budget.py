@@ -165,10 +165,11 @@ def main(argv=None):
     if abs(z_c2) > LIMIT:
         ok = False
         print(f"    MODELLING {curvature_effect} DOES NOT REMOVE THE OFFSET")
-    c2 = [(f"{curvature_effect}.{a}", r_c2.values[f"{curvature_effect}.{a}"] / r_c2.sigmas[f"{curvature_effect}.{a}"])
-          for a in "xyz"]
-    print("    " + ", ".join(f"{n} {v:+.2f} sigma" for n, v in c2) + " (its size in a subrange's sigma)")
-    rows["noise_free_tc2"]["curvature_in_sigma"] = dict(c2)
+    c2 = {n: {"estimate": r_c2.values[n] / r_c2.sigmas[n], "truth": _truth_value(truth, n) / r_c2.sigmas[n]}
+          for n in (f"{curvature_effect}.{a}" for a in "xyz")}
+    print("    in their sigma: " + ", ".join(f"{n} {v['estimate']:+.2f} (truth {v['truth']:+.2f})" for n, v in c2.items())
+          + ": the curvature's size against what a subrange resolves")
+    rows["noise_free_tc2"]["curvature_in_sigma"] = c2
     _, z_noisy = run("with noise (the campaign's record)", "noisy", noisy.experiment, truth)
     run(f"with noise, {curvature_effect} modelled", "noisy_tc2", noisy.experiment, truth, extra=(curvature_effect,))
     sources = {"temperature": {"temperature": noisy.experiment.temperature},
