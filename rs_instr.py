@@ -1,0 +1,474 @@
+r"""The Gauss-Newton system of an extended model at the current solution, with the attitudes eliminated.
+
+At the solution ``(R_hat, x_hat)`` of the current model, :func:`linearise` linearises
+the factors of the model *extended* by the candidates (same prepared record, same
+static mask, same alignment; every candidate's parameters zero) once.  With ``J`` the
+whitened Jacobian in the keyframe attitudes ``a`` and the calibration ``x`` and ``r``
+the whitened residuals, the system is ``H = J^T J + priors``, ``g = J^T r``.  The
+attitudes are eliminated (block-tridiagonal, sparse LU), leaving the
+:class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
+driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended.  The score tests
+(:mod:`graph_calib.diagnosis.score`) work on it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+import scipy.linalg as sla
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+from scipy.linalg import blas, lapack
+
+from graph_calib.diagnosis.drivers import SENSOR_AXES, TIME_SEGMENTS, DriverSums
+from graph_calib.params import Layout
+
+
+@dataclass(frozen=True)
+class ReducedSystem:
+    """Gauss-Newton system in the calibration columns, attitudes eliminated.
+
+    Shapes: ``Q`` columns (``layout.size`` calibration elements, then the drivers), ``K`` keyframes.
+
+    Attributes
+    ----------
+    columns : list of str
+        Flat parameter element names of the extended layout, then ``driver:<i>``.
+    A : ndarray (Q, Q)
+        Reduced information (data, plus the priors of the ``null`` columns).
+    b : ndarray (Q,)
+        Reduced gradient ``J^T r`` (plus the prior gradient of the ``null`` columns).
+    null : ndarray of int
+        Columns of the current model (layout of the solution).
+    layout : Layout
+        Extended layout (its elements are the first ``layout.size`` columns).
+    prior_sigma : ndarray (layout.size,)
+    chi2 : float
+        Sum of squared whitened data residuals at the solution.
+    dof : int
+        Scalar data residuals minus the unknowns of the current model.
+    n_drivers : int
+        Driver columns (after the calibration columns).
+    seconds : float
+        Wall time of :func:`linearise`.
+    driver_means : ndarray (K, D) or None
+        Keyframe means of the driver series (None without the drivers).
+    prior_h, prior_r : ndarray (layout.size,) or None
+        Diagonal of the calibration prior's whitening and its whitened residual at the linearisation
+        point, every calibration column (for :meth:`gauss_newton_step`).
+    attitudes : AttitudeSolve or None
+        What the elimination leaves to recover the attitudes' step (for :meth:`gauss_newton_step`).
+    factors : dict or None
+        ``{kind: Residuals}`` of the linearisation point without their Jacobians (``keep_factors``):
+        the current model's residuals, for :func:`graph_calib.diagnosis.residuals.factor_residuals`.
+    """
+
+    columns: list[str]
+    A: np.ndarray
+    b: np.ndarray
+    null: np.ndarray
+    layout: Layout
+    prior_sigma: np.ndarray
+    chi2: float
+    dof: int
+    n_drivers: int
+    seconds: float = 0.0
+    driver_means: np.ndarray | None = None
+    prior_h: np.ndarray | None = field(default=None, repr=False)
+    prior_r: np.ndarray | None = field(default=None, repr=False)
+    attitudes: AttitudeSolve | None = field(default=None, repr=False, compare=False)
+    factors: dict | None = field(default=None, repr=False, compare=False)
+
+    @property
+    def variance_factor(self):
+        """``s^2 = max(1, chi^2 / dof)``: guards against noise densities that are too optimistic."""
+        return max(1.0, self.chi2 / max(self.dof, 1))
+
+    def gauss_newton_step(self, columns):
+        """One Gauss-Newton step of the model whose calibration columns are ``columns``, every attitude free.
+
+        The columns of the system left out (the other candidates, the drivers) are held where
+        they are (zero).  The priors of ``columns`` outside :attr:`null` are added to the system.
+        From the current solution with a candidate's columns added this is the first step of the
+        grown model's solve, exactly as a solver takes it (without damping).
+
+        Parameters
+        ----------
+        columns : ndarray of int
+            Calibration columns (of :attr:`layout`) that move; they include :attr:`null`.
+
+        Returns
+        -------
+        dx : ndarray (layout.size,)
+            Step of the calibration, zero outside ``columns``.
+        delta : ndarray (K+1, 3)
+            Step of each keyframe attitude, rad (right perturbation: ``C_nb Exp(delta)``).
+        """
+        if self.attitudes is None or self.prior_h is None:
+            raise ValueError("this reduced system keeps no attitude elimination (linearise(..., keep_step=True))")
+        cols = np.asarray(columns, dtype=np.int64)
+        A = self.A[np.ix_(cols, cols)].copy()
+        b = self.b[cols].copy()
+        extra = ~np.isin(cols, self.null)
+        h = self.prior_h[cols[extra]]
+        A[np.flatnonzero(extra), np.flatnonzero(extra)] += h**2
+        b[extra] += h * self.prior_r[cols[extra]]
+        dxc = -sla.cho_solve(sla.cho_factor(A), b)
+        dx = np.zeros(self.A.shape[0])
+        dx[cols] = dxc
+        delta = -self.attitudes.solve(dx)
+        return dx[: self.layout.size], delta.reshape(-1, 3)
+
+
+@dataclass(frozen=True)
+class AttitudeSolve:
+    """``Haa^-1 (ga + Hax dx)`` for any calibration step ``dx``: the eliminated attitudes' share of a step.
+
+    Attributes
+    ----------
+    chol : ndarray (6, 3 (K+1)) or None
+        Lower banded Cholesky factor ``L`` of ``Haa`` (None where the sparse LU solved instead).
+    Y : ndarray (3 (K+1), Q + 1)
+        ``L^-1 [Hax, ga]`` (``Haa^-1 [Hax, ga]`` without ``chol``).
+    """
+
+    chol: np.ndarray | None
+    Y: np.ndarray
+
+    def solve(self, dx):
+        """``Haa^-1 (ga + Hax dx)``, shape (3 (K+1),), for ``dx`` (Q,)."""
+        v = self.Y[:, -1] + self.Y[:, :-1] @ np.asarray(dx, dtype=float)
+        if self.chol is None:
+            return v
+        v, info = lapack.dtbtrs(self.chol, v[:, None], uplo="L", trans="T")
+        return v[:, 0]
+
+
+def _add_at(target, keys, values):
+    """``target[keys] += values`` for keys in ascending order (duplicates summed)."""
+    if keys.size == 0:
+        return
+    if keys.size == 1 or np.all(keys[1:] > keys[:-1]):
+        target[keys] += values
+        return
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(keys)) + 1])
+    target[keys[starts]] += np.add.reduceat(values, starts, axis=0)
+
+
+def _eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx):
+    """Eliminate the attitudes: ``A = Hxx - Hax^T Haa^-1 Hax``, ``b = gx - Hax^T Haa^-1 ga``.
+
+    ``Haa`` is block-tridiagonal with 3 x 3 blocks (``Hdiag`` on the diagonal, ``Hoff`` above it),
+    symmetric positive definite: a band of half-width 5.  Its banded Cholesky factor ``L``
+    (LAPACK ``pbtrf``) gives ``Y = L^-1 [Hax, ga]`` by one banded triangular solve (``tbtrs``),
+    and ``Hax^T Haa^-1 Hax = Y^T Y``.  Should ``Haa`` not be positive definite in floating point,
+    the sparse LU does the same.
+
+    Parameters
+    ----------
+    Hdiag : ndarray (K+1, 3, 3)
+    Hoff : ndarray (K, 3, 3)
+        Block ``(k, k+1)``.
+    Hax : ndarray (3 (K+1), Q)
+    ga : ndarray (3 (K+1),)
+    Hxx : ndarray (Q, Q)
+    gx : ndarray (Q,)
+
+    Returns
+    -------
+    A : ndarray (Q, Q)
+        Symmetric.
+    b : ndarray (Q,)
+    attitudes : AttitudeSolve
+    """
+    na, Q = Hax.shape
+    K = Hoff.shape[0]
+    # lower band storage: ab[i - j, j] = Haa[i, j] for 0 <= i - j <= 5
+    ab = np.zeros((6, na))
+    i3, j3 = np.tril_indices(3)
+    for a_, b_ in zip(i3, j3):
+        ab[a_ - b_, 3 * np.arange(K + 1) + b_] = Hdiag[:, a_, b_]
+    for a_ in range(3):
+        for b_ in range(3):
+            # block (k+1, k) = Hoff[k]^T: row 3k+3+a_, column 3k+b_
+            ab[3 + a_ - b_, 3 * np.arange(K) + b_] = Hoff[:, b_, a_]
+    rhs = np.asfortranarray(np.column_stack([Hax, ga]))
+    c, info = lapack.dpbtrf(ab, lower=1)
+    if info == 0:
+        Y, info = lapack.dtbtrs(c, rhs, uplo="L", overwrite_b=1)
+    if info == 0:
+        Yx = Y[:, :Q]
+        A = Hxx - _gram(Yx)
+        b = gx - Yx.T @ Y[:, Q]
+        att = AttitudeSolve(chol=c, Y=Y)
+    else:
+        base = np.arange(3)
+        br, bc = np.repeat(base, 3), np.tile(base, 3)          # a 3 x 3 block, row-major
+        kd = 3 * np.arange(K + 1)[:, None]
+        ko = 3 * np.arange(K)[:, None]
+        rows = np.concatenate([(kd + br).ravel(), (ko + br).ravel(), (ko + 3 + br).ravel()])
+        cols = np.concatenate([(kd + bc).ravel(), (ko + 3 + bc).ravel(), (ko + bc).ravel()])
+        vals = np.concatenate([Hdiag.ravel(), Hoff.ravel(), np.swapaxes(Hoff, 1, 2).ravel()])
+        sol = spla.splu(sp.csc_matrix((vals, (rows, cols)), shape=(na, na))).solve(np.column_stack([Hax, ga]))
+        A = Hxx - Hax.T @ sol[:, :Q]
+        b = gx - Hax.T @ sol[:, Q]
+        att = AttitudeSolve(chol=None, Y=sol)
+    return 0.5 * (A + A.T), b, att
+
+
+def _gram(X):
+    """``X^T X`` of ``X`` (m, n), symmetric (BLAS ``syrk``: half the products of ``X.T @ X``)."""
+    X = np.asarray(X, dtype=float)
+    if X.shape[1] == 0:
+        return np.zeros((0, 0))
+    C = blas.dsyrk(1.0, X, trans=1) if X.flags.f_contiguous else blas.dsyrk(1.0, X.T, trans=0)
+    return np.triu(C) + np.triu(C, 1).T
+
+
+def _key_outer_sums(key, W, M, n_keys):
+    """``sum over f with key_f = k of W_f M_f^T`` for every ``k``: shape (n_keys, w, s).
+
+    ``key`` (F,) ascending; ``W`` (F, w), ``M`` (F, s).  The factors of each key are laid side by
+    side (zero-padded to the most any key holds) and summed by one batched product, without
+    forming the F outer products.
+    """
+    F = key.size
+    out = np.zeros((n_keys, W.shape[1], M.shape[1]))
+    if F == 0:
+        return out
+    first = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+    count = np.diff(np.concatenate([first, [F]]))
+    pos = np.arange(F) - np.repeat(first, count)
+    keys = key[first]
+    n = int(count.max())
+    Wp = np.zeros((keys.size, n, W.shape[1]))
+    Mp = np.zeros((keys.size, n, M.shape[1]))
+    grp = np.repeat(np.arange(keys.size), count)
+    Wp[grp, pos] = W
+    Mp[grp, pos] = M
+    out[keys] = np.swapaxes(Wp, 1, 2) @ Mp
+    return out
+
+
+def _driver_blocks(Hb, r, A_, B_, M, bi, sd, Xc, key, n_keys):
+    """The driver columns' share of one kind of factor, from per-factor driver means.
+
+    A driver column of factor ``f`` is its bias column times the factor's mean of the
+    series, ``X_f[:, d] = Hb_f[:, bi_d] M_f[sd_d]``; its products with the other columns
+    are therefore products of the bias columns weighted by the means, formed per bias
+    axis without building ``X`` (F x 3 x drivers), and its coupling to the attitudes is a
+    per-keyframe sum of ``(A_f^T Hb_f) M_f^T`` (:func:`_key_outer_sums`).
+
+    Parameters
+    ----------
+    Hb : ndarray (F, 3, nb)
+        Whitened Jacobian columns of the bias axes the drivers sit on.
+    r : ndarray (F, 3)
+        Whitened residuals.
+    A_, B_ : ndarray (F, 3, 3)
+        Whitened Jacobians in the attitudes ``key`` and ``key + 1`` (``B_`` None when absent).
+    M : ndarray (F, D)
+        Each factor's mean of every driver series.
+    bi, sd : ndarray of int (nd,)
+        Bias axis (column of ``Hb``) and series (column of ``M``) of each driver touched.
+    Xc : ndarray (F, 3, nc)
+        Whitened Jacobian in the calibration columns the kind touches.
+    key : ndarray of int (F,)
+        Keyframe of each factor, ascending.
+    n_keys : int
+        Keyframe boundaries (K+1).
+
+    Returns
+    -------
+    DD : ndarray (nd, nd)
+        Information among the drivers.
+    CD : ndarray (nc, nd)
+        Information between the calibration columns and the drivers.
+    gD : ndarray (nd,)
+        Gradient of the drivers.
+    Hax_d : ndarray (K+1, 3, nd)
+        Information between the attitudes and the drivers.
+    """
+    nd = bi.size
+    F, _, nb = Hb.shape
+    DD = np.zeros((nd, nd))
+    CD = np.zeros((Xc.shape[2], nd))
+    gD = np.zeros(nd)
+    groups = [(b, np.flatnonzero(bi == b)) for b in np.unique(bi)]
+    for b, jb in groups:
+        h = Hb[:, :, b]                                          # (F, 3)
+        Mb = M[:, sd[jb]]                                        # (F, nb_d)
+        CD[:, jb] = np.einsum("fic,fi->cf", Xc, h) @ Mb
+        gD[jb] = np.einsum("fi,fi->f", h, r) @ Mb
+        for b2, jb2 in groups:
+            if b2 < b:
+                continue
+            g = np.einsum("fi,fi->f", h, Hb[:, :, b2])
+            blk = (Mb * g[:, None]).T @ M[:, sd[jb2]]
+            DD[np.ix_(jb, jb2)] = blk
+            DD[np.ix_(jb2, jb)] = blk.T
+    # attitudes: sum over each keyframe's factors of (A_f^T Hb_f)[:, b] M_f[s], then the (b, s) of each driver
+    S = _key_outer_sums(key, np.einsum("fji,fjb->fib", A_, Hb).reshape(F, 3 * nb), M, n_keys)
+    if B_ is not None:
+        S += _key_outer_sums(key + 1, np.einsum("fji,fjb->fib", B_, Hb).reshape(F, 3 * nb), M, n_keys)
+    Hax_d = np.stack([S[:, i * nb + bi, sd] for i in range(3)], axis=1)
+    return DD, CD, gD, Hax_d
+
+
+import collections as _c
+TT = _c.defaultdict(float)
+_last = [0.0]
+def _tick(label):
+    t = time.process_time(); TT[label] += t - _last[0]; _last[0] = t
+
+def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_SEGMENTS, pre=None, sums=None,
+              keep_step=False, keep_factors=False):
+    """Linearise ``model`` (an extended layout) at ``(R, x)`` and eliminate the attitudes.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+        Its layout holds the current model's parameters (``null_names``) and the candidates.
+    R : ndarray (K+1, 3, 3)
+        Attitudes ``C_nb`` at the keyframe boundaries, of the current solution.
+    x : ndarray (P,)
+        The current solution embedded in ``model.layout`` (candidates zero).
+    q_nb0 : ndarray (4,)
+        The alignment (prior of the first attitude), as given to the solver.
+    null_names : sequence of str
+        Parameters of the current model (their priors enter the system).
+    drivers : bool
+        Append the generic driver columns.
+    n_segments : int
+        Cubic B-spline functions of the ``time`` driver (when ``sums`` is not given).
+    pre : graph_calib.model.preintegration.Preintegrated, optional
+        ``model.preintegrate(x)`` when the caller has it already.
+    sums : graph_calib.diagnosis.drivers.DriverSums, optional
+        The driver sums of ``model``'s record when the caller has them already (they depend on the
+        record only: one serves every round of a loop).
+    keep_step : bool
+        Keep what :meth:`ReducedSystem.gauss_newton_step` needs (the attitudes' elimination,
+        ``3 (K+1) x (Q+1)`` numbers).
+    keep_factors : bool
+        Keep the factors' residuals at ``(R, x)`` (:attr:`ReducedSystem.factors`).
+
+    Returns
+    -------
+    ReducedSystem, list of Driver
+    """
+    t0 = time.perf_counter()
+    _last[0] = time.process_time()
+    layout = model.layout
+    P = layout.size
+    K = model.n_keyframes
+    na = 3 * (K + 1)
+    if pre is None:
+        pre = model.preintegrate(x)
+    kinds = (
+        ("rotation", model.rotation_factors(R, pre, x)),
+        ("gravity", model.gravity_factors(R, pre, x)),
+        ("encoder", model.encoder_factors(R, pre, x)),
+    )
+    dlist = []
+    if drivers:
+        if sums is None:
+            sums = DriverSums.of(model, n_segments=n_segments)
+        dlist = sums.drivers
+        axis_col = {}
+        for i, ax in enumerate(SENSOR_AXES):
+            triad, el = ax.split(".")
+            axis_col[ax] = layout.slice(f"{triad}.bias").start + "xyz".index(el)
+        d_bias = np.array([axis_col[d.axis] for d in dlist], dtype=np.int64)
+        d_series = np.array([d.series for d in dlist], dtype=np.int64)
+    ND = len(dlist)
+    Q = P + ND
+    # block-tridiagonal attitude information and the coupling to the calibration
+    Hdiag = np.zeros((K + 1, 3, 3))
+    Hoff = np.zeros((K, 3, 3))            # block (k, k+1)
+    Hax = np.zeros((K + 1, 3, Q))
+    Hxx = np.zeros((Q, Q))
+    ga = np.zeros((K + 1, 3))
+    gx = np.zeros(Q)
+    chi2 = 0.0
+    m_data = 0
+    k0 = model.record.k0
+    _tick("factors+setup")
+    for kind, res in kinds:
+        F = res.r.shape[0]
+        if F == 0:
+            continue
+        r, A_, B_, Hx = res.whitened_system()
+        _tick('whiten')
+        chi2 += float(np.sum(r**2))
+        m_data += r.size
+        key = res.key
+        # only the columns this kind of factor touches (a rotation or encoder factor sees no accelerometer
+        # parameter, hence none of the accelerometer drivers): the columns left out are exactly zero
+        nzc = np.flatnonzero(np.any(Hx != 0.0, axis=(0, 1)))
+        Xc = Hx[:, :, nzc]
+        _tick('nzc+Xc')
+        At = np.swapaxes(A_, 1, 2)
+        _add_at(Hdiag, key, At @ A_)
+        _add_at(ga, key, np.einsum("fji,fj->fi", A_, r))
+        Hax_k = np.zeros((K + 1, 3, nzc.size))
+        _add_at(Hax_k, key, At @ Xc)
+        _tick('HaxA')
+        if B_ is not None:
+            Bt = np.swapaxes(B_, 1, 2)
+            _add_at(Hdiag, key + 1, Bt @ B_)
+            _add_at(Hoff, key, At @ B_)
+            _add_at(ga, key + 1, np.einsum("fji,fj->fi", B_, r))
+            _add_at(Hax_k, key + 1, Bt @ Xc)
+        Hax[:, :, nzc] += Hax_k
+        _tick('HaxB+=')
+        Xf = Xc.reshape(-1, nzc.size)
+        Hxx[np.ix_(nzc, nzc)] += _gram(Xf)
+        gx[nzc] += Xf.T @ r.reshape(-1)
+        _tick('Hxx')
+        dsel = np.flatnonzero(np.isin(d_bias, nzc)) if drivers else np.zeros(0, dtype=np.int64)
+        if dsel.size == 0:
+            continue
+        # the drivers on the bias axes this kind touches, from each factor's means of the series
+        hi = model.record.reading_sample + 1 if kind == "encoder" else k0[key + 1]
+        M = sums.means(k0[key], hi)                                   # (F, series)
+        _tick('means')
+        bcols, bi = np.unique(d_bias[dsel], return_inverse=True)
+        DD, CD, gD, Hax_d = _driver_blocks(Hx[:, :, bcols], r, A_, B_, M, bi, d_series[dsel], Xc, key, K + 1)
+        dcol = P + dsel
+        Hxx[np.ix_(dcol, dcol)] += DD
+        Hxx[np.ix_(nzc, dcol)] += CD
+        Hxx[np.ix_(dcol, nzc)] += CD.T
+        gx[dcol] += gD
+        _tick('Hxx_d')
+        Hax[:, :, dcol] += Hax_d
+        _tick('Hax_d')
+    # priors of the current model's calibration columns
+    cal_prior = model.calibration_prior(x)
+    x_sigma = cal_prior.sigma
+    null_idx = np.concatenate([np.arange(P)[layout.slice(n)] for n in null_names]).astype(np.int64)
+    h = np.diag(cal_prior.H)[null_idx]
+    Hxx[null_idx, null_idx] += h**2
+    gx[null_idx] += h * cal_prior.r[null_idx]
+    # attitude prior on the first keyframe (as factor_graph.build_graph)
+    # (the alignment prior: its residual at the solution is part of the current fit)
+    # (one per segment of a record cut together, /imu/segment)
+    for k, att_prior in model.attitude_priors(R, R_priors=model.segment_priors(q_nb0)):
+        Hdiag[k] += att_prior.H.T @ att_prior.H
+        ga[k] += att_prior.H.T @ att_prior.r
+        _tick('priors')
+    A, b, att = _eliminate(Hdiag, Hoff, Hax.reshape(na, Q), ga.reshape(na), Hxx, gx)
+    _tick('eliminate')
+    dof = m_data - na - null_idx.size
+    names = layout.element_names() + [f"driver:{i}" for i in range(ND)]
+    means = sums.means(k0[:-1], k0[1:]) if drivers else None
+    kept = None
+    if keep_factors:
+        kept = {kind: replace(res, H_R=None, H_R_next=None, H_x=None) for kind, res in kinds}
+    rs = ReducedSystem(columns=names, A=A, b=b, null=null_idx, layout=layout, prior_sigma=x_sigma,
+                       chi2=chi2, dof=int(dof), n_drivers=ND, seconds=time.perf_counter() - t0,
+                       driver_means=means, prior_h=np.diag(cal_prior.H).copy(), prior_r=np.asarray(cal_prior.r).copy(),
+                       attitudes=att if keep_step else None, factors=kept)
+    return rs, dlist
+
