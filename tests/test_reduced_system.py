@@ -12,7 +12,13 @@ import numpy as np
 import pytest
 
 from graph_calib.diagnosis import linearise
-from graph_calib.diagnosis.drivers import DriverSums, cumulative_sums, driver_series, interval_means
+from graph_calib.diagnosis.drivers import (
+    DriverSums,
+    cumulative_sums,
+    driver_series,
+    interval_means,
+    keyframe_context,
+)
 from graph_calib.diagnosis.reduced_system import _eliminate
 from graph_calib.simulation import simulate
 
@@ -110,6 +116,14 @@ def test_driver_sums_give_the_cumulative_sum_means_and_refuse_other_intervals(so
                        rtol=0, atol=1e-12 * np.max(np.abs(Phi)))
     with pytest.raises(ValueError, match="boundary of the driver sums"):
         sums.means(k0[:1] + 1, k0[1:2])
+    # the keyframe means of the residual regressions: one sum per keyframe, as the cumulative sums give
+    ctx = keyframe_context(ext)
+    f = ext.record.f_raw
+    ref = interval_means(cumulative_sums(f**2), k0[:-1], k0[1:])
+    assert ctx["specific_force_sq"].shape == (ext.n_keyframes, 3)
+    assert np.max(np.abs(ctx["specific_force_sq"] - ref)) <= 1e-12 * np.max(f**2)
+    assert np.allclose(ctx["time"], interval_means(cumulative_sums(ext.experiment.t - ext.experiment.t[0]),
+                                                   k0[:-1], k0[1:])[:, 0], rtol=1e-12, atol=0)
 
 
 def test_elimination_falls_back_to_the_sparse_lu_when_not_positive_definite():

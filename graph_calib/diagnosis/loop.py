@@ -34,7 +34,7 @@ from graph_calib.diagnosis.records import (
     Round,
     Stage,
 )
-from graph_calib.diagnosis.drivers import DriverSums
+from graph_calib.diagnosis.drivers import DriverSums, keyframe_context
 from graph_calib.diagnosis.reduced_system import linearise
 from graph_calib.diagnosis.residuals import (
     error_against_truth,
@@ -71,7 +71,7 @@ def _solve_graph(problem, *, options, initial=None):
 
 
 def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None, kf_from=None,
-                linearised=None, say=lambda msg: None):
+                linearised=None, context=None, say=lambda msg: None):
     """The stage of ``problem`` solved by the factor graph (``graph``): the filter, residuals, statistics, error.
 
     ``linearised``: the :class:`_Linearised` of the round run at ``graph`` (:func:`_round`): the factor
@@ -80,6 +80,7 @@ def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed
     ``kf_from``: the filter's solution of a smaller model (its ``SolverOutput``), embedded in ``problem``'s
     layout as the filter's first linearisation point (its own solution, not the graph's: the two solvers
     stay independent; the fixed point is the same, only fewer passes reach it).
+    ``context``: the record's :func:`~graph_calib.diagnosis.drivers.keyframe_context` (one for both stages).
     """
     model = problem.model
     if linearised is None:
@@ -97,7 +98,7 @@ def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed
         stage.results["sqrt-kf"] = to_result(model, kf)
         stage.kf = kf
         stage.innovations = filter_innovations(kf, model)
-    stage.statistics = residual_statistics(stage)
+    stage.statistics = residual_statistics(stage, context=context)
     if truth is not None:
         stage.error = {}
         for solver, res in stage.results.items():
@@ -447,6 +448,7 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     say(f"declared model: {declared.layout.size} parameters, {declared.n_keyframes} keyframes; factor graph ...")
     graph = _solve_graph(problem, options=options)
     sums = DriverSums.of(declared, n_segments=diagnosis.time_segments)   # the record's: one for every round
+    context = keyframe_context(declared)                                 # and one for both stages
     rounds, added = [], []
     before = None
     lin = None
@@ -458,7 +460,7 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
         say(f"round {rnd.index}: {rnd.decision}")
         if before is None:      # the declared model's stage, its residuals from the first round's linearisation
             before = _make_stage(problem, graph, options=options, diagnosis_options=diagnosis, truth=truth,
-                                 linearised=lin, say=say)
+                                 linearised=lin, context=context, say=say)
             fixed = {s: r.sigmas for s, r in before.results.items()}
         if rnd.added is None:
             break
@@ -467,7 +469,7 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
                                               say=say)
     after = before if not added else _make_stage(problem, graph, options=options, diagnosis_options=diagnosis,
                                                  truth=truth, fixed_sigmas=fixed, kf_from=before.kf,
-                                                 linearised=lin, say=say)
+                                                 linearised=lin, context=context, say=say)
     signature = sorted((d for d in rounds[-1].drivers if d.significant), key=lambda d: d.log10_p)
     source = experiment.source.rsplit("/", 1)[-1] if experiment.source else ""
     return Diagnosis(source=source, added=added, unexplained=bool(signature), signature=signature, rounds=rounds,

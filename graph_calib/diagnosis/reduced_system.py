@@ -391,14 +391,14 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         F = res.r.shape[0]
         if F == 0:
             continue
-        r, A_, B_, Hx = res.whitened_system()
+        # only the columns this kind of factor touches (a rotation or encoder factor sees no accelerometer
+        # parameter, hence none of the accelerometer drivers): the columns left out are exactly zero, before
+        # and after the whitening (which mixes a factor's rows, never its columns), so only these are whitened
+        nzc = np.flatnonzero(np.any(res.H_x != 0.0, axis=(0, 1)))
+        r, A_, B_, Xc = replace(res, H_x=res.H_x[:, :, nzc]).whitened_system()
         chi2 += float(np.sum(r**2))
         m_data += r.size
         key = res.key
-        # only the columns this kind of factor touches (a rotation or encoder factor sees no accelerometer
-        # parameter, hence none of the accelerometer drivers): the columns left out are exactly zero
-        nzc = np.flatnonzero(np.any(Hx != 0.0, axis=(0, 1)))
-        Xc = Hx[:, :, nzc]
         At = np.swapaxes(A_, 1, 2)
         _add_at(Hdiag, key, At @ A_)
         _add_at(ga, key, np.einsum("fji,fj->fi", A_, r))
@@ -421,7 +421,8 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         hi = model.record.reading_sample + 1 if kind == "encoder" else k0[key + 1]
         M = sums.means(k0[key], hi)                                   # (F, series)
         bcols, bi = np.unique(d_bias[dsel], return_inverse=True)
-        DD, CD, gD, Hax_d = _driver_blocks(Hx[:, :, bcols], r, A_, B_, M, bi, d_series[dsel], Xc, key, K + 1)
+        Hb = Xc[:, :, np.searchsorted(nzc, bcols)]                    # the bias columns (among nzc)
+        DD, CD, gD, Hax_d = _driver_blocks(Hb, r, A_, B_, M, bi, d_series[dsel], Xc, key, K + 1)
         dcol = P + dsel
         Hxx[np.ix_(dcol, dcol)] += DD
         Hxx[np.ix_(nzc, dcol)] += CD

@@ -159,7 +159,7 @@ def regression_tests(series, ctx, *, key, static=None):
 _COMPONENTS = {"rotation": "xyz (body)", "gravity": "ENU", "gravity_body": "xyz (body)", "encoder": "xyz (body)"}
 
 
-def residual_statistics(stage, *, top=5, lags=10):
+def residual_statistics(stage, *, top=5, lags=10, context=None):
     """Whiteness and driver relations of the residuals of both solvers.
 
     Parameters
@@ -170,6 +170,9 @@ def residual_statistics(stage, *, top=5, lags=10):
         Driver regressions kept per series (the most significant).
     lags : int
         Lags of the Ljung-Box statistic.
+    context : dict, optional
+        :func:`~graph_calib.diagnosis.drivers.keyframe_context` of the stage's record when the caller has
+        it already (it depends on the record only).
 
     Returns
     -------
@@ -178,7 +181,7 @@ def residual_statistics(stage, *, top=5, lags=10):
         "drivers": [top driver regressions]}}}``.
     """
     model = stage.problem.model
-    ctx = keyframe_context(model)
+    ctx = keyframe_context(model) if context is None else context
     out = {}
 
     def one(w, key, components, static=None):
