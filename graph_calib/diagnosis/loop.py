@@ -79,7 +79,9 @@ def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed
     instead of preintegrating the record and evaluating the factors once more.
     ``kf_from``: the filter's solution of a smaller model (its ``SolverOutput``), embedded in ``problem``'s
     layout as the filter's first linearisation point (its own solution, not the graph's: the two solvers
-    stay independent; the fixed point is the same, only fewer passes reach it).
+    stay independent; the fixed point is the same, only fewer passes reach it).  Without it the filter
+    starts from the prior calibration, as it does on its own, with the graph's keyframe attitudes as its
+    first attitudes (instead of fitting attitudes at the prior, ``initial_attitudes``).
     ``context``: the record's :func:`~graph_calib.diagnosis.drivers.keyframe_context` (one for both stages).
     """
     model = problem.model
@@ -91,9 +93,12 @@ def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed
     stage = Stage(layout=tuple(model.layout.names), problem=problem, graph=graph, results=results, residuals=series)
     if "sqrt-kf" in diagnosis_options.solvers:
         say("  square-root filter ...")
-        initial = None
         if kf_from is not None:
             initial = (kf_from.attitudes, model.layout.embed(kf_from.layout, kf_from.x))
+        else:
+            # the prior calibration, as the filter starts on its own; the first attitudes the graph's keyframe
+            # attitudes instead of the filter's attitude-only fit at the prior (initial_attitudes)
+            initial = (graph.attitudes, model.prior()[0])
         kf = solve("sqrt-kf", problem, options=options, initial=initial)
         stage.results["sqrt-kf"] = to_result(model, kf)
         stage.kf = kf
