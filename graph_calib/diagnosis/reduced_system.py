@@ -252,6 +252,17 @@ def _key_outer_sums(key, W, M, n_keys):
     return out
 
 
+def _block(rows, cols):
+    """Index of the block ``rows x cols`` (each a slice with a stop, or an index array) of a matrix."""
+    if isinstance(rows, slice) and isinstance(cols, slice):
+        return rows, cols
+
+    def idx(a):
+        return np.arange(a.start, a.stop) if isinstance(a, slice) else a
+
+    return np.ix_(idx(rows), idx(cols))
+
+
 def _driver_blocks(Hb, r, A_, B_, M, bi, sd, Xc, key, n_keys):
     """The driver columns' share of one kind of factor, from per-factor driver means.
 
@@ -296,19 +307,25 @@ def _driver_blocks(Hb, r, A_, B_, M, bi, sd, Xc, key, n_keys):
     DD = np.zeros((nd, nd))
     CD = np.zeros((Xc.shape[2], nd))
     gD = np.zeros(nd)
-    groups = [(b, np.flatnonzero(bi == b)) for b in np.unique(bi)]
+    Ms = M[:, sd]                                                # (F, nd): each driver's means, once
+    groups = []
+    for b in np.unique(bi):
+        jb = np.flatnonzero(bi == b)
+        # the drivers of one axis are adjacent: a slice, so that its means are a view, not a copy
+        sl = slice(int(jb[0]), int(jb[-1]) + 1) if jb.size == jb[-1] - jb[0] + 1 else jb
+        groups.append((b, sl))
     for b, jb in groups:
         h = Hb[:, :, b]                                          # (F, 3)
-        Mb = M[:, sd[jb]]                                        # (F, nb_d)
+        Mb = Ms[:, jb]                                           # (F, nb_d)
         CD[:, jb] = np.einsum("fic,fi->cf", Xc, h) @ Mb
         gD[jb] = np.einsum("fi,fi->f", h, r) @ Mb
         for b2, jb2 in groups:
             if b2 < b:
                 continue
             g = np.einsum("fi,fi->f", h, Hb[:, :, b2])
-            blk = (Mb * g[:, None]).T @ M[:, sd[jb2]]
-            DD[np.ix_(jb, jb2)] = blk
-            DD[np.ix_(jb2, jb)] = blk.T
+            blk = (Mb * g[:, None]).T @ Ms[:, jb2]
+            DD[_block(jb, jb2)] = blk
+            DD[_block(jb2, jb)] = blk.T
     # attitudes: sum over each keyframe's factors of (A_f^T Hb_f)[:, b] M_f[s], then the (b, s) of each driver
     S = _key_outer_sums(key, np.einsum("fji,fjb->fib", A_, Hb).reshape(F, 3 * nb), M, n_keys)
     if B_ is not None:
