@@ -5,10 +5,12 @@ the factors of the model *extended* by the candidates (same prepared record, sam
 static mask, same alignment; every candidate's parameters zero) once.  With ``J`` the
 whitened Jacobian in the keyframe attitudes ``a`` and the calibration ``x`` and ``r``
 the whitened residuals, the system is ``H = J^T J + priors``, ``g = J^T r``.  The
-attitudes are eliminated (block-tridiagonal, sparse LU), leaving the
-:class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
-driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended.  The score tests
-(:mod:`graph_calib.diagnosis.score`) work on it.
+attitudes are eliminated (block-tridiagonal: banded Cholesky, :func:`_eliminate`), leaving
+the :class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
+driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended; a driver column is
+its bias column times each factor's mean of the series, accumulated without forming it
+(:func:`_driver_blocks`).  The score tests (:mod:`graph_calib.diagnosis.score`) work on
+it; :meth:`ReducedSystem.gauss_newton_step` gives the step of a grown model from it.
 """
 
 from __future__ import annotations
