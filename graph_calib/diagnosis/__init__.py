@@ -12,7 +12,8 @@ and their thresholds.
 Modules, from the data up:
 
 - :mod:`graph_calib.diagnosis.drivers`: the generic drivers (:class:`Driver`,
-  :func:`driver_series`, :func:`time_basis`) and their keyframe means (:func:`keyframe_context`);
+  :func:`driver_series`, :func:`time_basis`), their sums at the factors' interval boundaries
+  (``DriverSums``, one per record) and their keyframe means (:func:`keyframe_context`);
 - :mod:`graph_calib.diagnosis.reduced_system`: the Gauss-Newton system of the extended
   model at the current solution with the attitudes eliminated (:func:`linearise`,
   :class:`ReducedSystem`);

@@ -76,45 +76,30 @@ def time_basis(t, n):
     return BSpline.design_matrix(np.clip(u, 0.0, 1.0), knots, k).toarray()
 
 
-def driver_series(model, *, n_segments=TIME_SEGMENTS, deadband=RATE_SIGN_DEADBAND):
-    """Per-sample driver series of ``model``'s experiment and the driver columns built from them.
+def _series(model, *, n_segments, deadband):
+    """The distinct per-sample driver series of ``model``'s experiment, one at a time.
 
-    Parameters
-    ----------
-    model : graph_calib.model.CalibrationModel
-    n_segments : int
-        Cubic B-spline functions of the ``time`` driver.
-    deadband : float
-        Dead band of the rate sign, rad/s.
-
-    Returns
-    -------
-    Phi : ndarray, shape (N, D)
-        One column per distinct series (SI units; ``dT`` in degC).
-    drivers : list of Driver
+    Yields ``(key, series)`` with ``series`` of shape (N,) (SI units; ``dT`` in degC); the keys are
+    ``("time", s)``, ``("dT3", i)``, ``("sign", j)``, ``("abs", j)``, ``("dw", j)``, ``("f2", j)``.
     """
     e = model.experiment
     w = model.record.w_raw
     f = model.record.f_raw
     dw = model.record.dw_raw
     dT = np.column_stack([model.record.dTg, model.record.dTa])          # (N, 6) per sensor
-    cols = []
-    names = {}
-
-    def add(key, v):
-        names[key] = len(cols)
-        cols.append(np.asarray(v, dtype=float))
-
     for s, col in enumerate(time_basis(e.t, n_segments).T):
-        add(("time", s), col)
+        yield ("time", s), col
     for i in range(6):
-        add(("dT3", i), dT[:, i] ** 3)
+        yield ("dT3", i), dT[:, i] ** 3
     for j in range(3):
-        add(("sign", j), np.sign(w[:, j]) * (np.abs(w[:, j]) > deadband))
-        add(("abs", j), np.abs(w[:, j]))
-        add(("dw", j), dw[:, j])
-        add(("f2", j), f[:, j] ** 2)
-    Phi = np.column_stack(cols)
+        yield ("sign", j), np.sign(w[:, j]) * (np.abs(w[:, j]) > deadband)
+        yield ("abs", j), np.abs(w[:, j])
+        yield ("dw", j), dw[:, j]
+        yield ("f2", j), f[:, j] ** 2
+
+
+def _drivers(names, n_segments):
+    """The driver columns, given the column ``names[key]`` of each distinct series."""
     xyz = "xyz"
     drivers = []
     for i, ax in enumerate(SENSOR_AXES):
@@ -134,7 +119,92 @@ def driver_series(model, *, n_segments=TIME_SEGMENTS, deadband=RATE_SIGN_DEADBAN
         for j in range(3):
             if gyro or j != own:
                 drivers.append(Driver("specific_force_sq", ax, f"f_{xyz[j]}^2", names[("f2", j)]))
-    return Phi, drivers
+    return drivers
+
+
+def driver_series(model, *, n_segments=TIME_SEGMENTS, deadband=RATE_SIGN_DEADBAND):
+    """Per-sample driver series of ``model``'s experiment and the driver columns built from them.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+    n_segments : int
+        Cubic B-spline functions of the ``time`` driver.
+    deadband : float
+        Dead band of the rate sign, rad/s.
+
+    Returns
+    -------
+    Phi : ndarray, shape (N, D)
+        One column per distinct series (SI units; ``dT`` in degC).
+    drivers : list of Driver
+    """
+    names, cols = {}, []
+    for key, v in _series(model, n_segments=n_segments, deadband=deadband):
+        names[key] = len(cols)
+        cols.append(np.asarray(v, dtype=float))
+    return np.column_stack(cols), _drivers(names, n_segments)
+
+
+@dataclass(frozen=True)
+class DriverSums:
+    """Sums of every driver series up to each boundary a factor's interval can start or end at.
+
+    The intervals of the factors (keyframes ``[k0[k], k0[k+1])``, encoder readings
+    ``[k0[key], reading_sample + 1)``) all start and end at a few boundaries; the sums
+    up to those boundaries give every factor's driver means without a cumulative sum over
+    the samples.  They depend on the record only, so one serves every round of a loop.
+
+    Shapes: ``B`` boundaries, ``D`` distinct series.
+
+    Attributes
+    ----------
+    drivers : list of Driver
+        The driver columns (as :func:`driver_series`).
+    bounds : ndarray of int64, shape (B,)
+        Sample indices, ascending, from 0.
+    sums : ndarray, shape (B, D)
+        Sum of each series over the samples ``[0, bounds[i])``.
+    """
+
+    drivers: list
+    bounds: np.ndarray
+    sums: np.ndarray
+
+    @classmethod
+    def of(cls, model, *, n_segments=TIME_SEGMENTS, deadband=RATE_SIGN_DEADBAND):
+        """The sums of ``model``'s record at its keyframe boundaries and encoder readings."""
+        rec = model.record
+        n = int(rec.k0[-1])
+        bounds = np.unique(np.concatenate([[0], rec.k0, np.asarray(rec.reading_sample) + 1])).astype(np.int64)
+        bounds = bounds[bounds <= n]
+        inner = bounds[(bounds > 0) & (bounds < n)]
+        starts = np.concatenate([[0], inner])
+        names, cols = {}, []
+        for key, v in _series(model, n_segments=n_segments, deadband=deadband):
+            names[key] = len(cols)
+            v = np.asarray(v, dtype=float)[:n]
+            # sums over [bounds[i], bounds[i+1]), accumulated: the sum up to each boundary
+            cols.append(np.concatenate([[0.0], np.cumsum(np.add.reduceat(v, starts))]))
+        return cls(drivers=_drivers(names, n_segments), bounds=bounds, sums=np.column_stack(cols))
+
+    def _at(self, samples):
+        """Row of :attr:`sums` of each sample index in ``samples`` (each must be a boundary)."""
+        samples = np.asarray(samples, dtype=np.int64)
+        i = np.minimum(np.searchsorted(self.bounds, samples), self.bounds.size - 1)
+        if np.any(self.bounds[i] != samples):
+            raise ValueError("an interval does not start or end at a boundary of the driver sums")
+        return i
+
+    def means(self, lo, hi):
+        """Mean of every series over the samples ``[lo, hi)`` of each interval, shape (F, D).
+
+        ``lo`` and ``hi`` (F,) must be boundaries (:attr:`bounds`).
+        """
+        lo = np.asarray(lo, dtype=np.int64)
+        hi = np.asarray(hi, dtype=np.int64)
+        cnt = np.maximum(hi - lo, 1)[:, None]
+        return (self.sums[self._at(hi)] - self.sums[self._at(lo)]) / cnt
 
 
 def cumulative_sums(Phi):
@@ -156,9 +226,13 @@ def keyframe_context(model):
     """
     k0 = model.record.k0
     lo, hi = k0[:-1], k0[1:]
+    adjacent = bool(np.all(hi > lo))      # every keyframe holds samples: one sum per keyframe, in order
 
     def mean(a):
         a = np.asarray(a, dtype=float)
+        if adjacent:
+            sums = np.add.reduceat(a[: hi[-1]], lo, axis=0)
+            return sums / (hi - lo).reshape((-1,) + (1,) * (a.ndim - 1))
         return interval_means(cumulative_sums(a), lo, hi).reshape((lo.size,) + a.shape[1:])
 
     t = model.experiment.t

@@ -20,7 +20,7 @@ reported as ``unexplained``.
 from __future__ import annotations
 
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
@@ -34,6 +34,7 @@ from graph_calib.diagnosis.records import (
     Round,
     Stage,
 )
+from graph_calib.diagnosis.drivers import DriverSums, keyframe_context
 from graph_calib.diagnosis.reduced_system import linearise
 from graph_calib.diagnosis.residuals import (
     error_against_truth,
@@ -44,6 +45,7 @@ from graph_calib.diagnosis.residuals import (
 from graph_calib.diagnosis.score import score_test, with_priors
 from graph_calib.options import CalibrationOptions
 from graph_calib.problem import build_problem
+from graph_calib.rotations import exp_so3
 from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import to_result
 
@@ -69,34 +71,39 @@ def _solve_graph(problem, *, options, initial=None):
 
 
 def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None, kf_from=None,
-                linearised=None, say=lambda msg: None):
+                linearised=None, context=None, say=lambda msg: None):
     """The stage of ``problem`` solved by the factor graph (``graph``): the filter, residuals, statistics, error.
 
-    ``linearised``: ``(extended model, x embedded, its preintegration)`` of the round run at ``graph``
-    (:func:`_round`): the factor residuals are taken from it (the candidates zero, they are the current
-    model's residuals) instead of preintegrating the record once more.
+    ``linearised``: the :class:`_Linearised` of the round run at ``graph`` (:func:`_round`): the factor
+    residuals are taken from its factors (the candidates zero, they are the current model's residuals)
+    instead of preintegrating the record and evaluating the factors once more.
     ``kf_from``: the filter's solution of a smaller model (its ``SolverOutput``), embedded in ``problem``'s
     layout as the filter's first linearisation point (its own solution, not the graph's: the two solvers
-    stay independent; the fixed point is the same, only fewer passes reach it).
+    stay independent; the fixed point is the same, only fewer passes reach it).  Without it the filter
+    starts from the prior calibration, as it does on its own, with the graph's keyframe attitudes as its
+    first attitudes (instead of fitting attitudes at the prior, ``initial_attitudes``).
+    ``context``: the record's :func:`~graph_calib.diagnosis.drivers.keyframe_context` (one for both stages).
     """
     model = problem.model
     if linearised is None:
         series = factor_residuals(model, graph.attitudes, graph.x)
     else:
-        ext, x_ext, pre = linearised
-        series = factor_residuals(ext, graph.attitudes, x_ext, pre=pre)
+        series = factor_residuals(linearised.model, graph.attitudes, linearised.x, factors=linearised.factors)
     results = {"factor-graph": to_result(model, graph)}
     stage = Stage(layout=tuple(model.layout.names), problem=problem, graph=graph, results=results, residuals=series)
     if "sqrt-kf" in diagnosis_options.solvers:
         say("  square-root filter ...")
-        initial = None
         if kf_from is not None:
             initial = (kf_from.attitudes, model.layout.embed(kf_from.layout, kf_from.x))
+        else:
+            # the prior calibration, as the filter starts on its own; the first attitudes the graph's keyframe
+            # attitudes instead of the filter's attitude-only fit at the prior (initial_attitudes)
+            initial = (graph.attitudes, model.prior()[0])
         kf = solve("sqrt-kf", problem, options=options, initial=initial)
         stage.results["sqrt-kf"] = to_result(model, kf)
         stage.kf = kf
         stage.innovations = filter_innovations(kf, model)
-    stage.statistics = residual_statistics(stage)
+    stage.statistics = residual_statistics(stage, context=context)
     if truth is not None:
         stage.error = {}
         for solver, res in stage.results.items():
@@ -302,30 +309,84 @@ def _decide(system, candidate_tests, candidate_columns, driver_tests, driver_col
                   "that the catalogue lacks"), checks
 
 
-def _round(index, *, options, problem, graph, diagnosis_options, candidates, allow_add=True):
+@dataclass(frozen=True)
+class _Linearised:
+    """What a round keeps of its linearisation for the next steps of the loop.
+
+    Attributes
+    ----------
+    model : graph_calib.model.CalibrationModel
+        The extended model (the current one with every untested candidate).
+    x : ndarray (P,)
+        The current solution embedded in ``model.layout`` (candidates zero).
+    pre : graph_calib.model.preintegration.Preintegrated
+        ``model``'s preintegration, at ``x`` or near enough for a first-order update
+        (:meth:`~graph_calib.model.preintegration.Preintegrated.needs_repreintegration`).
+    factors : dict
+        ``{kind: Residuals}`` at the solution (without Jacobians): the stage's factor residuals.
+    start : tuple or None
+        ``(R, x)`` after one Gauss-Newton step of the grown model from the current solution, ``x`` in
+        ``model.layout``, when the round added an effect: where the grown model's solve starts.
+    """
+
+    model: object
+    x: np.ndarray
+    pre: object
+    factors: dict
+    start: tuple | None = None
+
+
+def _extended_model(model, names, previous):
+    """``model`` with the further effects ``names``: ``previous``'s extended model when it is the same one.
+
+    The extended model of every round holds the same effects (those the current model holds plus
+    those still untested), so the first round's serves every later one, in the same layout.
+    """
+    if previous is not None and set(previous.model.options.extra_effects) == set(names):
+        return previous.model
+    return model.with_effects(names)
+
+
+def _round(index, *, options, problem, graph, diagnosis_options, candidates, allow_add=True, sums=None,
+           previous=None):
     """One round: linearise the extended model at the solution, test, decide.
 
-    Returns the :class:`Round` and ``(extended model, x embedded, its preintegration)`` (for the stage's
-    factor residuals at the same solution).
+    ``sums``: the record's driver sums (:class:`~graph_calib.diagnosis.drivers.DriverSums`, one for
+    every round).  ``previous``: the previous round's :class:`_Linearised`: its extended model and
+    preintegration serve again when the solution moved so little that the preintegration is updated to
+    first order (``GraphOptions.repreintegrate_tol``, as the solvers decide).
+
+    Returns the :class:`Round` and the round's :class:`_Linearised`.
     """
     t0 = time.perf_counter()
     model = problem.model
     untested = [name for name in candidates if name not in model.layout]
     # the same prepared record, static intervals and alignment: only the layout grows
-    extended = model.with_effects(tuple(options.model.extra_effects) + tuple(untested))
+    extended = _extended_model(model, tuple(options.model.extra_effects) + tuple(untested), previous)
     x_extended = extended.layout.embed(model.layout, graph.x)
-    pre = extended.preintegrate(x_extended)
+    if (previous is not None and previous.model is extended
+            and not previous.pre.needs_repreintegration(x_extended, tol=options.graph.repreintegrate_tol)):
+        pre = previous.pre
+    else:
+        pre = extended.preintegrate(x_extended)
     system, drivers = linearise(extended, graph.attitudes, x_extended, q_nb0=problem.q_nb0,
-                                null_names=model.layout.names, n_segments=diagnosis_options.time_segments, pre=pre)
+                                null_names=model.layout.names, n_segments=diagnosis_options.time_segments, pre=pre,
+                                sums=sums, keep_step=allow_add, keep_factors=True)
     candidate_tests, candidate_columns = _test_candidates(system, extended.layout, untested,
                                                           diagnosis_options=diagnosis_options)
     driver_tests, driver_columns = _test_drivers(system, drivers, extended, diagnosis_options=diagnosis_options)
     added, decision, checks = _decide(system, candidate_tests, candidate_columns, driver_tests, driver_columns,
                                       allow_add=allow_add, diagnosis_options=diagnosis_options)
+    start = None
+    if added is not None:
+        # the grown model's first Gauss-Newton step from the current solution, from this linearisation
+        dx, delta = system.gauss_newton_step(np.concatenate([system.null, candidate_columns[added]]))
+        if np.all(np.isfinite(dx)) and np.all(np.isfinite(delta)):
+            start = (graph.attitudes @ exp_so3(delta), x_extended + dx)
     rnd = Round(index=index, layout=tuple(model.layout.names), candidates=candidate_tests, drivers=driver_tests,
                 variance_factor=system.variance_factor, chi2_per_dof=system.chi2 / max(system.dof, 1),
                 added=added, decision=decision, checks=checks, seconds=time.perf_counter() - t0)
-    return rnd, (extended, x_extended, pre)
+    return rnd, _Linearised(model=extended, x=x_extended, pre=pre, factors=system.factors, start=start)
 
 
 # ---------------------------------------------------------------------------
@@ -333,13 +394,21 @@ def _round(index, *, options, problem, graph, diagnosis_options, candidates, all
 # ---------------------------------------------------------------------------
 
 
-def _add_effect(name, *, options, problem, graph, say):
-    """Add effect ``name`` to the model and re-solve from the previous solution: ``(options, problem, graph)``."""
+def _add_effect(name, *, options, problem, graph, lin, say):
+    """Add effect ``name`` to the model and re-solve: ``(options, problem, graph)``.
+
+    The solve starts where the round's linearisation (``lin``, :class:`_Linearised`) put the first
+    Gauss-Newton step of the grown model, else from the previous solution (the new parameters zero).
+    Either way the solver iterates to its own fixed point; from the step it needs one iteration fewer.
+    """
     options = _with_effects(options, tuple(options.model.extra_effects) + (name,))
     grown = problem.with_effects(options.model.extra_effects)
-    x0 = grown.model.layout.embed(problem.model.layout, graph.x)
+    if lin is not None and lin.start is not None:
+        initial = (lin.start[0], grown.model.layout.embed(lin.model.layout, lin.start[1]))
+    else:
+        initial = (graph.attitudes, grown.model.layout.embed(problem.model.layout, graph.x))
     say(f"re-solving with {name} ...")
-    graph = _solve_graph(grown, options=options, initial=(graph.attitudes, x0))
+    graph = _solve_graph(grown, options=options, initial=initial)
     return options, grown, graph
 
 
@@ -383,25 +452,29 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     declared = problem.model
     say(f"declared model: {declared.layout.size} parameters, {declared.n_keyframes} keyframes; factor graph ...")
     graph = _solve_graph(problem, options=options)
+    sums = DriverSums.of(declared, n_segments=diagnosis.time_segments)   # the record's: one for every round
+    context = keyframe_context(declared)                                 # and one for both stages
     rounds, added = [], []
     before = None
+    lin = None
     while True:
         rnd, lin = _round(len(rounds) + 1, options=options, problem=problem, graph=graph,
                           diagnosis_options=diagnosis, candidates=candidates,
-                          allow_add=len(added) < diagnosis.max_added)
+                          allow_add=len(added) < diagnosis.max_added, sums=sums, previous=lin)
         rounds.append(rnd)
         say(f"round {rnd.index}: {rnd.decision}")
         if before is None:      # the declared model's stage, its residuals from the first round's linearisation
             before = _make_stage(problem, graph, options=options, diagnosis_options=diagnosis, truth=truth,
-                                 linearised=lin, say=say)
+                                 linearised=lin, context=context, say=say)
             fixed = {s: r.sigmas for s, r in before.results.items()}
         if rnd.added is None:
             break
         added.append(rnd.added)
-        options, problem, graph = _add_effect(rnd.added, options=options, problem=problem, graph=graph, say=say)
+        options, problem, graph = _add_effect(rnd.added, options=options, problem=problem, graph=graph, lin=lin,
+                                              say=say)
     after = before if not added else _make_stage(problem, graph, options=options, diagnosis_options=diagnosis,
                                                  truth=truth, fixed_sigmas=fixed, kf_from=before.kf,
-                                                 linearised=lin, say=say)
+                                                 linearised=lin, context=context, say=say)
     signature = sorted((d for d in rounds[-1].drivers if d.significant), key=lambda d: d.log10_p)
     source = experiment.source.rsplit("/", 1)[-1] if experiment.source else ""
     return Diagnosis(source=source, added=added, unexplained=bool(signature), signature=signature, rounds=rounds,

@@ -5,28 +5,26 @@ the factors of the model *extended* by the candidates (same prepared record, sam
 static mask, same alignment; every candidate's parameters zero) once.  With ``J`` the
 whitened Jacobian in the keyframe attitudes ``a`` and the calibration ``x`` and ``r``
 the whitened residuals, the system is ``H = J^T J + priors``, ``g = J^T r``.  The
-attitudes are eliminated (block-tridiagonal, sparse LU), leaving the
-:class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
-driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended.  The score tests
-(:mod:`graph_calib.diagnosis.score`) work on it.
+attitudes are eliminated (block-tridiagonal: banded Cholesky, :func:`_eliminate`), leaving
+the :class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
+driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended; a driver column is
+its bias column times each factor's mean of the series, accumulated without forming it
+(:func:`_driver_blocks`).  The score tests (:mod:`graph_calib.diagnosis.score`) work on
+it; :meth:`ReducedSystem.gauss_newton_step` gives the step of a grown model from it.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
+import scipy.linalg as sla
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
+from scipy.linalg import blas, lapack
 
-from graph_calib.diagnosis.drivers import (
-    SENSOR_AXES,
-    TIME_SEGMENTS,
-    cumulative_sums,
-    driver_series,
-    interval_means,
-)
+from graph_calib.diagnosis.drivers import SENSOR_AXES, TIME_SEGMENTS, DriverSums
 from graph_calib.params import Layout
 
 
@@ -59,6 +57,14 @@ class ReducedSystem:
         Wall time of :func:`linearise`.
     driver_means : ndarray (K, D) or None
         Keyframe means of the driver series (None without the drivers).
+    prior_h, prior_r : ndarray (layout.size,) or None
+        Diagonal of the calibration prior's whitening and its whitened residual at the linearisation
+        point, every calibration column (for :meth:`gauss_newton_step`).
+    attitudes : AttitudeSolve or None
+        What the elimination leaves to recover the attitudes' step (for :meth:`gauss_newton_step`).
+    factors : dict or None
+        ``{kind: Residuals}`` of the linearisation point without their Jacobians (``keep_factors``):
+        the current model's residuals, for :func:`graph_calib.diagnosis.residuals.factor_residuals`.
     """
 
     columns: list[str]
@@ -72,11 +78,74 @@ class ReducedSystem:
     n_drivers: int
     seconds: float = 0.0
     driver_means: np.ndarray | None = None
+    prior_h: np.ndarray | None = field(default=None, repr=False)
+    prior_r: np.ndarray | None = field(default=None, repr=False)
+    attitudes: AttitudeSolve | None = field(default=None, repr=False, compare=False)
+    factors: dict | None = field(default=None, repr=False, compare=False)
 
     @property
     def variance_factor(self):
         """``s^2 = max(1, chi^2 / dof)``: guards against noise densities that are too optimistic."""
         return max(1.0, self.chi2 / max(self.dof, 1))
+
+    def gauss_newton_step(self, columns):
+        """One Gauss-Newton step of the model whose calibration columns are ``columns``, every attitude free.
+
+        The columns of the system left out (the other candidates, the drivers) are held where
+        they are (zero).  The priors of ``columns`` outside :attr:`null` are added to the system.
+        From the current solution with a candidate's columns added this is the first step of the
+        grown model's solve, exactly as a solver takes it (without damping).
+
+        Parameters
+        ----------
+        columns : ndarray of int
+            Calibration columns (of :attr:`layout`) that move; they include :attr:`null`.
+
+        Returns
+        -------
+        dx : ndarray (layout.size,)
+            Step of the calibration, zero outside ``columns``.
+        delta : ndarray (K+1, 3)
+            Step of each keyframe attitude, rad (right perturbation: ``C_nb Exp(delta)``).
+        """
+        if self.attitudes is None or self.prior_h is None:
+            raise ValueError("this reduced system keeps no attitude elimination (linearise(..., keep_step=True))")
+        cols = np.asarray(columns, dtype=np.int64)
+        A = self.A[np.ix_(cols, cols)].copy()
+        b = self.b[cols].copy()
+        extra = ~np.isin(cols, self.null)
+        h = self.prior_h[cols[extra]]
+        A[np.flatnonzero(extra), np.flatnonzero(extra)] += h**2
+        b[extra] += h * self.prior_r[cols[extra]]
+        dxc = -sla.cho_solve(sla.cho_factor(A), b)
+        dx = np.zeros(self.A.shape[0])
+        dx[cols] = dxc
+        delta = -self.attitudes.solve(dx)
+        return dx[: self.layout.size], delta.reshape(-1, 3)
+
+
+@dataclass(frozen=True)
+class AttitudeSolve:
+    """``Haa^-1 (ga + Hax dx)`` for any calibration step ``dx``: the eliminated attitudes' share of a step.
+
+    Attributes
+    ----------
+    chol : ndarray (6, 3 (K+1)) or None
+        Lower banded Cholesky factor ``L`` of ``Haa`` (None where the sparse LU solved instead).
+    Y : ndarray (3 (K+1), Q + 1)
+        ``L^-1 [Hax, ga]`` (``Haa^-1 [Hax, ga]`` without ``chol``).
+    """
+
+    chol: np.ndarray | None
+    Y: np.ndarray
+
+    def solve(self, dx):
+        """``Haa^-1 (ga + Hax dx)``, shape (3 (K+1),), for ``dx`` (Q,)."""
+        v = self.Y[:, -1] + self.Y[:, :-1] @ np.asarray(dx, dtype=float)
+        if self.chol is None:
+            return v
+        v, info = lapack.dtbtrs(self.chol, v[:, None], uplo="L", trans="T")
+        return v[:, 0]
 
 
 def _add_at(target, keys, values):
@@ -90,7 +159,185 @@ def _add_at(target, keys, values):
     target[keys[starts]] += np.add.reduceat(values, starts, axis=0)
 
 
-def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_SEGMENTS, chunk=4096, pre=None):
+def _eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx):
+    """Eliminate the attitudes: ``A = Hxx - Hax^T Haa^-1 Hax``, ``b = gx - Hax^T Haa^-1 ga``.
+
+    ``Haa`` is block-tridiagonal with 3 x 3 blocks (``Hdiag`` on the diagonal, ``Hoff`` above it),
+    symmetric positive definite: a band of half-width 5.  Its banded Cholesky factor ``L``
+    (LAPACK ``pbtrf``) gives ``Y = L^-1 [Hax, ga]`` by one banded triangular solve (``tbtrs``),
+    and ``Hax^T Haa^-1 Hax = Y^T Y``.  Should ``Haa`` not be positive definite in floating point,
+    the sparse LU does the same.
+
+    Parameters
+    ----------
+    Hdiag : ndarray (K+1, 3, 3)
+    Hoff : ndarray (K, 3, 3)
+        Block ``(k, k+1)``.
+    Hax : ndarray (3 (K+1), Q)
+    ga : ndarray (3 (K+1),)
+    Hxx : ndarray (Q, Q)
+    gx : ndarray (Q,)
+
+    Returns
+    -------
+    A : ndarray (Q, Q)
+        Symmetric.
+    b : ndarray (Q,)
+    attitudes : AttitudeSolve
+    """
+    na, Q = Hax.shape
+    K = Hoff.shape[0]
+    # lower band storage: ab[i - j, j] = Haa[i, j] for 0 <= i - j <= 5
+    ab = np.zeros((6, na))
+    i3, j3 = np.tril_indices(3)
+    for a_, b_ in zip(i3, j3):
+        ab[a_ - b_, 3 * np.arange(K + 1) + b_] = Hdiag[:, a_, b_]
+    for a_ in range(3):
+        for b_ in range(3):
+            # block (k+1, k) = Hoff[k]^T: row 3k+3+a_, column 3k+b_
+            ab[3 + a_ - b_, 3 * np.arange(K) + b_] = Hoff[:, b_, a_]
+    rhs = np.asfortranarray(np.column_stack([Hax, ga]))
+    c, info = lapack.dpbtrf(ab, lower=1)
+    if info == 0:
+        Y, info = lapack.dtbtrs(c, rhs, uplo="L", overwrite_b=1)
+    if info == 0:
+        Yx = Y[:, :Q]
+        A = Hxx - _gram(Yx)
+        b = gx - Yx.T @ Y[:, Q]
+        att = AttitudeSolve(chol=c, Y=Y)
+    else:
+        base = np.arange(3)
+        br, bc = np.repeat(base, 3), np.tile(base, 3)          # a 3 x 3 block, row-major
+        kd = 3 * np.arange(K + 1)[:, None]
+        ko = 3 * np.arange(K)[:, None]
+        rows = np.concatenate([(kd + br).ravel(), (ko + br).ravel(), (ko + 3 + br).ravel()])
+        cols = np.concatenate([(kd + bc).ravel(), (ko + 3 + bc).ravel(), (ko + bc).ravel()])
+        vals = np.concatenate([Hdiag.ravel(), Hoff.ravel(), np.swapaxes(Hoff, 1, 2).ravel()])
+        sol = spla.splu(sp.csc_matrix((vals, (rows, cols)), shape=(na, na))).solve(np.column_stack([Hax, ga]))
+        A = Hxx - Hax.T @ sol[:, :Q]
+        b = gx - Hax.T @ sol[:, Q]
+        att = AttitudeSolve(chol=None, Y=sol)
+    return 0.5 * (A + A.T), b, att
+
+
+def _gram(X):
+    """``X^T X`` of ``X`` (m, n), symmetric (BLAS ``syrk``: half the products of ``X.T @ X``)."""
+    X = np.asarray(X, dtype=float)
+    if X.shape[1] == 0:
+        return np.zeros((0, 0))
+    C = blas.dsyrk(1.0, X, trans=1) if X.flags.f_contiguous else blas.dsyrk(1.0, X.T, trans=0)
+    return np.triu(C) + np.triu(C, 1).T
+
+
+def _key_outer_sums(key, W, M, n_keys):
+    """``sum over f with key_f = k of W_f M_f^T`` for every ``k``: shape (n_keys, w, s).
+
+    ``key`` (F,) ascending; ``W`` (F, w), ``M`` (F, s).  The factors of each key are laid side by
+    side (zero-padded to the most any key holds) and summed by one batched product, without
+    forming the F outer products.
+    """
+    F = key.size
+    out = np.zeros((n_keys, W.shape[1], M.shape[1]))
+    if F == 0:
+        return out
+    first = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+    count = np.diff(np.concatenate([first, [F]]))
+    pos = np.arange(F) - np.repeat(first, count)
+    keys = key[first]
+    n = int(count.max())
+    Wp = np.zeros((keys.size, n, W.shape[1]))
+    Mp = np.zeros((keys.size, n, M.shape[1]))
+    grp = np.repeat(np.arange(keys.size), count)
+    Wp[grp, pos] = W
+    Mp[grp, pos] = M
+    out[keys] = np.swapaxes(Wp, 1, 2) @ Mp
+    return out
+
+
+def _block(rows, cols):
+    """Index of the block ``rows x cols`` (each a slice with a stop, or an index array) of a matrix."""
+    if isinstance(rows, slice) and isinstance(cols, slice):
+        return rows, cols
+
+    def idx(a):
+        return np.arange(a.start, a.stop) if isinstance(a, slice) else a
+
+    return np.ix_(idx(rows), idx(cols))
+
+
+def _driver_blocks(Hb, r, A_, B_, M, bi, sd, Xc, key, n_keys):
+    """The driver columns' share of one kind of factor, from per-factor driver means.
+
+    A driver column of factor ``f`` is its bias column times the factor's mean of the
+    series, ``X_f[:, d] = Hb_f[:, bi_d] M_f[sd_d]``; its products with the other columns
+    are therefore products of the bias columns weighted by the means, formed per bias
+    axis without building ``X`` (F x 3 x drivers), and its coupling to the attitudes is a
+    per-keyframe sum of ``(A_f^T Hb_f) M_f^T`` (:func:`_key_outer_sums`).
+
+    Parameters
+    ----------
+    Hb : ndarray (F, 3, nb)
+        Whitened Jacobian columns of the bias axes the drivers sit on.
+    r : ndarray (F, 3)
+        Whitened residuals.
+    A_, B_ : ndarray (F, 3, 3)
+        Whitened Jacobians in the attitudes ``key`` and ``key + 1`` (``B_`` None when absent).
+    M : ndarray (F, D)
+        Each factor's mean of every driver series.
+    bi, sd : ndarray of int (nd,)
+        Bias axis (column of ``Hb``) and series (column of ``M``) of each driver touched.
+    Xc : ndarray (F, 3, nc)
+        Whitened Jacobian in the calibration columns the kind touches.
+    key : ndarray of int (F,)
+        Keyframe of each factor, ascending.
+    n_keys : int
+        Keyframe boundaries (K+1).
+
+    Returns
+    -------
+    DD : ndarray (nd, nd)
+        Information among the drivers.
+    CD : ndarray (nc, nd)
+        Information between the calibration columns and the drivers.
+    gD : ndarray (nd,)
+        Gradient of the drivers.
+    Hax_d : ndarray (K+1, 3, nd)
+        Information between the attitudes and the drivers.
+    """
+    nd = bi.size
+    F, _, nb = Hb.shape
+    DD = np.zeros((nd, nd))
+    CD = np.zeros((Xc.shape[2], nd))
+    gD = np.zeros(nd)
+    Ms = M[:, sd]                                                # (F, nd): each driver's means, once
+    groups = []
+    for b in np.unique(bi):
+        jb = np.flatnonzero(bi == b)
+        # the drivers of one axis are adjacent: a slice, so that its means are a view, not a copy
+        sl = slice(int(jb[0]), int(jb[-1]) + 1) if jb.size == jb[-1] - jb[0] + 1 else jb
+        groups.append((b, sl))
+    for b, jb in groups:
+        h = Hb[:, :, b]                                          # (F, 3)
+        Mb = Ms[:, jb]                                           # (F, nb_d)
+        CD[:, jb] = np.einsum("fic,fi->cf", Xc, h) @ Mb
+        gD[jb] = np.einsum("fi,fi->f", h, r) @ Mb
+        for b2, jb2 in groups:
+            if b2 < b:
+                continue
+            g = np.einsum("fi,fi->f", h, Hb[:, :, b2])
+            blk = (Mb * g[:, None]).T @ Ms[:, jb2]
+            DD[_block(jb, jb2)] = blk
+            DD[_block(jb2, jb)] = blk.T
+    # attitudes: sum over each keyframe's factors of (A_f^T Hb_f)[:, b] M_f[s], then the (b, s) of each driver
+    S = _key_outer_sums(key, np.einsum("fji,fjb->fib", A_, Hb).reshape(F, 3 * nb), M, n_keys)
+    if B_ is not None:
+        S += _key_outer_sums(key + 1, np.einsum("fji,fjb->fib", B_, Hb).reshape(F, 3 * nb), M, n_keys)
+    Hax_d = np.stack([S[:, i * nb + bi, sd] for i in range(3)], axis=1)
+    return DD, CD, gD, Hax_d
+
+
+def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_SEGMENTS, pre=None, sums=None,
+              keep_step=False, keep_factors=False):
     """Linearise ``model`` (an extended layout) at ``(R, x)`` and eliminate the attitudes.
 
     Parameters
@@ -108,11 +355,17 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     drivers : bool
         Append the generic driver columns.
     n_segments : int
-        Cubic B-spline functions of the ``time`` driver.
-    chunk : int
-        Factors accumulated at a time (bounds the memory of the driver columns).
+        Cubic B-spline functions of the ``time`` driver (when ``sums`` is not given).
     pre : graph_calib.model.preintegration.Preintegrated, optional
         ``model.preintegrate(x)`` when the caller has it already.
+    sums : graph_calib.diagnosis.drivers.DriverSums, optional
+        The driver sums of ``model``'s record when the caller has them already (they depend on the
+        record only: one serves every round of a loop).
+    keep_step : bool
+        Keep what :meth:`ReducedSystem.gauss_newton_step` needs (the attitudes' elimination,
+        ``3 (K+1) x (Q+1)`` numbers).
+    keep_factors : bool
+        Keep the factors' residuals at ``(R, x)`` (:attr:`ReducedSystem.factors`).
 
     Returns
     -------
@@ -132,9 +385,9 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     )
     dlist = []
     if drivers:
-        Phi, dlist = driver_series(model, n_segments=n_segments)
-        Phi_cs = cumulative_sums(Phi)
-        del Phi
+        if sums is None:
+            sums = DriverSums.of(model, n_segments=n_segments)
+        dlist = sums.drivers
         axis_col = {}
         for i, ax in enumerate(SENSOR_AXES):
             triad, el = ax.split(".")
@@ -157,51 +410,44 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         F = res.r.shape[0]
         if F == 0:
             continue
-        r, HR, HRn, Hx = res.whitened_system()
+        # only the columns this kind of factor touches (a rotation or encoder factor sees no accelerometer
+        # parameter, hence none of the accelerometer drivers): the columns left out are exactly zero, before
+        # and after the whitening (which mixes a factor's rows, never its columns), so only these are whitened
+        nzc = np.flatnonzero(np.any(res.H_x != 0.0, axis=(0, 1)))
+        r, A_, B_, Xc = replace(res, H_x=res.H_x[:, :, nzc]).whitened_system()
         chi2 += float(np.sum(r**2))
         m_data += r.size
         key = res.key
-        # only the columns this kind of factor touches (a rotation or encoder factor sees no accelerometer
-        # parameter, hence none of the accelerometer drivers): the columns left out are exactly zero
-        nzc = np.flatnonzero(np.any(Hx != 0.0, axis=(0, 1)))
-        if drivers:
-            lo = k0[key]
-            if kind == "encoder":
-                hi = model.record.reading_sample + 1
-            else:
-                hi = k0[key + 1]
-            dsel = np.flatnonzero(np.isin(d_bias, nzc))
-            cols = np.concatenate([nzc, P + dsel])
-        else:
-            cols = nzc
-        nc = cols.size
-        Hax_k = np.zeros((K + 1, 3, nc))
-        for a in range(0, F, chunk):
-            sl = slice(a, min(F, a + chunk))
-            Hx_c = Hx[sl]
-            X = Hx_c[:, :, nzc]
-            if drivers:
-                means = interval_means(Phi_cs, lo[sl], hi[sl])           # (f, series)
-                XD = Hx_c[:, :, d_bias[dsel]] * means[:, None, d_series[dsel]]      # (f, 3, drivers)
-                X = np.concatenate([X, XD], axis=2)
-            kk = key[sl]
-            A_ = HR[sl]
-            rr = r[sl]
-            At = np.swapaxes(A_, 1, 2)
-            _add_at(Hdiag, kk, At @ A_)
-            _add_at(Hax_k, kk, At @ X)
-            _add_at(ga, kk, np.einsum("fji,fj->fi", A_, rr))
-            if HRn is not None:
-                B_ = HRn[sl]
-                Bt = np.swapaxes(B_, 1, 2)
-                _add_at(Hdiag, kk + 1, Bt @ B_)
-                _add_at(Hoff, kk, At @ B_)
-                _add_at(Hax_k, kk + 1, Bt @ X)
-                _add_at(ga, kk + 1, np.einsum("fji,fj->fi", B_, rr))
-            Xf = X.reshape(-1, nc)
-            Hxx[np.ix_(cols, cols)] += Xf.T @ Xf
-            gx[cols] += Xf.T @ rr.reshape(-1)
-        Hax[:, :, cols] += Hax_k
+        At = np.swapaxes(A_, 1, 2)
+        _add_at(Hdiag, key, At @ A_)
+        _add_at(ga, key, np.einsum("fji,fj->fi", A_, r))
+        Hax_k = np.zeros((K + 1, 3, nzc.size))
+        _add_at(Hax_k, key, At @ Xc)
+        if B_ is not None:
+            Bt = np.swapaxes(B_, 1, 2)
+            _add_at(Hdiag, key + 1, Bt @ B_)
+            _add_at(Hoff, key, At @ B_)
+            _add_at(ga, key + 1, np.einsum("fji,fj->fi", B_, r))
+            _add_at(Hax_k, key + 1, Bt @ Xc)
+        Hax[:, :, nzc] += Hax_k
+        Xf = Xc.reshape(-1, nzc.size)
+        Hxx[np.ix_(nzc, nzc)] += _gram(Xf)
+        gx[nzc] += Xf.T @ r.reshape(-1)
+        dsel = np.flatnonzero(np.isin(d_bias, nzc)) if drivers else np.zeros(0, dtype=np.int64)
+        if dsel.size == 0:
+            continue
+        # the drivers on the bias axes this kind touches, from each factor's means of the series
+        hi = model.record.reading_sample + 1 if kind == "encoder" else k0[key + 1]
+        M = sums.means(k0[key], hi)                                   # (F, series)
+        bcols, bi = np.unique(d_bias[dsel], return_inverse=True)
+        Hb = Xc[:, :, np.searchsorted(nzc, bcols)]                    # the bias columns (among nzc)
+        DD, CD, gD, Hax_d = _driver_blocks(Hb, r, A_, B_, M, bi, d_series[dsel], Xc, key, K + 1)
+        dcol = P + dsel
+        Hxx[np.ix_(dcol, dcol)] += DD
+        Hxx[np.ix_(nzc, dcol)] += CD
+        Hxx[np.ix_(dcol, nzc)] += CD.T
+        gx[dcol] += gD
+        Hax[:, :, dcol] += Hax_d
     # priors of the current model's calibration columns
     cal_prior = model.calibration_prior(x)
     x_sigma = cal_prior.sigma
@@ -215,27 +461,16 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     for k, att_prior in model.attitude_priors(R, R_priors=model.segment_priors(q_nb0)):
         Hdiag[k] += att_prior.H.T @ att_prior.H
         ga[k] += att_prior.H.T @ att_prior.r
-    # eliminate the attitudes
-    base = np.arange(3)
-    br, bc = np.repeat(base, 3), np.tile(base, 3)          # a 3 x 3 block, row-major
-    kd = 3 * np.arange(K + 1)[:, None]
-    ko = 3 * np.arange(K)[:, None]
-    rows = np.concatenate([(kd + br).ravel(), (ko + br).ravel(), (ko + 3 + br).ravel()])
-    cols = np.concatenate([(kd + bc).ravel(), (ko + 3 + bc).ravel(), (ko + bc).ravel()])
-    vals = np.concatenate([Hdiag.ravel(), Hoff.ravel(), np.swapaxes(Hoff, 1, 2).ravel()])
-    Haa = sp.csc_matrix((vals, (rows, cols)), shape=(na, na))
-    lu = spla.splu(Haa)
-    rhs = np.concatenate([Hax.reshape(na, Q), ga.reshape(na, 1)], axis=1)
-    sol = lu.solve(rhs)
-    Hax2 = Hax.reshape(na, Q)
-    A = Hxx - Hax2.T @ sol[:, :Q]
-    b = gx - Hax2.T @ sol[:, Q]
-    A = 0.5 * (A + A.T)
+    A, b, att = _eliminate(Hdiag, Hoff, Hax.reshape(na, Q), ga.reshape(na), Hxx, gx)
     dof = m_data - na - null_idx.size
     names = layout.element_names() + [f"driver:{i}" for i in range(ND)]
-    means = interval_means(Phi_cs, k0[:-1], k0[1:]) if drivers else None
+    means = sums.means(k0[:-1], k0[1:]) if drivers else None
+    kept = None
+    if keep_factors:
+        kept = {kind: replace(res, H_R=None, H_R_next=None, H_x=None) for kind, res in kinds}
     rs = ReducedSystem(columns=names, A=A, b=b, null=null_idx, layout=layout, prior_sigma=x_sigma,
                        chi2=chi2, dof=int(dof), n_drivers=ND, seconds=time.perf_counter() - t0,
-                       driver_means=means)
+                       driver_means=means, prior_h=np.diag(cal_prior.H).copy(), prior_r=np.asarray(cal_prior.r).copy(),
+                       attitudes=att if keep_step else None, factors=kept)
     return rs, dlist
 

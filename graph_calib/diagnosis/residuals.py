@@ -18,7 +18,7 @@ from graph_calib import effects
 from graph_calib.diagnosis.drivers import keyframe_context
 
 
-def factor_residuals(model, R, x, *, pre=None):
+def factor_residuals(model, R, x, *, pre=None, factors=None):
     """Per kind: time, keyframe, SI and whitened residuals at ``(R, x)``; gravity also in body axes.
 
     Parameters
@@ -30,6 +30,9 @@ def factor_residuals(model, R, x, *, pre=None):
         Calibration in ``model.layout``.
     pre : graph_calib.model.preintegration.Preintegrated, optional
         ``model.preintegrate(x)`` when the caller has it already.
+    factors : dict, optional
+        ``{kind: Residuals}`` at ``(R, x)`` when the caller has them already (their Jacobians are
+        not used; :attr:`graph_calib.diagnosis.reduced_system.ReducedSystem.factors`).
 
     Returns
     -------
@@ -37,13 +40,16 @@ def factor_residuals(model, R, x, *, pre=None):
         ``{kind: {"t", "key", "r", "w"}}`` with ``r``, ``w`` of shape (F, 3); gravity also
         ``"r_body"``, ``"w_body"`` and the keyframes' ``"static"`` flags.
     """
-    if pre is None:
-        pre = model.preintegrate(x)
+    if factors is None:
+        if pre is None:
+            pre = model.preintegrate(x)
+        factors = {"rotation": model.rotation_factors(R, pre, x), "gravity": model.gravity_factors(R, pre, x),
+                   "encoder": model.encoder_factors(R, pre, x)}
     out = {}
-    rot = model.rotation_factors(R, pre, x)
+    rot = factors["rotation"]
     for kind, res, t in (("rotation", rot, model.t_key[rot.key + 1]),
-                         ("gravity", model.gravity_factors(R, pre, x), model.t_key[:-1]),
-                         ("encoder", model.encoder_factors(R, pre, x), model.record.reading_t)):
+                         ("gravity", factors["gravity"], model.t_key[:-1]),
+                         ("encoder", factors["encoder"], model.record.reading_t)):
         w = res.whitened()
         d = {"t": np.asarray(t, dtype=float), "key": res.key.copy(), "r": res.r.copy(), "w": w}
         if kind == "gravity":
@@ -153,7 +159,7 @@ def regression_tests(series, ctx, *, key, static=None):
 _COMPONENTS = {"rotation": "xyz (body)", "gravity": "ENU", "gravity_body": "xyz (body)", "encoder": "xyz (body)"}
 
 
-def residual_statistics(stage, *, top=5, lags=10):
+def residual_statistics(stage, *, top=5, lags=10, context=None):
     """Whiteness and driver relations of the residuals of both solvers.
 
     Parameters
@@ -164,6 +170,9 @@ def residual_statistics(stage, *, top=5, lags=10):
         Driver regressions kept per series (the most significant).
     lags : int
         Lags of the Ljung-Box statistic.
+    context : dict, optional
+        :func:`~graph_calib.diagnosis.drivers.keyframe_context` of the stage's record when the caller has
+        it already (it depends on the record only).
 
     Returns
     -------
@@ -172,7 +181,7 @@ def residual_statistics(stage, *, top=5, lags=10):
         "drivers": [top driver regressions]}}}``.
     """
     model = stage.problem.model
-    ctx = keyframe_context(model)
+    ctx = keyframe_context(model) if context is None else context
     out = {}
 
     def one(w, key, components, static=None):
