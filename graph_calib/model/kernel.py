@@ -60,6 +60,52 @@ def _pending_rows(rows, feat, pG, pHs, pHs1, pT, T, N, acc):
             acc[r, q] += f * N[ax, q]
 
 
+@numba.njit(cache=True, inline="always")
+def _rate_rows(rows, feat, M, sign, J, k):
+    """J[k, :, col_r] += sign * M[:, axis_r] * feat[r]: the calibrated rate's Jacobian of one sample's rows."""
+    for r in range(rows.shape[0]):
+        col = rows[r, 0]
+        ax = rows[r, 1]
+        for i in range(3):
+            J[k, i, col] += sign * M[i, ax] * feat[r]
+
+
+@numba.njit(cache=True, inline="always")
+def _tap_rows(rows, feat, acc, T, R, tapJ, tp, gv):
+    """tapJ[tp, :, col_r] += R^T (acc[r, :3] + feat[r] T[:, axis_r]): the rows at a reading (gv scratch)."""
+    for r in range(rows.shape[0]):
+        f = feat[r]
+        ax = rows[r, 1]
+        col = rows[r, 0]
+        for i in range(3):
+            gv[i] = acc[r, i] + f * T[i, ax]
+        for i in range(3):
+            tapJ[tp, i, col] += R[0, i] * gv[0] + R[1, i] * gv[1] + R[2, i] * gv[2]
+
+
+@numba.njit(cache=True, inline="always")
+def _keyframe_rows(rows, feat, acc, pG, pHs, pHs1, pT, R, s, s1, T1, T2, T3, gv, JR, JS, JS1, k):
+    """The last sample's pending rows closed into keyframe ``k``'s JR, JS, JS1 (T1, T2, T3, gv scratch)."""
+    _mm3(pG, pT, T1)
+    _mm3(pHs, pT, T2)
+    _mm3(pHs1, pT, T3)
+    for r in range(rows.shape[0]):
+        f = feat[r]
+        ax = rows[r, 1]
+        col = rows[r, 0]
+        for i in range(3):
+            gv[i] = acc[r, i] + f * T1[i, ax]
+        g0, g1, g2 = gv[0], gv[1], gv[2]
+        for i in range(3):
+            JR[k, i, col] += R[0, i] * g0 + R[1, i] * g1 + R[2, i] * g2
+        JS[k, 0, col] += acc[r, 3] + f * T2[0, ax] - (s[1] * g2 - s[2] * g1)
+        JS[k, 1, col] += acc[r, 4] + f * T2[1, ax] - (s[2] * g0 - s[0] * g2)
+        JS[k, 2, col] += acc[r, 5] + f * T2[2, ax] - (s[0] * g1 - s[1] * g0)
+        JS1[k, 0, col] += acc[r, 6] + f * T3[0, ax] - (s1[1] * g2 - s1[2] * g1)
+        JS1[k, 1, col] += acc[r, 7] + f * T3[1, ax] - (s1[2] * g0 - s1[0] * g2)
+        JS1[k, 2, col] += acc[r, 8] + f * T3[2, ax] - (s1[0] * g1 - s1[1] * g0)
+
+
 @numba.njit(cache=True, error_model="numpy")
 def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                   w_raw, f_raw, dw_raw, df_raw, tap_idx, tap_lo, n_newton,
@@ -235,17 +281,9 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
             if j == j0:
                 for i in range(3):
                     w_first[k, i] = w[i]
-                for r in range(ng):
-                    col = grows[r, 0]
-                    ax = grows[r, 1]
-                    for i in range(3):
-                        Jw_first[k, i, col] -= Aig[i, ax] * featg[r]
+                _rate_rows(grows, featg, Aig, -1.0, Jw_first, k)
                 if coupled:
-                    for r in range(na):
-                        col = arows[r, 0]
-                        ax = arows[r, 1]
-                        for i in range(3):
-                            Jw_first[k, i, col] += Bga[i, ax] * feata[r]
+                    _rate_rows(arows, feata, Bga, 1.0, Jw_first, k)
             th0, th1, th2 = th[0], th[1], th[2]
             v0, v1, v2 = vv[0], vv[1], vv[2]
             # coning: phi = th + (pth x th) / 12
@@ -317,23 +355,7 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                         pG[i, m] += Q[i, m]
                 _add_skew_mul(s, Q, pHs, pHs)
                 _add_skew_mul(s1, Q, pHs1, pHs1)
-                _mm3(pG, pTg, T1)
-                for i in range(3):
-                    for a in range(3):
-                        NG[a, i] = T1[i, a]
-                _mm3(pHs, pTg, T1)
-                for i in range(3):
-                    for a in range(3):
-                        NG[a, 3 + i] = T1[i, a]
-                _mm3(pHs1, pTg, T1)
-                for i in range(3):
-                    for a in range(3):
-                        NG[a, 6 + i] = T1[i, a]
-                for r in range(ng):
-                    f = pfeat[r]
-                    ax = grows[r, 1]
-                    for q in range(9):
-                        accG[r, q] += f * NG[ax, q]
+                _pending_rows(grows, pfeat, pG, pHs, pHs1, pTg, T1, NG, accG)
                 if coupled:
                     _pending_rows(arows, pfeata, pG, pHs, pHs1, pTga, T1, NGA, accGA)
             # this sample's share: P_j, R_{j-1} Mg + [S_j x] P_j, tm R_{j-1} Mg + [S1_j x] P_j
@@ -381,67 +403,17 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
                     for i in range(3):
                         for m in range(3):
                             tapR[tp, i, m] = R[i, m]
-                    for r in range(ng):
-                        f = pfeat[r]
-                        ax = grows[r, 1]
-                        col = grows[r, 0]
-                        for i in range(3):
-                            gv[i] = accG[r, i] + f * T1[i, ax]
-                        for i in range(3):
-                            tapJ[tp, i, col] += R[0, i] * gv[0] + R[1, i] * gv[1] + R[2, i] * gv[2]
+                    _tap_rows(grows, pfeat, accG, T1, R, tapJ, tp, gv)
                     if coupled:
                         _mm3(pG, pTga, T2)
-                        for r in range(na):
-                            f = pfeata[r]
-                            ax = arows[r, 1]
-                            col = arows[r, 0]
-                            for i in range(3):
-                                gv[i] = accGA[r, i] + f * T2[i, ax]
-                            for i in range(3):
-                                tapJ[tp, i, col] += R[0, i] * gv[0] + R[1, i] * gv[1] + R[2, i] * gv[2]
+                        _tap_rows(arows, pfeata, accGA, T2, R, tapJ, tp, gv)
                     tp += 1
-        # the last sample's pending gyro rows
-        _mm3(pG, pTg, T1)
-        _mm3(pHs, pTg, T2)
-        _mm3(pHs1, pTg, Rn)
-        for r in range(ng):
-            f = pfeat[r]
-            ax = grows[r, 1]
-            col = grows[r, 0]
-            for i in range(3):
-                gv[i] = accG[r, i] + f * T1[i, ax]
-            g0, g1, g2 = gv[0], gv[1], gv[2]
-            for i in range(3):
-                JR[k, i, col] += R[0, i] * g0 + R[1, i] * g1 + R[2, i] * g2
-            JS[k, 0, col] += accG[r, 3] + f * T2[0, ax] - (s[1] * g2 - s[2] * g1)
-            JS[k, 1, col] += accG[r, 4] + f * T2[1, ax] - (s[2] * g0 - s[0] * g2)
-            JS[k, 2, col] += accG[r, 5] + f * T2[2, ax] - (s[0] * g1 - s[1] * g0)
-            JS1[k, 0, col] += accG[r, 6] + f * Rn[0, ax] - (s1[1] * g2 - s1[2] * g1)
-            JS1[k, 1, col] += accG[r, 7] + f * Rn[1, ax] - (s1[2] * g0 - s1[0] * g2)
-            JS1[k, 2, col] += accG[r, 8] + f * Rn[2, ax] - (s1[0] * g1 - s1[1] * g0)
-            for i in range(3):
-                Jw_last[k, i, col] -= Aig[i, ax] * f
+        # the last sample's pending rows (Rn free now: scratch)
+        _keyframe_rows(grows, pfeat, accG, pG, pHs, pHs1, pTg, R, s, s1, T1, T2, Rn, gv, JR, JS, JS1, k)
+        _rate_rows(grows, pfeat, Aig, -1.0, Jw_last, k)
         if coupled:
-            _mm3(pG, pTga, T1)
-            _mm3(pHs, pTga, T2)
-            _mm3(pHs1, pTga, Rn)
-            for r in range(na):
-                f = pfeata[r]
-                ax = arows[r, 1]
-                col = arows[r, 0]
-                for i in range(3):
-                    gv[i] = accGA[r, i] + f * T1[i, ax]
-                g0, g1, g2 = gv[0], gv[1], gv[2]
-                for i in range(3):
-                    JR[k, i, col] += R[0, i] * g0 + R[1, i] * g1 + R[2, i] * g2
-                JS[k, 0, col] += accGA[r, 3] + f * T2[0, ax] - (s[1] * g2 - s[2] * g1)
-                JS[k, 1, col] += accGA[r, 4] + f * T2[1, ax] - (s[2] * g0 - s[0] * g2)
-                JS[k, 2, col] += accGA[r, 5] + f * T2[2, ax] - (s[0] * g1 - s[1] * g0)
-                JS1[k, 0, col] += accGA[r, 6] + f * Rn[0, ax] - (s1[1] * g2 - s1[2] * g1)
-                JS1[k, 1, col] += accGA[r, 7] + f * Rn[1, ax] - (s1[2] * g0 - s1[0] * g2)
-                JS1[k, 2, col] += accGA[r, 8] + f * Rn[2, ax] - (s1[0] * g1 - s1[1] * g0)
-                for i in range(3):
-                    Jw_last[k, i, col] += Bga[i, ax] * f
+            _keyframe_rows(arows, pfeata, accGA, pG, pHs, pHs1, pTga, R, s, s1, T1, T2, Rn, gv, JR, JS, JS1, k)
+            _rate_rows(arows, pfeata, Bga, 1.0, Jw_last, k)
         for r in range(na):
             col = arows[r, 0]
             for i in range(3):
