@@ -25,6 +25,7 @@ import scipy.sparse.linalg as spla
 from scipy.linalg import blas, lapack
 
 from graph_calib.diagnosis.drivers import SENSOR_AXES, TIME_SEGMENTS, DriverSums
+from graph_calib.model.factors import sum_by_key
 from graph_calib.params import Layout
 
 
@@ -146,17 +147,6 @@ class AttitudeSolve:
             return v
         v, info = lapack.dtbtrs(self.chol, v[:, None], uplo="L", trans="T")
         return v[:, 0]
-
-
-def _add_at(target, keys, values):
-    """``target[keys] += values`` for keys in ascending order (duplicates summed)."""
-    if keys.size == 0:
-        return
-    if keys.size == 1 or np.all(keys[1:] > keys[:-1]):
-        target[keys] += values
-        return
-    starts = np.concatenate([[0], np.flatnonzero(np.diff(keys)) + 1])
-    target[keys[starts]] += np.add.reduceat(values, starts, axis=0)
 
 
 def _eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx):
@@ -419,16 +409,16 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         m_data += r.size
         key = res.key
         At = np.swapaxes(A_, 1, 2)
-        _add_at(Hdiag, key, At @ A_)
-        _add_at(ga, key, np.einsum("fji,fj->fi", A_, r))
+        sum_by_key(Hdiag, key, At @ A_)
+        sum_by_key(ga, key, np.einsum("fji,fj->fi", A_, r))
         Hax_k = np.zeros((K + 1, 3, nzc.size))
-        _add_at(Hax_k, key, At @ Xc)
+        sum_by_key(Hax_k, key, At @ Xc)
         if B_ is not None:
             Bt = np.swapaxes(B_, 1, 2)
-            _add_at(Hdiag, key + 1, Bt @ B_)
-            _add_at(Hoff, key, At @ B_)
-            _add_at(ga, key + 1, np.einsum("fji,fj->fi", B_, r))
-            _add_at(Hax_k, key + 1, Bt @ Xc)
+            sum_by_key(Hdiag, key + 1, Bt @ B_)
+            sum_by_key(Hoff, key, At @ B_)
+            sum_by_key(ga, key + 1, np.einsum("fji,fj->fi", B_, r))
+            sum_by_key(Hax_k, key + 1, Bt @ Xc)
         Hax[:, :, nzc] += Hax_k
         Xf = Xc.reshape(-1, nzc.size)
         Hxx[np.ix_(nzc, nzc)] += _gram(Xf)

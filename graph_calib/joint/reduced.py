@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
 
+from graph_calib.model.factors import sum_by_key
 from graph_calib.rotations import exp_so3
 
 #: Half-bandwidth of the attitudes' block-tridiagonal information (3 x 3 blocks, neighbours only).
@@ -116,18 +117,6 @@ def retract(R, dR):
     return R @ exp_so3(dR)
 
 
-def _sum_by_key(target, key, vals):
-    """``target[key[i]] += vals[i]`` for keys in non-decreasing order (every factor kind's are): one sum per
-    run of equal keys (``np.add.at`` took half the time of a 3 h experiment's linearisation)."""
-    if key.size == 0:
-        return
-    if np.any(key[1:] < key[:-1]):
-        np.add.at(target, key, vals)
-        return
-    starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
-    target[key[starts]] += np.add.reduceat(vals, starts, axis=0)
-
-
 class _Accumulator:
     """Sums one experiment's whitened factors into its normal equations, in the calibration vector's
     columns (P): ``theta_e``'s blocks are ``M_u^T (.) M_u`` of them, formed once at the end."""
@@ -147,16 +136,16 @@ class _Accumulator:
         HR = H_R * s[:, :, None]
         Hx = H_x * s[:, :, None]
         HRT = np.swapaxes(HR, 1, 2)
-        _sum_by_key(self.D, key, HRT @ HR)
-        _sum_by_key(self.H_Rx, key, HRT @ Hx)
-        _sum_by_key(self.g_R, key, np.einsum("fji,fj->fi", HR, r))
+        sum_by_key(self.D, key, HRT @ HR)
+        sum_by_key(self.H_Rx, key, HRT @ Hx)
+        sum_by_key(self.g_R, key, np.einsum("fji,fj->fi", HR, r))
         if H_next is not None:
             Hn = H_next * s[:, :, None]
             HnT = np.swapaxes(Hn, 1, 2)
-            _sum_by_key(self.D, key + 1, HnT @ Hn)
-            _sum_by_key(self.O, key, HRT @ Hn)
-            _sum_by_key(self.H_Rx, key + 1, HnT @ Hx)
-            _sum_by_key(self.g_R, key + 1, np.einsum("fji,fj->fi", Hn, r))
+            sum_by_key(self.D, key + 1, HnT @ Hn)
+            sum_by_key(self.O, key, HRT @ Hn)
+            sum_by_key(self.H_Rx, key + 1, HnT @ Hx)
+            sum_by_key(self.g_R, key + 1, np.einsum("fji,fj->fi", Hn, r))
         flat = Hx.reshape(-1, Hx.shape[-1])
         self.H_xx += flat.T @ flat
         self.g_x += flat.T @ r.reshape(-1)

@@ -393,5 +393,27 @@ def calibration_prior(x, *, mean, sigma):
     return PriorResidual(r=(np.asarray(x, dtype=float) - mean) / sigma, H=np.diag(1.0 / sigma), sigma=sigma)
 
 
+def sum_by_key(target, key, vals):
+    """``target[key[i]] += vals[i]``, duplicates summed: a factor kind's terms into its keyframes' blocks.
+
+    Keys in non-decreasing order (every factor kind's are) are summed by one ``np.add.reduceat`` per run
+    of equal keys (``np.add.at`` took half the time of a 3 h experiment's linearisation); other orders
+    fall back to ``np.add.at``.
+
+    Parameters
+    ----------
+    target : ndarray, shape (n, ...)
+    key : ndarray of int, shape (F,)
+    vals : ndarray, shape (F, ...)
+    """
+    if key.size == 0:
+        return
+    if np.any(key[1:] < key[:-1]):
+        np.add.at(target, key, vals)
+        return
+    starts = np.flatnonzero(np.concatenate([[True], key[1:] != key[:-1]]))
+    target[key[starts]] += np.add.reduceat(vals, starts, axis=0)
+
+
 __all__ = ["Noise", "Residuals", "PriorResidual", "rotation_factors", "gravity_factors", "encoder_factors",
-           "attitude_prior", "calibration_prior"]
+           "attitude_prior", "calibration_prior", "sum_by_key"]
