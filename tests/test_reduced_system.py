@@ -19,7 +19,7 @@ from graph_calib.diagnosis.drivers import (
     interval_means,
     keyframe_context,
 )
-from graph_calib.diagnosis.reduced_system import _eliminate
+from graph_calib.model.attitude_elimination import eliminate
 from graph_calib.simulation import simulate
 
 EFFECT = "accel.bias_tc2"
@@ -141,12 +141,22 @@ def test_elimination_falls_back_to_the_sparse_lu_when_not_positive_definite():
     assert np.linalg.eigvalsh(H).min() < 0          # indefinite: the banded Cholesky fails
     Hax, ga = rng.normal(size=(na, Q)), rng.normal(size=na)
     Hxx, gx = 50.0 * np.eye(Q), rng.normal(size=Q)
-    A, b, att = _eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx)
+    with pytest.raises(RuntimeError, match="not positive definite"):
+        eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx, definite=True)
+    A, b, att = eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx)
     assert att.chol is None
     assert np.allclose(A, Hxx - Hax.T @ np.linalg.solve(H, Hax), rtol=1e-12, atol=1e-12)
     assert np.allclose(b, gx - Hax.T @ np.linalg.solve(H, ga), rtol=1e-12, atol=1e-12)
     dx = rng.normal(size=Q)
     assert np.allclose(att.solve(dx), np.linalg.solve(H, ga + Hax @ dx), rtol=1e-12, atol=1e-12)
+    # damped: lam on the attitudes only; the banded Cholesky then holds (H + 3 I is positive definite)
+    lam = 3.0
+    Hl = H + lam * np.eye(na)
+    A, b, att = eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx, lam=lam, definite=True)
+    assert att.chol is not None
+    assert np.allclose(A, Hxx - Hax.T @ np.linalg.solve(Hl, Hax), rtol=1e-12, atol=1e-12)
+    assert np.allclose(b, gx - Hax.T @ np.linalg.solve(Hl, ga), rtol=1e-12, atol=1e-12)
+    assert np.allclose(att.step(dx), -np.linalg.solve(Hl, ga + Hax @ dx).reshape(-1, 3), rtol=1e-12, atol=1e-12)
 
 
 def test_gauss_newton_step_is_the_factor_graphs_first_step_of_the_grown_model(solved):

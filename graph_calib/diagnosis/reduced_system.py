@@ -5,7 +5,8 @@ the factors of the model *extended* by the candidates (same prepared record, sam
 static mask, same alignment; every candidate's parameters zero) once.  With ``J`` the
 whitened Jacobian in the keyframe attitudes ``a`` and the calibration ``x`` and ``r``
 the whitened residuals, the system is ``H = J^T J + priors``, ``g = J^T r``.  The
-attitudes are eliminated (block-tridiagonal: banded Cholesky, :func:`_eliminate`), leaving
+attitudes are eliminated (block-tridiagonal: banded Cholesky,
+:mod:`graph_calib.model.attitude_elimination`, the joint solver's too), leaving
 the :class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
 driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended; a driver column is
 its bias column times each factor's mean of the series, accumulated without forming it
@@ -20,12 +21,9 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 import scipy.linalg as sla
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
-from scipy.linalg import blas, lapack
 
 from graph_calib.diagnosis.drivers import SENSOR_AXES, TIME_SEGMENTS, DriverSums
-from graph_calib.model.factors import sum_by_key
+from graph_calib.model.attitude_elimination import AttitudeSolve, NormalEquations
 from graph_calib.params import Layout
 
 
@@ -123,100 +121,6 @@ class ReducedSystem:
         dx[cols] = dxc
         delta = -self.attitudes.solve(dx)
         return dx[: self.layout.size], delta.reshape(-1, 3)
-
-
-@dataclass(frozen=True)
-class AttitudeSolve:
-    """``Haa^-1 (ga + Hax dx)`` for any calibration step ``dx``: the eliminated attitudes' share of a step.
-
-    Attributes
-    ----------
-    chol : ndarray (6, 3 (K+1)) or None
-        Lower banded Cholesky factor ``L`` of ``Haa`` (None where the sparse LU solved instead).
-    Y : ndarray (3 (K+1), Q + 1)
-        ``L^-1 [Hax, ga]`` (``Haa^-1 [Hax, ga]`` without ``chol``).
-    """
-
-    chol: np.ndarray | None
-    Y: np.ndarray
-
-    def solve(self, dx):
-        """``Haa^-1 (ga + Hax dx)``, shape (3 (K+1),), for ``dx`` (Q,)."""
-        v = self.Y[:, -1] + self.Y[:, :-1] @ np.asarray(dx, dtype=float)
-        if self.chol is None:
-            return v
-        v, info = lapack.dtbtrs(self.chol, v[:, None], uplo="L", trans="T")
-        return v[:, 0]
-
-
-def _eliminate(Hdiag, Hoff, Hax, ga, Hxx, gx):
-    """Eliminate the attitudes: ``A = Hxx - Hax^T Haa^-1 Hax``, ``b = gx - Hax^T Haa^-1 ga``.
-
-    ``Haa`` is block-tridiagonal with 3 x 3 blocks (``Hdiag`` on the diagonal, ``Hoff`` above it),
-    symmetric positive definite: a band of half-width 5.  Its banded Cholesky factor ``L``
-    (LAPACK ``pbtrf``) gives ``Y = L^-1 [Hax, ga]`` by one banded triangular solve (``tbtrs``),
-    and ``Hax^T Haa^-1 Hax = Y^T Y``.  Should ``Haa`` not be positive definite in floating point,
-    the sparse LU does the same.
-
-    Parameters
-    ----------
-    Hdiag : ndarray (K+1, 3, 3)
-    Hoff : ndarray (K, 3, 3)
-        Block ``(k, k+1)``.
-    Hax : ndarray (3 (K+1), Q)
-    ga : ndarray (3 (K+1),)
-    Hxx : ndarray (Q, Q)
-    gx : ndarray (Q,)
-
-    Returns
-    -------
-    A : ndarray (Q, Q)
-        Symmetric.
-    b : ndarray (Q,)
-    attitudes : AttitudeSolve
-    """
-    na, Q = Hax.shape
-    K = Hoff.shape[0]
-    # lower band storage: ab[i - j, j] = Haa[i, j] for 0 <= i - j <= 5
-    ab = np.zeros((6, na))
-    i3, j3 = np.tril_indices(3)
-    for a_, b_ in zip(i3, j3):
-        ab[a_ - b_, 3 * np.arange(K + 1) + b_] = Hdiag[:, a_, b_]
-    for a_ in range(3):
-        for b_ in range(3):
-            # block (k+1, k) = Hoff[k]^T: row 3k+3+a_, column 3k+b_
-            ab[3 + a_ - b_, 3 * np.arange(K) + b_] = Hoff[:, b_, a_]
-    rhs = np.asfortranarray(np.column_stack([Hax, ga]))
-    c, info = lapack.dpbtrf(ab, lower=1)
-    if info == 0:
-        Y, info = lapack.dtbtrs(c, rhs, uplo="L", overwrite_b=1)
-    if info == 0:
-        Yx = Y[:, :Q]
-        A = Hxx - _gram(Yx)
-        b = gx - Yx.T @ Y[:, Q]
-        att = AttitudeSolve(chol=c, Y=Y)
-    else:
-        base = np.arange(3)
-        br, bc = np.repeat(base, 3), np.tile(base, 3)          # a 3 x 3 block, row-major
-        kd = 3 * np.arange(K + 1)[:, None]
-        ko = 3 * np.arange(K)[:, None]
-        rows = np.concatenate([(kd + br).ravel(), (ko + br).ravel(), (ko + 3 + br).ravel()])
-        cols = np.concatenate([(kd + bc).ravel(), (ko + 3 + bc).ravel(), (ko + bc).ravel()])
-        vals = np.concatenate([Hdiag.ravel(), Hoff.ravel(), np.swapaxes(Hoff, 1, 2).ravel()])
-        sol = spla.splu(sp.csc_matrix((vals, (rows, cols)), shape=(na, na))).solve(np.column_stack([Hax, ga]))
-        A = Hxx - Hax.T @ sol[:, :Q]
-        b = gx - Hax.T @ sol[:, Q]
-        att = AttitudeSolve(chol=None, Y=sol)
-    return 0.5 * (A + A.T), b, att
-
-
-def _gram(X):
-    """``X^T X`` of ``X`` (m, n), symmetric (BLAS ``syrk``: half the products of ``X.T @ X``)."""
-    X = np.asarray(X, dtype=float)
-    if X.shape[1] == 0:
-        return np.zeros((0, 0))
-    C = blas.dsyrk(1.0, X, trans=1) if X.flags.f_contiguous else blas.dsyrk(1.0, X.T, trans=0)
-    return np.triu(C) + np.triu(C, 1).T
 
 
 def _key_outer_sums(key, W, M, n_keys):
@@ -387,12 +291,7 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     ND = len(dlist)
     Q = P + ND
     # block-tridiagonal attitude information and the coupling to the calibration
-    Hdiag = np.zeros((K + 1, 3, 3))
-    Hoff = np.zeros((K, 3, 3))            # block (k, k+1)
-    Hax = np.zeros((K + 1, 3, Q))
-    Hxx = np.zeros((Q, Q))
-    ga = np.zeros((K + 1, 3))
-    gx = np.zeros(Q)
+    ne = NormalEquations(K + 1, Q)
     chi2 = 0.0
     m_data = 0
     k0 = model.record.k0
@@ -408,21 +307,7 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         chi2 += float(np.sum(r**2))
         m_data += r.size
         key = res.key
-        At = np.swapaxes(A_, 1, 2)
-        sum_by_key(Hdiag, key, At @ A_)
-        sum_by_key(ga, key, np.einsum("fji,fj->fi", A_, r))
-        Hax_k = np.zeros((K + 1, 3, nzc.size))
-        sum_by_key(Hax_k, key, At @ Xc)
-        if B_ is not None:
-            Bt = np.swapaxes(B_, 1, 2)
-            sum_by_key(Hdiag, key + 1, Bt @ B_)
-            sum_by_key(Hoff, key, At @ B_)
-            sum_by_key(ga, key + 1, np.einsum("fji,fj->fi", B_, r))
-            sum_by_key(Hax_k, key + 1, Bt @ Xc)
-        Hax[:, :, nzc] += Hax_k
-        Xf = Xc.reshape(-1, nzc.size)
-        Hxx[np.ix_(nzc, nzc)] += _gram(Xf)
-        gx[nzc] += Xf.T @ r.reshape(-1)
+        ne.add_rows(key, r, A_, Xc, B=B_, cols=nzc)
         dsel = np.flatnonzero(np.isin(d_bias, nzc)) if drivers else np.zeros(0, dtype=np.int64)
         if dsel.size == 0:
             continue
@@ -433,25 +318,24 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         Hb = Xc[:, :, np.searchsorted(nzc, bcols)]                    # the bias columns (among nzc)
         DD, CD, gD, Hax_d = _driver_blocks(Hb, r, A_, B_, M, bi, d_series[dsel], Xc, key, K + 1)
         dcol = P + dsel
-        Hxx[np.ix_(dcol, dcol)] += DD
-        Hxx[np.ix_(nzc, dcol)] += CD
-        Hxx[np.ix_(dcol, nzc)] += CD.T
-        gx[dcol] += gD
-        Hax[:, :, dcol] += Hax_d
+        ne.H_xx[np.ix_(dcol, dcol)] += DD
+        ne.H_xx[np.ix_(nzc, dcol)] += CD
+        ne.H_xx[np.ix_(dcol, nzc)] += CD.T
+        ne.g_x[dcol] += gD
+        ne.H_ax[:, :, dcol] += Hax_d
     # priors of the current model's calibration columns
     cal_prior = model.calibration_prior(x)
     x_sigma = cal_prior.sigma
     null_idx = np.concatenate([np.arange(P)[layout.slice(n)] for n in null_names]).astype(np.int64)
     h = np.diag(cal_prior.H)[null_idx]
-    Hxx[null_idx, null_idx] += h**2
-    gx[null_idx] += h * cal_prior.r[null_idx]
+    ne.H_xx[null_idx, null_idx] += h**2
+    ne.g_x[null_idx] += h * cal_prior.r[null_idx]
     # attitude prior on the first keyframe (as factor_graph.build_graph)
     # (the alignment prior: its residual at the solution is part of the current fit)
     # (one per segment of a record cut together, /imu/segment)
     for k, att_prior in model.attitude_priors(R, R_priors=model.segment_priors(q_nb0)):
-        Hdiag[k] += att_prior.H.T @ att_prior.H
-        ga[k] += att_prior.H.T @ att_prior.r
-    A, b, att = _eliminate(Hdiag, Hoff, Hax.reshape(na, Q), ga.reshape(na), Hxx, gx)
+        ne.add_attitude_prior(k, att_prior.H, att_prior.r)
+    A, b, att = ne.eliminate()
     dof = m_data - na - null_idx.size
     names = layout.element_names() + [f"driver:{i}" for i in range(ND)]
     means = sums.means(k0[:-1], k0[1:]) if drivers else None

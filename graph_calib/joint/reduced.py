@@ -13,7 +13,8 @@ other factor touches one keyframe).  Eliminating the attitudes, as GTSAM's elimi
 chain does, leaves on ``theta_e`` the Schur complement ``H_tt - H_tR (H_RR + lam I)^-1 H_Rt`` (and the
 same for the gradient): the joint solver hands GTSAM that reduced factor per experiment, GTSAM solves the
 reduced graph of the unknowns, and each experiment's attitude step follows by back-substitution.  The
-band of ``H_RR`` (half-width 5) is factored by LAPACK's banded Cholesky; no per-factor Python callback,
+band of ``H_RR`` (half-width 5) is factored by LAPACK's banded Cholesky
+(:mod:`graph_calib.model.attitude_elimination`, the closed loop's too); no per-factor Python callback,
 and the linear system of a 3 h experiment is a few tens of MB instead of GTSAM's 0.3 GB of Jacobian
 factors.  ``tests/test_joint_reduced.py`` checks cost, step and covariance against GTSAM's linearisation
 and elimination of the whole graph (every attitude a variable, the model's factors as callbacks).
@@ -27,13 +28,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import cho_solve_banded, cholesky_banded
 
-from graph_calib.model.factors import sum_by_key
+from graph_calib.model.attitude_elimination import NormalEquations, eliminate
 from graph_calib.rotations import exp_so3
 
-#: Half-bandwidth of the attitudes' block-tridiagonal information (3 x 3 blocks, neighbours only).
-BAND = 5
 #: Factors whitened and chained per block (bounds the temporaries of the 3 h records' 85,000 readings).
 CHUNK = 8192
 
@@ -58,8 +56,8 @@ class ExperimentSystem:
     ----------
     cost : float
         The experiment's share of the graph's error (its factors and its first attitude's prior).
-    band : ndarray, shape (BAND + 1, 3 (K+1))
-        ``H_RR`` in LAPACK's upper banded storage, undamped.
+    H_RR_diag, H_RR_off : ndarray, shapes (K+1, 3, 3), (K, 3, 3)
+        ``H_RR``'s diagonal blocks and its blocks ``(k, k+1)``, undamped.
     H_Rt : ndarray, shape (3 (K+1), Nt)
     g_R : ndarray, shape (3 (K+1),)
     H_tt : ndarray, shape (Nt, Nt)
@@ -70,20 +68,13 @@ class ExperimentSystem:
     """
 
     cost: float
-    band: np.ndarray
+    H_RR_diag: np.ndarray
+    H_RR_off: np.ndarray
     H_Rt: np.ndarray
     g_R: np.ndarray
     H_tt: np.ndarray
     g_t: np.ndarray
     whitened: tuple
-
-    def _factor(self, lam):
-        ab = self.band.copy()
-        ab[BAND] += lam
-        try:
-            return cholesky_banded(ab, lower=False, check_finite=False)
-        except np.linalg.LinAlgError as exc:
-            raise RuntimeError(f"attitudes' information not positive definite: {exc}") from exc
 
     def reduce(self, lam):
         """The Schur complement on ``theta_e`` with ``lam I`` added to the attitudes' information.
@@ -92,24 +83,27 @@ class ExperimentSystem:
         -------
         H, g : ndarray, shapes (Nt, Nt), (Nt,)
             Reduced information and gradient (``lam`` not added on ``theta_e``: the caller damps it).
-        Y : ndarray, shape (3 (K+1), Nt + 1)
-            ``(H_RR + lam I)^-1 [H_Rt g_R]``, for :meth:`attitude_step`.
+        attitudes : graph_calib.model.attitude_elimination.AttitudeSolve
+            The back-substitution, for :meth:`attitude_step`.
+
+        Raises
+        ------
+        RuntimeError
+            ``H_RR + lam I`` not positive definite in floating point.
         """
-        cb = self._factor(lam)
-        Y = cho_solve_banded((cb, False), np.column_stack([self.H_Rt, self.g_R]), check_finite=False)
-        T = self.H_Rt.T @ Y
-        H = self.H_tt - T[:, :-1]
-        return 0.5 * (H + H.T), self.g_t - T[:, -1], Y
+        return eliminate(self.H_RR_diag, self.H_RR_off, self.H_Rt, self.g_R, self.H_tt, self.g_t, lam=lam,
+                         definite=True)
 
     @staticmethod
-    def attitude_step(Y, d_theta):
+    def attitude_step(attitudes, d_theta):
         """The attitudes' step (K+1, 3) given the unknowns' step ``d_theta`` (Nt,) (back-substitution)."""
-        return -(Y[:, -1] + Y[:, :-1] @ d_theta).reshape(-1, 3)
+        return attitudes.step(d_theta)
 
     def attitude_only_step(self, lam):
         """The attitudes' step (K+1, 3) with the unknowns held."""
-        cb = self._factor(lam)
-        return -cho_solve_banded((cb, False), self.g_R, check_finite=False).reshape(-1, 3)
+        _, _, att = eliminate(self.H_RR_diag, self.H_RR_off, np.zeros((self.g_R.size, 0)), self.g_R,
+                              np.zeros((0, 0)), np.zeros(0), lam=lam, definite=True)
+        return att.step(np.zeros(0))
 
 
 def retract(R, dR):
@@ -117,38 +111,13 @@ def retract(R, dR):
     return R @ exp_so3(dR)
 
 
-class _Accumulator:
+class _Accumulator(NormalEquations):
     """Sums one experiment's whitened factors into its normal equations, in the calibration vector's
     columns (P): ``theta_e``'s blocks are ``M_u^T (.) M_u`` of them, formed once at the end."""
 
     def __init__(self, n_keys, P):
-        self.D = np.zeros((n_keys, 3, 3))           # diagonal blocks of H_RR
-        self.O = np.zeros((max(n_keys - 1, 0), 3, 3))    # (k, k+1) blocks
-        self.H_Rx = np.zeros((n_keys, 3, P))
-        self.g_R = np.zeros((n_keys, 3))
-        self.H_xx = np.zeros((P, P))
-        self.g_x = np.zeros(P)
+        super().__init__(n_keys, P)
         self.cost = 0.0
-
-    def add(self, key, r, H_R, H_x, s, H_next=None):
-        """Rows ``s * (r, H_R, H_x)`` (``s`` (F, 3): 1/sigma times the square root of any robust weight)."""
-        r = r * s
-        HR = H_R * s[:, :, None]
-        Hx = H_x * s[:, :, None]
-        HRT = np.swapaxes(HR, 1, 2)
-        sum_by_key(self.D, key, HRT @ HR)
-        sum_by_key(self.H_Rx, key, HRT @ Hx)
-        sum_by_key(self.g_R, key, np.einsum("fji,fj->fi", HR, r))
-        if H_next is not None:
-            Hn = H_next * s[:, :, None]
-            HnT = np.swapaxes(Hn, 1, 2)
-            sum_by_key(self.D, key + 1, HnT @ Hn)
-            sum_by_key(self.O, key, HRT @ Hn)
-            sum_by_key(self.H_Rx, key + 1, HnT @ Hx)
-            sum_by_key(self.g_R, key + 1, np.einsum("fji,fj->fi", Hn, r))
-        flat = Hx.reshape(-1, Hx.shape[-1])
-        self.H_xx += flat.T @ flat
-        self.g_x += flat.T @ r.reshape(-1)
 
     def add_factors(self, res, *, robust=None, k=None, group=None):
         """A kind of factors (:class:`graph_calib.model.factors.Residuals`), whitened, in chunks.
@@ -173,24 +142,17 @@ class _Accumulator:
             s = np.sqrt(weight)[g][:, None] / res.sigma
         for lo in range(0, F, CHUNK):
             sl = slice(lo, min(lo + CHUNK, F))
-            self.add(res.key[sl], res.r[sl], res.H_R[sl], res.H_x[sl], s[sl],
-                     None if res.H_R_next is None else res.H_R_next[sl])
+            sc = s[sl][:, :, None]
+            self.add_rows(res.key[sl], res.r[sl] * s[sl], res.H_R[sl] * sc, res.H_x[sl] * sc,
+                          B=None if res.H_R_next is None else res.H_R_next[sl] * sc)
         return w
 
     def system(self, M_u, whitened):
-        n = self.D.shape[0]
-        band = np.zeros((BAND + 1, 3 * n))
-        idx = 3 * np.arange(n)
-        for a in range(3):
-            for b in range(a, 3):
-                band[BAND + a - b, idx + b] = self.D[:, a, b]
-        for a in range(3):
-            for b in range(3):
-                band[BAND - (3 + b - a), idx[1:] + b] = self.O[:, a, b]
+        n = self.H_aa_diag.shape[0]
         H_tt = M_u.T @ self.H_xx @ M_u
-        return ExperimentSystem(cost=self.cost, band=band, H_Rt=self.H_Rx.reshape(3 * n, -1) @ M_u,
-                                g_R=self.g_R.reshape(-1), H_tt=0.5 * (H_tt + H_tt.T), g_t=M_u.T @ self.g_x,
-                                whitened=whitened)
+        return ExperimentSystem(cost=self.cost, H_RR_diag=self.H_aa_diag, H_RR_off=self.H_aa_off,
+                                H_Rt=self.H_ax.reshape(3 * n, -1) @ M_u, g_R=self.g_a.reshape(-1),
+                                H_tt=0.5 * (H_tt + H_tt.T), g_t=M_u.T @ self.g_x, whitened=whitened)
 
 
 def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
@@ -216,8 +178,7 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
     """
     acc = _Accumulator(R.shape[0], M_u.shape[0])
     prior = model.attitude_prior(R[0], R_prior=R_prior)
-    acc.D[0] += prior.H.T @ prior.H
-    acc.g_R[0] += prior.H.T @ prior.r
+    acc.add_attitude_prior(0, prior.H, prior.r)
     acc.cost += prior.cost
     rot = model.rotation_factors(R, preint, x)
     w_rot = acc.add_factors(rot)
@@ -235,4 +196,4 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
     return acc.system(M_u, (w_rot, w_grav, w_enc))
 
 
-__all__ = ["BAND", "ExperimentSystem", "linearise", "retract"]
+__all__ = ["ExperimentSystem", "linearise", "retract"]

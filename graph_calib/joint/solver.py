@@ -154,7 +154,7 @@ class _Experiment:
 def _reduced_graph(exps, systems, prior_lin, lam):
     """The linearised graph with every experiment's attitudes eliminated (``lam`` their damping):
     the priors of the unknowns and one reduced factor per experiment; and each experiment's
-    back-substitution ``Y`` (:meth:`graph_calib.joint.reduced.ExperimentSystem.reduce`)."""
+    back-substitution (:meth:`graph_calib.joint.reduced.ExperimentSystem.reduce`)."""
     gfg = gtsam.GaussianFactorGraph()
     gfg.push_back(prior_lin)
     Ys = []
@@ -326,7 +326,8 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     -----
     BLAS runs on one thread inside the solve: its products are of a few tens of columns (an experiment's
     unknowns), where OpenBLAS's threads gain nothing on two cores and, on a machine shared with other
-    work, spin: ``H_Rt^T Y`` of a 3 h experiment took 0.4-2.4 s with its threads instead of 0.04 s.
+    work, spin: the Schur complement's ``H_Rt^T (H_RR^-1 H_Rt)`` of a 3 h experiment took 0.4-2.4 s with its
+    threads instead of 0.04 s.
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve_joint(problems, options=options, progress=progress, initial=initial,
