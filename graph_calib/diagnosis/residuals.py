@@ -156,7 +156,11 @@ def regression_tests(series, ctx, *, key, static=None):
     return out
 
 
-_COMPONENTS = {"rotation": "xyz (body)", "gravity": "ENU", "gravity_body": "xyz (body)", "encoder": "xyz (body)"}
+#: What the three components of each series are.  An encoder residual is turned into the principal axes of its
+#: reading's noise (graph_calib.model.encoder_noise): body x, y, z where the declared isotropic noise holds
+#: (readings in motion), the scatter's axes ordered and signed nearest them in a static dwell.
+_COMPONENTS = {"rotation": "xyz (body)", "gravity": "ENU", "gravity_body": "xyz (body)",
+               "encoder": "noise axes nearest body xyz"}
 
 
 def residual_statistics(stage, *, top=5, lags=10, context=None):
