@@ -117,7 +117,7 @@ def test_no_diagnose_skips_the_loop(curved, tmp_path, capsys):
                  "factor-graph", "--no-diagnose", "--no-report", "--quiet"])
     assert code in (0, 3)
     doc = json.loads((out / "campaign.json").read_text())
-    assert doc["loop"] == {"enabled": False, "options": None, "changed": []}
+    assert doc["loop"] == {"enabled": False, "options": None, "changed": [], "pooled": None}
     assert "loop" not in doc["experiments"][0]
     assert not (out / "sub1_m10_0" / "diagnosis.json").exists()
     r = io.read_result(out / "sub1_m10_0" / "factor-graph.json")

@@ -28,8 +28,8 @@ import numpy as np
 from tqdm import tqdm
 
 from graph_calib import io
-from graph_calib.campaign.loop import declared_path, loop_record
-from graph_calib.diagnosis import diagnose
+from graph_calib.campaign.loop import declared_path, loop_record, wave_record
+from graph_calib.diagnosis import diagnose, diagnose_from
 from graph_calib.errors import InputError
 from graph_calib.problem import build_problem
 from graph_calib.solvers.registry import solve
@@ -87,6 +87,8 @@ def run_tasks(tasks):
             numba.set_num_threads(max(1, min(first.numba_threads, numba.config.NUMBA_NUM_THREADS)))
         except Exception:  # pragma: no cover - numba threading is an optimisation only
             pass
+    if first.wave:
+        return _run_wave_tasks(tasks)
     if first.diagnosis is not None:
         return _run_tasks_with_loop(tasks)
     t0 = time.perf_counter()
@@ -177,6 +179,69 @@ def _run_tasks_with_loop(tasks):
             io.write_result(replace(result, extra=extra), task.result_path)
             outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
                              "compile_seconds": clock.seconds / len(tasks), "added": list(diag.added)})
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            outcomes.append(_failure(task, exc))
+    return outcomes
+
+
+def _run_wave_tasks(tasks):
+    """One experiment solved again after the campaign's pooled test adopted an effect in it (a wave's job).
+
+    :func:`graph_calib.diagnosis.diagnose_from` solves the grown model (the tasks' options: the model the
+    previous wave chose plus the adopted effect), warm-started from the previous wave's results (the factor
+    graph's and the filter's own, read from ``start_dir``), and runs the loop's rounds on it, which may add
+    further effects up to the loop's limit.  Files, into the wave's folder (``<experiment>/pooled/<k>/``),
+    each atomic: ``summary.json``, ``diagnosis.json`` (the wave's rounds), and per task its residual series and
+    ``<solver>.json``, last, its ``campaign.loop`` the previous record carried on
+    (:func:`graph_calib.campaign.loop.wave_record`).
+    """
+    first = tasks[0]
+    t0 = time.perf_counter()
+    try:
+        with CompileClock() as clock:
+            Path(first.out_dir).mkdir(parents=True, exist_ok=True)
+            exp = io.read_experiment(first.file)
+            start = Path(first.start_dir)
+            previous = {}
+            for s in ("factor-graph", "sqrt-kf"):
+                if (start / f"{s}.json").is_file():
+                    previous[s] = io.read_result(start / f"{s}.json")
+            record = next(r.extra["campaign"]["loop"] for r in previous.values())
+            graph_start = previous.get("factor-graph") or next(iter(previous.values()))
+            kf_start = previous.get("sqrt-kf")
+            left = max(0, first.diagnosis.max_added - len(record["added"]))
+            diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=graph_start.values,
+                                 kf_start=None if kf_start is None else kf_start.values, max_added=left)
+            record = wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
+            io.atomic_write_json(first.summary_path,
+                                 experiment_summary(exp, t_ref_degC=diag.before.problem.model.t_ref_degC))
+            js = diag.to_json()
+            js["source"] = Path(first.file).name
+            io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - reported per task
+        return [_failure(t, exc) for t in tasks]
+    seconds = (time.perf_counter() - t0 - clock.seconds) / len(tasks)
+    outcomes = []
+    for task in tasks:
+        try:
+            output = diag.after.graph if task.solver == "factor-graph" else getattr(diag.after, "kf", None)
+            result = diag.after.results.get(task.solver)
+            if output is None or result is None:
+                raise RuntimeError(f"the pooled wave ran no {task.solver} on the grown model")
+            io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
+                               source=Path(task.file).name, kind=output.residual_quantity)
+            extra = dict(result.extra)
+            extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
+                                 "options_sha256": task.options_sha256, "experiment": task.name, "wave": task.wave,
+                                 "seconds": seconds, "compile_seconds": clock.seconds / len(tasks), "loop": record}
+            io.write_result(replace(result, extra=extra), task.result_path)
+            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
+                             "compile_seconds": clock.seconds / len(tasks),
+                             "added": [task.pooled[-1]] + list(diag.added)})
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001
