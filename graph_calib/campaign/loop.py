@@ -61,7 +61,9 @@ def loop_record(diagnosis):
     ``unexplained`` (significant driver signatures left), ``residual_rms`` ``{"before", "after"}`` (per
     solver the overall RMS of the whitened residuals or normalised innovations, and per kind),
     ``seconds``, and ``final_round``: the last round's index and every candidate it tested (``effect``,
-    ``statistic``, ``dof``, ``threshold``, ``log10_p``; ``dof`` 0 when skipped), at the chosen model: what the
+    ``statistic``, ``dof``, ``threshold``, ``log10_p``, and its ``score`` vector, ``information`` matrix
+    (row-major) and the prior sigmas ``scale`` (:class:`graph_calib.diagnosis.CandidateTest`); ``dof`` 0 and
+    empty lists when skipped), at the chosen model: what the
     campaign's pooled score test sums (:mod:`graph_calib.campaign.pooled`), without recomputing anything.
     """
     added = []
@@ -90,7 +92,9 @@ def loop_record(diagnosis):
                             "candidates": [] if last is None else [
                                 {"effect": t.name, "statistic": float(t.statistic), "dof": int(t.dof),
                                  "threshold": float(t.threshold) if t.dof else None,
-                                 "log10_p": float(t.log10_p)} for t in last.candidates]}}
+                                 "log10_p": float(t.log10_p), "score": list(t.score),
+                                 "information": list(t.information), "scale": list(t.scale)}
+                                for t in last.candidates]}}
 
 
 def wave_record(previous, diagnosis, *, wave, effect):

@@ -137,7 +137,8 @@ def run_waves(planned, outcomes, *, options, on_done=None):
     waves, wave_outcomes, adopted, folders = [], {}, {}, {}
     counts = {"computed": 0, "cached": 0, "failed": 0}
     for wave in range(1, MAX_WAVES + 2):
-        tests = pooled_tests({n: final_statistics(st.record) for n, st in states.items()}, alpha=dopts.alpha)
+        tests = pooled_tests({n: final_statistics(st.record) for n, st in states.items()}, alpha=dopts.alpha,
+                             identifiable=dopts.identifiable)
         pick = adoption(tests)
         limit = pick is not None and wave > MAX_WAVES
         text = (f"{pick.effect} passes but the limit of {MAX_WAVES} pooled waves is reached" if limit

@@ -168,7 +168,8 @@ def _test_candidates(system, layout, names, *, diagnosis_options):
         idx, sc = raw[name]
         thr = float(stats.chi2.isf(diagnosis_options.alpha / m, sc.dof))
         tests.append(CandidateTest(name, sc.statistic, sc.dof, sc.dim, thr, sc.log10_p(), sc.statistic > thr, None,
-                                   tuple(sc.estimate.tolist()), tuple(sc.sigma.tolist())))
+                                   tuple(sc.estimate.tolist()), tuple(sc.sigma.tolist()), tuple(sc.u.tolist()),
+                                   tuple(sc.S.ravel().tolist()), tuple(system.prior_sigma[idx].tolist())))
     return tests, {name: idx for name, (idx, _) in raw.items()}
 
 

@@ -167,7 +167,8 @@ def _loop_table(doc):
             continue
         added = "; ".join(f"{a['effect']} (score {a['statistic']:.1f} > {a['threshold']:.1f}, log10 p "
                           f"{a['log10_p']:.1f})" for a in lp["added"]) or "nothing"
-        pooled = "; ".join(f"{a['effect']} (wave {a['wave']}: pooled score {a['statistic']:.1f} > {a['threshold']:.1f}, "
+        pooled = "; ".join(f"{a['effect']} (wave {a['wave']}: pooled {a['kind']} score {a['statistic']:.1f} > "
+                           f"{a['threshold']:.1f}, "
                            f"{a['dof']} dof, log10 p {a['log10_p']:.1f}, over {len(a['experiments'])} experiments)"
                            for a in lp.get("pooled") or []) or "-"
         rr = lp["residual_rms"]
@@ -194,10 +195,11 @@ def _loop_section(doc):
             "with the declared model, every further effect of model.md score-tested against its residuals, the most "
             "significant one added and the model solved again, until none is significant (Bonferroni at alpha = "
             f"{doc['loop']['options']['alpha']:g}). The stitched curves come from the models the loop chose. "
-            "Then the campaign's pooled score test: for each candidate, the final-round score statistics of the "
-            "experiments that did not adopt it are summed (chi-square with the summed degrees of freedom), at the "
-            "same level, Bonferroni over the candidates; the most significant one past its threshold is adopted "
-            "in those experiments, which are solved again (an effect each subrange sees weakly, seen by the "
+            "Then the campaign's pooled score tests, over the experiments that did not adopt a candidate: 'sum', "
+            "their final-round score statistics summed (chi-square with the summed degrees of freedom), and "
+            "'common', the score test of one value of the effect shared by them; at the same level, Bonferroni "
+            "over every pooled test; the candidate of the most significant one past its threshold is adopted in "
+            "those experiments, which are solved again (an effect each subrange sees weakly, seen by the "
             "campaign). "
             "Residual RMS: overall RMS of the whitened residuals (graph) or normalised innovations (filter), about 1 "
             "for a model that explains the data.")
