@@ -204,10 +204,7 @@ def _run_wave_tasks(tasks):
             Path(first.out_dir).mkdir(parents=True, exist_ok=True)
             exp = io.read_experiment(first.file)
             start = Path(first.start_dir)
-            previous = {}
-            for s in ("factor-graph", "sqrt-kf"):
-                if (start / f"{s}.json").is_file():
-                    previous[s] = io.read_result(start / f"{s}.json")
+            previous = {t.solver: io.read_result(start / f"{t.solver}.json") for t in tasks}
             record = next(r.extra["campaign"]["loop"] for r in previous.values())
             graph_start = previous.get("factor-graph") or next(iter(previous.values()))
             kf_start = previous.get("sqrt-kf")
