@@ -42,6 +42,25 @@ from graph_calib.warmup import CompileClock, cache_present, warm_kernels
 # one task (runs on a worker)
 # ---------------------------------------------------------------------------
 
+#: The factor graph's keyframe attitudes of an experiment's chosen solution (with the loop), beside its results:
+#: where a pooled wave's graph starts (docs/campaign.md).
+ATTITUDES_FILE = "factor-graph.attitudes.npy"
+
+
+def _write_attitudes(folder, graph):
+    """``graph``'s keyframe attitudes (K+1, 3, 3) into ``folder``/:data:`ATTITUDES_FILE`, atomically."""
+    with io.atomic_path(Path(folder) / ATTITUDES_FILE) as tmp, open(tmp, "wb") as fh:
+        np.save(fh, np.asarray(graph.attitudes, dtype=float))
+
+
+def _read_attitudes(folder):
+    """The attitudes :func:`_write_attitudes` kept in ``folder``, or None."""
+    p = Path(folder) / ATTITUDES_FILE
+    try:
+        return np.load(p) if p.is_file() else None
+    except (OSError, ValueError):
+        return None
+
 
 def experiment_summary(experiment, *, t_ref_degC, points=1500):
     """``summary.json`` of an experiment: length, temperatures (ranges per sensor and a thinned series)."""
@@ -154,6 +173,7 @@ def _run_tasks_with_loop(tasks):
             js = diag.to_json()
             js["source"] = Path(first.file).name
             io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
+            _write_attitudes(first.out_dir, diag.after.graph)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - reported per task
@@ -210,6 +230,7 @@ def _run_wave_tasks(tasks):
             kf_start = previous.get("sqrt-kf")
             left = max(0, first.diagnosis.max_added - len(record["added"]))
             diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=graph_start.values,
+                                 attitudes=_read_attitudes(start) if "factor-graph" in previous else None,
                                  kf_start=None if kf_start is None else kf_start.values, max_added=left)
             record = wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
             io.atomic_write_json(first.summary_path,
@@ -217,6 +238,7 @@ def _run_wave_tasks(tasks):
             js = diag.to_json()
             js["source"] = Path(first.file).name
             io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
+            _write_attitudes(first.out_dir, diag.after.graph)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - reported per task
@@ -311,7 +333,51 @@ def warm_up(*, progress):
     return w
 
 
-def execute(tasks, *, options, on_done=None, timing=None):
+class Pool:
+    """A campaign's Dask client, started on first use and kept for its later waves of jobs; :meth:`close` ends it.
+
+    With ``options.scheduler`` the client of that cluster (:meth:`connect`); else a local cluster of processes
+    with one thread each (:meth:`local`), as many as ``options.workers`` or CPU cores, at most one per job of
+    the first wave that needs it.  The pooled score test's waves (:mod:`graph_calib.campaign.waves`) run on the
+    same workers, which then load nothing again.
+    """
+
+    def __init__(self, options):
+        self.options = options
+        self.client = None
+        self._cluster = None
+
+    def connect(self):
+        """The client of ``options.scheduler`` (InputError when it cannot be reached)."""
+        if self.client is None:
+            self.client = _connect(self.options.scheduler)
+        return self.client
+
+    def local(self, n_jobs, bar=None):
+        """The client of the local cluster, started here for ``n_jobs`` jobs on first use."""
+        if self.client is None:
+            from distributed import Client, LocalCluster  # seconds to import: only here (module docstring)
+
+            n = self.options.workers if self.options.workers else min(os.cpu_count() or 1, n_jobs)
+            n = max(1, min(n, n_jobs))
+            _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", self.options.progress)
+            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                         silence_logs=logging.ERROR)
+            self.client = Client(self._cluster)
+        return self.client
+
+    def close(self):
+        """Close the client and the local cluster, if any."""
+        try:
+            if self.client is not None:
+                self.client.close()
+        finally:
+            if self._cluster is not None:
+                self._cluster.close()
+            self.client = self._cluster = None
+
+
+def execute(tasks, *, options, on_done=None, timing=None, pool=None):
     """Run ``tasks`` (Dask or in-process), one job per experiment; ``{(name, solver): outcome dict}``.
 
     First the numba kernels are warmed in this process (:func:`warm_up`; with ``options.scheduler`` after
@@ -320,6 +386,8 @@ def execute(tasks, *, options, on_done=None, timing=None):
     the run; finished tasks stay on disk).  ``timing``, a dict, receives ``warmup_seconds`` (the
     warm-up's wall time), ``compile_seconds`` (numba compiling during the warm-up) and
     ``compiled_signatures``; the tasks' own seconds leave numba compiling out (:func:`run_tasks`).
+    ``pool``: a :class:`Pool` kept by the caller for later waves (left open); by default one of its own,
+    closed at the end.
     """
     outcomes = {}
     if timing is None:
@@ -327,16 +395,19 @@ def execute(tasks, *, options, on_done=None, timing=None):
     timing.update({"warmup_seconds": 0.0, "compile_seconds": 0.0, "compiled_signatures": 0})
     if not tasks:
         return outcomes
-    client = _connect(options.scheduler) if options.scheduler else None
+    own = pool is None
+    pool = Pool(options) if own else pool
     try:
+        if options.scheduler:
+            pool.connect()
         t_warm = time.perf_counter()
         w = warm_up(progress=options.progress)
         timing.update({"warmup_seconds": time.perf_counter() - t_warm,
                        "compile_seconds": 0.0 if w is None else w.compile_seconds,
                        "compiled_signatures": 0 if w is None else w.compiled})
     except BaseException:
-        if client is not None:
-            client.close()
+        if own:
+            pool.close()
         raise
     bar = _progress_bar(len(tasks), options.progress)
 
@@ -361,10 +432,14 @@ def execute(tasks, *, options, on_done=None, timing=None):
                 for t, outcome in zip(group, run_tasks(group)):
                     finish(t, outcome)
         else:
-            _run_dask(tasks, options=options, finish=finish, bar=bar, client=client)
+            _run_dask(tasks, finish=finish, bar=bar, pool=pool)
     finally:
-        if bar is not None:
-            bar.close()
+        try:
+            if bar is not None:
+                bar.close()
+        finally:
+            if own:
+                pool.close()
     return outcomes
 
 
@@ -378,40 +453,26 @@ def _connect(scheduler):
         raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
 
 
-def _run_dask(tasks, *, options, finish, bar, client=None):
-    """The jobs on ``client`` (an existing cluster's) or on a local cluster started here."""
-    from distributed import Client, LocalCluster, as_completed  # seconds to import: only here (module docstring)
+def _run_dask(tasks, *, finish, bar, pool):
+    """The jobs on ``pool``'s client (an existing cluster's, or a local cluster started on first use)."""
+    from distributed import as_completed  # seconds to import: only here (module docstring)
 
     groups = _groups(tasks)
-    cluster = None
-    if client is None:
-        n = options.workers if options.workers else min(os.cpu_count() or 1, len(groups))
-        n = max(1, min(n, len(groups)))
-        _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
-        client = Client(cluster)
-    try:
-        by_future = {}
-        for g in groups:
-            key = f"calibrate-{g[0].name}-{'+'.join(t.solver for t in g)}-{g[0].key[:12]}"
-            by_future[client.submit(run_tasks, g, key=key, pure=False)] = g
-        for fut in as_completed(list(by_future)):
-            g = by_future[fut]
-            try:
-                outs = fut.result()
-            except (KeyboardInterrupt, SystemExit):
-                raise
-            except Exception as exc:  # noqa: BLE001 - e.g. a worker that died
-                outs = [_failure(t, exc) for t in g]
-            for t, outcome in zip(g, outs):
-                finish(t, outcome)
-    finally:
+    client = pool.client or pool.local(len(groups), bar)
+    by_future = {}
+    for g in groups:
+        key = f"calibrate-{g[0].name}-{'+'.join(t.solver for t in g)}-{g[0].key[:12]}"
+        by_future[client.submit(run_tasks, g, key=key, pure=False)] = g
+    for fut in as_completed(list(by_future)):
+        g = by_future[fut]
         try:
-            client.close()
-        finally:
-            if cluster is not None:
-                cluster.close()
+            outs = fut.result()
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001 - e.g. a worker that died
+            outs = [_failure(t, exc) for t in g]
+        for t, outcome in zip(g, outs):
+            finish(t, outcome)
 
 
-__all__ = ["experiment_summary", "run_tasks", "warm_up", "execute"]
+__all__ = ["experiment_summary", "run_tasks", "warm_up", "execute", "Pool"]

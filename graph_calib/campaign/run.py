@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from graph_calib import io
-from graph_calib.campaign.execution import execute
+from graph_calib.campaign.execution import Pool, execute
 from graph_calib.campaign.joint_run import joint_failures, run_joint
 from graph_calib.campaign.loop import loop_entry
 from graph_calib.campaign.planning import plan_campaign
@@ -133,8 +133,12 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     """
     t_start = time.perf_counter()
     planned = _read_and_plan(manifest, out, options=options)
-    outcomes, compute_timing = _compute(planned, options=options, on_done=on_done)
-    pooled = run_waves(planned, outcomes, options=options, on_done=on_done)
+    pool = Pool(options)        # one cluster for the first wave and the pooled test's waves
+    try:
+        outcomes, compute_timing = _compute(planned, options=options, on_done=on_done, pool=pool)
+        pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool)
+    finally:
+        pool.close()
     collected = _collect(planned, {**outcomes, **(pooled.outcomes if pooled else {})},
                          folders=pooled.folders if pooled else {})
     loop_doc = _loop(planned, collected, pooled)
@@ -169,7 +173,7 @@ def _read_and_plan(manifest, out, *, options):
     return planned
 
 
-def _compute(planned, *, options, on_done):
+def _compute(planned, *, options, on_done, pool=None):
     """Phase 2: the tasks run; ``({(name, solver): outcome dict}, timing dict)`` with the cached tasks' outcomes.
 
     The timing holds ``tasks_seconds`` (wall time of the tasks, the warm-up left out), ``warmup_seconds``,
@@ -183,7 +187,7 @@ def _compute(planned, *, options, on_done):
     """
     t_tasks = time.perf_counter()
     timing = {}
-    outcomes = execute(planned.to_compute, options=options, on_done=on_done, timing=timing)
+    outcomes = execute(planned.to_compute, options=options, on_done=on_done, timing=timing, pool=pool)
     timing["tasks_seconds"] = time.perf_counter() - t_tasks - timing["warmup_seconds"]
     timing["tasks_compile_seconds"] = sum(o.get("compile_seconds", 0.0) for o in outcomes.values())
     for t in planned.from_cache:

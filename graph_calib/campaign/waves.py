@@ -111,7 +111,7 @@ def _states(planned, outcomes):
     return states
 
 
-def run_waves(planned, outcomes, *, options, on_done=None):
+def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
     """The pooled score test and its waves after the first wave of jobs (module docstring).
 
     Parameters
@@ -122,6 +122,8 @@ def run_waves(planned, outcomes, *, options, on_done=None):
     options : CampaignOptions
     on_done : callable, optional
         Called with each finished wave task's outcome, as in the first wave.
+    pool : graph_calib.campaign.execution.Pool, optional
+        The first wave's cluster, kept (default: each wave starts its own).
 
     Returns
     -------
@@ -152,7 +154,7 @@ def run_waves(planned, outcomes, *, options, on_done=None):
         new = [t for n in pick.experiments
                for t in _wave_tasks(states[n], name=n, effect=pick.effect, wave=wave, dopts=dopts)]
         todo = [t for t in new if options.force or not cached(t)]
-        outs = execute(todo, options=options, on_done=on_done)
+        outs = execute(todo, options=options, on_done=on_done, pool=pool)
         for t in new:
             if t not in todo:
                 outs[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}

@@ -460,15 +460,16 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
                       max_added=diagnosis.max_added, kf_x=None, t_start=t_start, say=say)
 
 
-def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), kf_start=None, max_added=None,
-                  progress=None):
+def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), attitudes=None, kf_start=None,
+                  max_added=None, progress=None):
     """The closed loop continued on a model grown from outside, warm-started from a smaller model's solution.
 
     What a campaign runs after its pooled score test adopted an effect in this experiment
     (:mod:`graph_calib.campaign.pooled`): ``options`` hold the model the experiment's own loop chose plus the
     adopted effect(s), ``start`` that model's factor-graph solution.  The grown model is solved by the factor
-    graph from ``start`` (the new parameters zero; the keyframe attitudes dead-reckoned from the alignment
-    with that calibration, which keeps them within the alignment's error, so no attitude-only fit), then the
+    graph from ``start`` (the new parameters zero; the keyframe attitudes that solution's own, else
+    dead-reckoned from the alignment with that calibration, which keeps them within the alignment's error, so
+    no attitude-only fit), then the
     rounds of :func:`diagnose` run on it (at most ``max_added`` further effects).  The filter, when it is one
     of ``diagnosis.solvers``, starts from ``kf_start`` (its own solution of the smaller model) with the
     graph's attitudes: the two solvers keep their own fixed points, fewer passes reach them.
@@ -482,6 +483,8 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), k
         ``{flat element name: value}`` (SI) of the smaller model's factor-graph solution
         (:attr:`graph_calib.experiment.Result.values`); elements not given start at zero.
     diagnosis : DiagnosisOptions
+    attitudes : ndarray (K+1, 3, 3), optional
+        The keyframe attitudes ``C_nb`` of the ``start`` solution (ignored when their shape does not fit).
     kf_start : dict, optional
         The same of its filter solution (default: the filter starts from the prior calibration).
     max_added : int, optional
@@ -498,7 +501,10 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), k
     problem = build_problem(experiment, options=options)
     model = problem.model
     x0 = model.layout.from_dict(start)
-    R0 = model.propagate(model.segment_priors(problem.q_nb0), model.preintegrate(x0), x0)
+    if attitudes is not None and np.shape(attitudes) == (model.n_keyframes + 1, 3, 3):
+        R0 = np.asarray(attitudes, dtype=float)
+    else:
+        R0 = model.propagate(model.segment_priors(problem.q_nb0), model.preintegrate(x0), x0)
     say(f"grown model: {model.layout.size} parameters, warm start; factor graph ...")
     graph = _solve_graph(problem, options=options, initial=(R0, x0))
     kf_x = None if kf_start is None else model.layout.from_dict(kf_start)
