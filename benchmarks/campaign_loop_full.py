@@ -8,9 +8,11 @@ Run by hand (heavy: the simulation about 80 s, each campaign minutes)::
 Simulates ``nav-campaign`` (six subranges over -10..50 degC, ``--hours`` each at 100 Hz) with a cubic term in the
 bias curves (``--cubic-scale`` times the grade's typical size, :mod:`graph_calib.simulation.truth`) and an
 independent 2 h record sweeping the whole range (20 Hz), then runs the campaign twice from a cold cache: without
-the loop (``diagnose=False``) and with it (the default).  Prints, per subrange and solver, the error against the
-truth of the declared parameters (RMS normalised error, share within 3 sigma, largest) without and with the
-loop; the stitched curves against the truth curves; validation; the two campaign times.  docs/campaign.md and
+the loop (``diagnose=False``) and with it (the default: every experiment's own loop, then the campaign's pooled
+score tests and their waves).  Prints, per subrange and solver, the error against the truth of the declared
+parameters (RMS normalised error, share within 3 sigma, largest) without and with the loop, with the effects each
+experiment's loop added and those the pooled test adopted; the pooled decisions; the stitched curves against the
+truth curves; validation; the two campaign times (with the loop: the first wave and the pooled waves apart).  docs/campaign.md and
 docs/performance.md record what it measured.  Done means (issue 11): after the loop every subrange result of
 both solvers has >= 95 % of its elements within 3 sigma and RMS normalised error <= 1.3, validation leaves at
 most 0.01 deg/h and 2e-4 m/s^2, the linear model alone is 4 sigma or more off somewhere, and the campaign with
@@ -82,6 +84,8 @@ def main(argv=None):
     for e in looped.document["experiments"]:
         name = e["name"]
         added = ", ".join(a["effect"] for a in e["loop"]["added"]) or "nothing"
+        added += "".join(f"; pooled: {a['effect']} ({a['kind']} {a['statistic']:.1f} > {a['threshold']:.1f}, "
+                         f"{a['dof']} dof, log10 p {a['log10_p']:.1f})" for a in e["loop"].get("pooled") or [])
         for s in ("factor-graph", "sqrt-kf"):
             a, b = e_plain[name][s], e_loop[name][s]
             worst_linear = max(worst_linear, a["max_abs_z"])
@@ -91,10 +95,19 @@ def main(argv=None):
                   f"{a['max_abs_z']:.1f} ({a['worst']}) -> {b['rms_z']:.2f} / {100 * b['fraction_within_3sigma']:.0f} % "
                   f"/ {b['max_abs_z']:.1f}  [{'ok' if good else 'FAIL'}]  added: {added}")
     ok &= worst_linear >= 4.0
+    pooled = looped.document["loop"].get("pooled") or {}
+    for w in pooled.get("waves", []):
+        best = ", ".join(f"{t['effect']} ({t['kind']}) {t['statistic']:.1f} vs {t['threshold']:.1f} [{t['dof']} dof]"
+                         for t in w["tests"][:3])
+        print(f"  pooled score test {w['wave']}: {w['decision']}\n      most significant: {best}")
+    tim = looped.document["timing"]
+    print(f"  time with the loop: first wave (every experiment's own loop) {tim['tasks_seconds']:.0f} s, pooled waves "
+          f"{tim.get('pooled_seconds', 0.0):.0f} s ({pooled.get('tasks_computed', 0)} tasks), total {tim['total_seconds']:.0f} s")
     print(f"  the linear (declared) model alone: worst {worst_linear:.1f} sigma (needs >= 4 to be a test)")
     summary = {"hours": args.hours, "cubic_scale": args.cubic_scale, "seed": args.seed, "workers": args.workers,
                "seconds": {"no_loop": t_plain, "loop": t_loop}, "errors": {"no_loop": e_plain, "loop": e_loop},
-               "linear_worst_z": worst_linear}
+               "linear_worst_z": worst_linear, "pooled": pooled,
+               "timing": {"no_loop": plain.document["timing"], "loop": tim}}
     for label, run in (("without", plain), ("with", looped)):
         tc = run.document["truth_check"]["factor-graph"]["cubic"]
         print(f"stitched cubic vs truth curves ({label} the loop): max |z| {tc['max_abs_z']:.2f}, RMS z {tc['rms_z']:.2f}, "

@@ -107,8 +107,9 @@ def test_resume_after_an_interruption_keeps_the_loops_results(resumed):
     assert tim["tasks_cached"] == 2 and tim["tasks_computed"] == 2
     e = run.document["experiments"][0]
     assert e["results"]["factor-graph"]["status"] == "cached"
-    kept = {k: v for k, v in e["loop"].items() if k != "error_vs_truth"}
+    kept = {k: v for k, v in e["loop"].items() if k not in ("error_vs_truth", "pooled")}
     assert kept == first["factor-graph"] == first["sqrt-kf"]
+    assert e["loop"]["pooled"] == []        # the campaign's pooled test adopted nothing more here
 
 
 def test_no_diagnose_skips_the_loop(curved, tmp_path, capsys):
@@ -117,7 +118,7 @@ def test_no_diagnose_skips_the_loop(curved, tmp_path, capsys):
                  "factor-graph", "--no-diagnose", "--no-report", "--quiet"])
     assert code in (0, 3)
     doc = json.loads((out / "campaign.json").read_text())
-    assert doc["loop"] == {"enabled": False, "options": None, "changed": []}
+    assert doc["loop"] == {"enabled": False, "options": None, "changed": [], "pooled": None}
     assert "loop" not in doc["experiments"][0]
     assert not (out / "sub1_m10_0" / "diagnosis.json").exists()
     r = io.read_result(out / "sub1_m10_0" / "factor-graph.json")

@@ -44,8 +44,12 @@ def campaign(tmp_path_factory):
     assert cli.main([str(a) for a in argv]) == 0
     manifest = sim / "campaign.toml"
     manifest.write_text(manifest.read_text() + f"\n[model]\neffects = {json.dumps(list(EFFECTS))}\n")
+    # the declared model and the two effects, without the closed loop: the loop is not this file's subject
+    # (tests/test_campaign_loop.py, tests/test_campaign_pooled.py), and on these 72 s subranges the campaign's
+    # pooled test adopts accel.nonlinearity (common value 15.6 > 13.4, 2 dof), whose second-order terms the
+    # bounds and the apply-twice check below do not cover
     assert cli.main(["campaign", str(manifest), "--out", str(camp), "--workers", "0", "--solver", "factor-graph",
-                     "--no-report", "--quiet"]) == 0
+                     "--no-report", "--quiet", "--no-diagnose"]) == 0
     return sim, camp
 
 

@@ -52,6 +52,9 @@ Modules, one job each
   runs) and :func:`execute` (in this process, on a local Dask cluster or on an
   existing scheduler; the progress display);
 - :mod:`graph_calib.campaign.truth`: :func:`truth_path`, :func:`truth_check`;
+- :mod:`graph_calib.campaign.loop`: the closed loop's options and record per experiment;
+  :mod:`graph_calib.campaign.pooled`: the pooled score tests across the experiments (the rule);
+  :mod:`graph_calib.campaign.waves`: their waves of re-solves (cached like the first);
 - :mod:`graph_calib.campaign.run`: :func:`run_campaign`, a short sequence of
   phases (read and plan, compute, collect, stitch, truth check, validate,
   document and report), and :class:`CampaignRun`.

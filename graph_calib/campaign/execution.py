@@ -28,8 +28,8 @@ import numpy as np
 from tqdm import tqdm
 
 from graph_calib import io
-from graph_calib.campaign.loop import declared_path, loop_record
-from graph_calib.diagnosis import diagnose
+from graph_calib.campaign.loop import declared_path, loop_record, wave_record
+from graph_calib.diagnosis import diagnose, diagnose_from
 from graph_calib.errors import InputError
 from graph_calib.problem import build_problem
 from graph_calib.solvers.registry import solve
@@ -41,6 +41,25 @@ from graph_calib.warmup import CompileClock, cache_present, warm_kernels
 # ---------------------------------------------------------------------------
 # one task (runs on a worker)
 # ---------------------------------------------------------------------------
+
+#: The factor graph's keyframe attitudes of an experiment's chosen solution (with the loop), beside its results:
+#: where a pooled wave's graph starts (docs/campaign.md).
+ATTITUDES_FILE = "factor-graph.attitudes.npy"
+
+
+def _write_attitudes(folder, graph):
+    """``graph``'s keyframe attitudes (K+1, 3, 3) into ``folder``/:data:`ATTITUDES_FILE`, atomically."""
+    with io.atomic_path(Path(folder) / ATTITUDES_FILE) as tmp, open(tmp, "wb") as fh:
+        np.save(fh, np.asarray(graph.attitudes, dtype=float))
+
+
+def _read_attitudes(folder):
+    """The attitudes :func:`_write_attitudes` kept in ``folder``, or None."""
+    p = Path(folder) / ATTITUDES_FILE
+    try:
+        return np.load(p) if p.is_file() else None
+    except (OSError, ValueError):
+        return None
 
 
 def experiment_summary(experiment, *, t_ref_degC, points=1500):
@@ -87,6 +106,8 @@ def run_tasks(tasks):
             numba.set_num_threads(max(1, min(first.numba_threads, numba.config.NUMBA_NUM_THREADS)))
         except Exception:  # pragma: no cover - numba threading is an optimisation only
             pass
+    if first.wave:
+        return _run_wave_tasks(tasks)
     if first.diagnosis is not None:
         return _run_tasks_with_loop(tasks)
     t0 = time.perf_counter()
@@ -152,6 +173,7 @@ def _run_tasks_with_loop(tasks):
             js = diag.to_json()
             js["source"] = Path(first.file).name
             io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
+            _write_attitudes(first.out_dir, diag.after.graph)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - reported per task
@@ -177,6 +199,68 @@ def _run_tasks_with_loop(tasks):
             io.write_result(replace(result, extra=extra), task.result_path)
             outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
                              "compile_seconds": clock.seconds / len(tasks), "added": list(diag.added)})
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001
+            outcomes.append(_failure(task, exc))
+    return outcomes
+
+
+def _run_wave_tasks(tasks):
+    """One experiment solved again after the campaign's pooled test adopted an effect in it (a wave's job).
+
+    :func:`graph_calib.diagnosis.diagnose_from` solves the grown model (the tasks' options: the model the
+    previous wave chose plus the adopted effect), warm-started from the previous wave's results (the factor
+    graph's and the filter's own, read from ``start_dir``), and runs the loop's rounds on it, which may add
+    further effects up to the loop's limit.  Files, into the wave's folder (``<experiment>/pooled/<k>/``),
+    each atomic: ``summary.json``, ``diagnosis.json`` (the wave's rounds), and per task its residual series and
+    ``<solver>.json``, last, its ``campaign.loop`` the previous record carried on
+    (:func:`graph_calib.campaign.loop.wave_record`).
+    """
+    first = tasks[0]
+    t0 = time.perf_counter()
+    try:
+        with CompileClock() as clock:
+            Path(first.out_dir).mkdir(parents=True, exist_ok=True)
+            exp = io.read_experiment(first.file)
+            start = Path(first.start_dir)
+            previous = {t.solver: io.read_result(start / f"{t.solver}.json") for t in tasks}
+            record = next(r.extra["campaign"]["loop"] for r in previous.values())
+            graph_start = previous.get("factor-graph") or next(iter(previous.values()))
+            kf_start = previous.get("sqrt-kf")
+            left = max(0, first.diagnosis.max_added - len(record["added"]))
+            diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=graph_start.values,
+                                 attitudes=_read_attitudes(start) if "factor-graph" in previous else None,
+                                 kf_start=None if kf_start is None else kf_start.values, max_added=left)
+            record = wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
+            io.atomic_write_json(first.summary_path,
+                                 experiment_summary(exp, t_ref_degC=diag.before.problem.model.t_ref_degC))
+            js = diag.to_json()
+            js["source"] = Path(first.file).name
+            io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
+            _write_attitudes(first.out_dir, diag.after.graph)
+    except (KeyboardInterrupt, SystemExit):
+        raise
+    except Exception as exc:  # noqa: BLE001 - reported per task
+        return [_failure(t, exc) for t in tasks]
+    seconds = (time.perf_counter() - t0 - clock.seconds) / len(tasks)
+    outcomes = []
+    for task in tasks:
+        try:
+            output = diag.after.graph if task.solver == "factor-graph" else getattr(diag.after, "kf", None)
+            result = diag.after.results.get(task.solver)
+            if output is None or result is None:
+                raise RuntimeError(f"the pooled wave ran no {task.solver} on the grown model")
+            io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
+                               source=Path(task.file).name, kind=output.residual_quantity)
+            extra = dict(result.extra)
+            extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
+                                 "options_sha256": task.options_sha256, "experiment": task.name, "wave": task.wave,
+                                 "seconds": seconds, "compile_seconds": clock.seconds / len(tasks), "loop": record}
+            io.write_result(replace(result, extra=extra), task.result_path)
+            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
+                             "compile_seconds": clock.seconds / len(tasks),
+                             "added": [task.pooled[-1]] + list(diag.added)})
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001
@@ -249,7 +333,51 @@ def warm_up(*, progress):
     return w
 
 
-def execute(tasks, *, options, on_done=None, timing=None):
+class Pool:
+    """A campaign's Dask client, started on first use and kept for its later waves of jobs; :meth:`close` ends it.
+
+    With ``options.scheduler`` the client of that cluster (:meth:`connect`); else a local cluster of processes
+    with one thread each (:meth:`local`), as many as ``options.workers`` or CPU cores, at most one per job of
+    the first wave that needs it.  The pooled score test's waves (:mod:`graph_calib.campaign.waves`) run on the
+    same workers, which then load nothing again.
+    """
+
+    def __init__(self, options):
+        self.options = options
+        self.client = None
+        self._cluster = None
+
+    def connect(self):
+        """The client of ``options.scheduler`` (InputError when it cannot be reached)."""
+        if self.client is None:
+            self.client = _connect(self.options.scheduler)
+        return self.client
+
+    def local(self, n_jobs, bar=None):
+        """The client of the local cluster, started here for ``n_jobs`` jobs on first use."""
+        if self.client is None:
+            from distributed import Client, LocalCluster  # seconds to import: only here (module docstring)
+
+            n = self.options.workers if self.options.workers else min(os.cpu_count() or 1, n_jobs)
+            n = max(1, min(n, n_jobs))
+            _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", self.options.progress)
+            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                         silence_logs=logging.ERROR)
+            self.client = Client(self._cluster)
+        return self.client
+
+    def close(self):
+        """Close the client and the local cluster, if any."""
+        try:
+            if self.client is not None:
+                self.client.close()
+        finally:
+            if self._cluster is not None:
+                self._cluster.close()
+            self.client = self._cluster = None
+
+
+def execute(tasks, *, options, on_done=None, timing=None, pool=None):
     """Run ``tasks`` (Dask or in-process), one job per experiment; ``{(name, solver): outcome dict}``.
 
     First the numba kernels are warmed in this process (:func:`warm_up`; with ``options.scheduler`` after
@@ -258,6 +386,8 @@ def execute(tasks, *, options, on_done=None, timing=None):
     the run; finished tasks stay on disk).  ``timing``, a dict, receives ``warmup_seconds`` (the
     warm-up's wall time), ``compile_seconds`` (numba compiling during the warm-up) and
     ``compiled_signatures``; the tasks' own seconds leave numba compiling out (:func:`run_tasks`).
+    ``pool``: a :class:`Pool` kept by the caller for later waves (left open); by default one of its own,
+    closed at the end.
     """
     outcomes = {}
     if timing is None:
@@ -265,16 +395,19 @@ def execute(tasks, *, options, on_done=None, timing=None):
     timing.update({"warmup_seconds": 0.0, "compile_seconds": 0.0, "compiled_signatures": 0})
     if not tasks:
         return outcomes
-    client = _connect(options.scheduler) if options.scheduler else None
+    own = pool is None
+    pool = Pool(options) if own else pool
     try:
+        if options.scheduler:
+            pool.connect()
         t_warm = time.perf_counter()
         w = warm_up(progress=options.progress)
         timing.update({"warmup_seconds": time.perf_counter() - t_warm,
                        "compile_seconds": 0.0 if w is None else w.compile_seconds,
                        "compiled_signatures": 0 if w is None else w.compiled})
     except BaseException:
-        if client is not None:
-            client.close()
+        if own:
+            pool.close()
         raise
     bar = _progress_bar(len(tasks), options.progress)
 
@@ -299,10 +432,14 @@ def execute(tasks, *, options, on_done=None, timing=None):
                 for t, outcome in zip(group, run_tasks(group)):
                     finish(t, outcome)
         else:
-            _run_dask(tasks, options=options, finish=finish, bar=bar, client=client)
+            _run_dask(tasks, finish=finish, bar=bar, pool=pool)
     finally:
-        if bar is not None:
-            bar.close()
+        try:
+            if bar is not None:
+                bar.close()
+        finally:
+            if own:
+                pool.close()
     return outcomes
 
 
@@ -316,40 +453,26 @@ def _connect(scheduler):
         raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
 
 
-def _run_dask(tasks, *, options, finish, bar, client=None):
-    """The jobs on ``client`` (an existing cluster's) or on a local cluster started here."""
-    from distributed import Client, LocalCluster, as_completed  # seconds to import: only here (module docstring)
+def _run_dask(tasks, *, finish, bar, pool):
+    """The jobs on ``pool``'s client (an existing cluster's, or a local cluster started on first use)."""
+    from distributed import as_completed  # seconds to import: only here (module docstring)
 
     groups = _groups(tasks)
-    cluster = None
-    if client is None:
-        n = options.workers if options.workers else min(os.cpu_count() or 1, len(groups))
-        n = max(1, min(n, len(groups)))
-        _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", options.progress)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                               silence_logs=logging.ERROR)
-        client = Client(cluster)
-    try:
-        by_future = {}
-        for g in groups:
-            key = f"calibrate-{g[0].name}-{'+'.join(t.solver for t in g)}-{g[0].key[:12]}"
-            by_future[client.submit(run_tasks, g, key=key, pure=False)] = g
-        for fut in as_completed(list(by_future)):
-            g = by_future[fut]
-            try:
-                outs = fut.result()
-            except (KeyboardInterrupt, SystemExit):
-                raise
-            except Exception as exc:  # noqa: BLE001 - e.g. a worker that died
-                outs = [_failure(t, exc) for t in g]
-            for t, outcome in zip(g, outs):
-                finish(t, outcome)
-    finally:
+    client = pool.client or pool.local(len(groups), bar)
+    by_future = {}
+    for g in groups:
+        key = f"calibrate-{g[0].name}-{'+'.join(t.solver for t in g)}-{g[0].key[:12]}"
+        by_future[client.submit(run_tasks, g, key=key, pure=False)] = g
+    for fut in as_completed(list(by_future)):
+        g = by_future[fut]
         try:
-            client.close()
-        finally:
-            if cluster is not None:
-                cluster.close()
+            outs = fut.result()
+        except (KeyboardInterrupt, SystemExit):
+            raise
+        except Exception as exc:  # noqa: BLE001 - e.g. a worker that died
+            outs = [_failure(t, exc) for t in g]
+        for t, outcome in zip(g, outs):
+            finish(t, outcome)
 
 
-__all__ = ["experiment_summary", "run_tasks", "warm_up", "execute"]
+__all__ = ["experiment_summary", "run_tasks", "warm_up", "execute", "Pool"]

@@ -9,6 +9,7 @@
   added something (``<experiment>/declared/<solver>.json``);
 - :func:`truth_errors`: a result against a truth, per element at the result's own ``T_ref`` (RMS
   normalised error, largest, share within 3 sigma);
+- :func:`wave_record`: the record carried on through a wave of the campaign's pooled score test;
 - :func:`loop_entry`: ``campaign.json``'s ``loop`` of one experiment, from its results and its truth.
 
 The worker side (diagnose, write the files) is :func:`graph_calib.campaign.execution.run_tasks`.
@@ -59,7 +60,11 @@ def loop_record(diagnosis):
     (the score), ``threshold``, ``dof``, ``log10_p``, the round's ``decision``), the last round's decision,
     ``unexplained`` (significant driver signatures left), ``residual_rms`` ``{"before", "after"}`` (per
     solver the overall RMS of the whitened residuals or normalised innovations, and per kind),
-    ``seconds``.
+    ``seconds``, and ``final_round``: the last round's index and every candidate it tested (``effect``,
+    ``statistic``, ``dof``, ``threshold``, ``log10_p``, and its ``score`` vector, ``information`` matrix
+    (row-major) and the prior sigmas ``scale`` (:class:`graph_calib.diagnosis.CandidateTest`); ``dof`` 0 and
+    empty lists when skipped), at the chosen model: what the
+    campaign's pooled score test sums (:mod:`graph_calib.campaign.pooled`), without recomputing anything.
     """
     added = []
     for r in diagnosis.rounds:
@@ -82,7 +87,44 @@ def loop_record(diagnosis):
             "decision": last.decision if last else "", "unexplained": bool(diagnosis.unexplained),
             "signature": [f"{d.group} on {d.axis}" for d in diagnosis.signature[:5]],
             "residual_rms": {"before": rms(diagnosis.before), "after": rms(diagnosis.after)},
-            "seconds": float(diagnosis.seconds)}
+            "seconds": float(diagnosis.seconds),
+            "final_round": {"round": last.index if last else 0,
+                            "candidates": [] if last is None else [
+                                {"effect": t.name, "statistic": float(t.statistic), "dof": int(t.dof),
+                                 "threshold": float(t.threshold) if t.dof else None,
+                                 "log10_p": float(t.log10_p), "score": list(t.score),
+                                 "information": list(t.information), "scale": list(t.scale)}
+                                for t in last.candidates]}}
+
+
+def wave_record(previous, diagnosis, *, wave, effect):
+    """The loop record after a wave of the campaign's pooled test (:mod:`graph_calib.campaign.pooled`).
+
+    Parameters
+    ----------
+    previous : dict
+        The record the wave started from (:func:`loop_record`, or an earlier wave's).
+    diagnosis : graph_calib.diagnosis.Diagnosis
+        The wave's :func:`graph_calib.diagnosis.diagnose_from` (its ``before`` the grown model).
+    wave : int
+    effect : str
+        The effect the pooled test adopted in this wave.
+
+    Returns
+    -------
+    dict
+        ``previous`` carried on: ``declared`` kept, ``chosen`` the wave's, ``added`` extended by what the wave's
+        own rounds added (each with its ``wave``), ``pooled`` extended by ``{"effect", "wave"}`` (the pooled
+        statistics are the campaign's, in ``campaign.json``), ``residual_rms.before`` kept and ``after`` the
+        wave's, ``seconds`` summed, ``decision``, ``unexplained``, ``signature`` and ``final_round`` the wave's.
+    """
+    new = loop_record(diagnosis)
+    return {**previous, "chosen": new["chosen"],
+            "added": list(previous["added"]) + [dict(a, wave=wave) for a in new["added"]],
+            "pooled": list(previous.get("pooled", [])) + [{"effect": effect, "wave": wave}],
+            "decision": new["decision"], "unexplained": new["unexplained"], "signature": new["signature"],
+            "residual_rms": {"before": previous["residual_rms"]["before"], "after": new["residual_rms"]["after"]},
+            "seconds": float(previous["seconds"]) + new["seconds"], "final_round": new["final_round"]}
 
 
 def _truth_at(truth, t_ref):
@@ -160,10 +202,13 @@ def loop_entry(folder, results, truth=None):
     entry = dict(rec)
     if truth is not None:
         err = {}
+        # the declared model's results: declared/ when the experiment's own loop added something, else the
+        # experiment's own result files when a pooled wave changed them, else the results themselves
+        first_wave = any("wave" not in a for a in rec["added"])
         for s, r in results.items():
             before = r
-            if rec["added"]:
-                p = Path(folder) / DECLARED_FOLDER / f"{s}.json"
+            if first_wave or rec.get("pooled"):
+                p = Path(folder) / (DECLARED_FOLDER if first_wave else "") / f"{s}.json"
                 try:
                     before = io.read_result(p)
                 except InputError:
@@ -174,4 +219,4 @@ def loop_entry(folder, results, truth=None):
     return entry
 
 
-__all__ = ["DECLARED_FOLDER", "loop_options", "loop_record", "declared_path", "truth_errors", "loop_entry"]
+__all__ = ["DECLARED_FOLDER", "loop_options", "loop_record", "wave_record", "declared_path", "truth_errors", "loop_entry"]

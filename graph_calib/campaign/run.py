@@ -27,12 +27,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from graph_calib import io
-from graph_calib.campaign.execution import execute
+from graph_calib.campaign.execution import Pool, execute
 from graph_calib.campaign.joint_run import joint_failures, run_joint
 from graph_calib.campaign.loop import loop_entry
 from graph_calib.campaign.planning import plan_campaign
 from graph_calib.campaign.tasks import CampaignOptions
 from graph_calib.campaign.truth import truth_check, truth_path
+from graph_calib.campaign.waves import run_waves
 from graph_calib.errors import InputError
 from graph_calib.experiment import Result
 from graph_calib.reports.campaign_report import write_report
@@ -132,9 +133,15 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     """
     t_start = time.perf_counter()
     planned = _read_and_plan(manifest, out, options=options)
-    outcomes, compute_timing = _compute(planned, options=options, on_done=on_done)
-    collected = _collect(planned, outcomes)
-    loop_doc = _loop(planned, collected)
+    pool = Pool(options)        # one cluster for the first wave and the pooled test's waves
+    try:
+        outcomes, compute_timing = _compute(planned, options=options, on_done=on_done, pool=pool)
+        pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool)
+    finally:
+        pool.close()
+    collected = _collect(planned, {**outcomes, **(pooled.outcomes if pooled else {})},
+                         folders=pooled.folders if pooled else {})
+    loop_doc = _loop(planned, collected, pooled)
     stitched = _stitch(planned, collected)
     truth_doc = _check_truth(stitched, collected.truths, collected.summaries)
     joint, joint_doc = run_joint(planned, collected, progress=options.progress, force=options.force)
@@ -147,6 +154,8 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     document["joint"] = joint_doc
     collected.failed.extend(joint_failures(joint_doc))     # after the timing counted the tasks
     document["loop"] = loop_doc
+    if pooled is not None:
+        document["timing"]["pooled_seconds"] = pooled.document["seconds"]
     run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
                       truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed,
                       joint=joint)
@@ -164,7 +173,7 @@ def _read_and_plan(manifest, out, *, options):
     return planned
 
 
-def _compute(planned, *, options, on_done):
+def _compute(planned, *, options, on_done, pool=None):
     """Phase 2: the tasks run; ``({(name, solver): outcome dict}, timing dict)`` with the cached tasks' outcomes.
 
     The timing holds ``tasks_seconds`` (wall time of the tasks, the warm-up left out), ``warmup_seconds``,
@@ -178,7 +187,7 @@ def _compute(planned, *, options, on_done):
     """
     t_tasks = time.perf_counter()
     timing = {}
-    outcomes = execute(planned.to_compute, options=options, on_done=on_done, timing=timing)
+    outcomes = execute(planned.to_compute, options=options, on_done=on_done, timing=timing, pool=pool)
     timing["tasks_seconds"] = time.perf_counter() - t_tasks - timing["warmup_seconds"]
     timing["tasks_compile_seconds"] = sum(o.get("compile_seconds", 0.0) for o in outcomes.values())
     for t in planned.from_cache:
@@ -189,12 +198,17 @@ def _compute(planned, *, options, on_done):
     return outcomes, timing
 
 
-def _collect(planned, outcomes):
-    """Phase 3: every experiment's summary and results read back, ``comparison.json`` written, its truth read."""
+def _collect(planned, outcomes, *, folders):
+    """Phase 3: every experiment's summary and results read back, ``comparison.json`` written, its truth read.
+
+    ``folders``: ``{experiment: folder relative to the output}`` of those whose final results a pooled wave
+    wrote (:func:`graph_calib.campaign.waves.run_waves`); the others' are in their own folder.
+    """
     out = planned.out
     experiments_doc, results, summaries, truths, failed = [], {}, {}, {}, []
     for e in planned.campaign.experiments:
         folder = out / e.name
+        rfolder = Path(folders.get(e.name, e.name))
         entry = {"name": e.name, "file": str(e.file), "folder": e.name, "t_ref_degC": e.t_ref_degC, "results": {}}
         summary_file = folder / "summary.json"
         if summary_file.is_file():
@@ -205,11 +219,11 @@ def _collect(planned, outcomes):
         res = {}
         for s in planned.solvers:
             oc = outcomes.get((e.name, s), {"status": "missing"})
-            info = {"status": oc["status"], "file": f"{e.name}/{s}.json"}
+            info = {"status": oc["status"], "file": (rfolder / f"{s}.json").as_posix()}
             if oc["status"] == "failed":
                 info["error"] = oc["error"]
                 failed.append({"name": e.name, "solver": s, "error": oc["error"]})
-            p = folder / f"{s}.json"
+            p = out / rfolder / f"{s}.json"
             if oc["status"] in ("computed", "cached") and p.is_file():
                 r = io.read_result(p)
                 res[s] = r
@@ -239,26 +253,32 @@ def _collect(planned, outcomes):
                       failed=failed)
 
 
-def _loop(planned, collected):
+def _loop(planned, collected, pooled):
     """Phase 3b: the closed loop's record per experiment (``experiments[i].loop``) and its summary.
 
     Per experiment :func:`graph_calib.campaign.loop.loop_entry` (the model chosen and why, residual RMS
-    before and after, the error against its truth before and after); the summary (``campaign.json``'s
-    ``loop``) says whether the loop ran, its options and which experiments it changed.
+    before and after, the error against its truth before and after) and ``pooled``, what the campaign's
+    pooled score test adopted there (per adoption its wave, pooled statistic, dof, threshold, log10 p and the
+    experiments pooled; :mod:`graph_calib.campaign.pooled`); the summary (``campaign.json``'s ``loop``) says
+    whether the loop ran, its options, which experiments it changed (``added``: their own loop's effects,
+    ``pooled``: the pooled test's) and ``pooled``, the pooled test's waves (:func:`run_waves`).
     """
     dopts = planned.todo[0].diagnosis if planned.todo else (planned.done[0].diagnosis if planned.done else None)
+    adopted = pooled.adopted if pooled else {}
     changed = []
     for entry in collected.experiments:
         le = loop_entry(planned.out / entry["name"], collected.results.get(entry["name"], {}),
                         collected.truths.get(entry["name"]))
         if le is not None:
+            le["pooled"] = adopted.get(entry["name"], [])
             entry["loop"] = le
-            if le["added"]:
-                changed.append({"name": entry["name"], "added": [a["effect"] for a in le["added"]]})
+            if le["added"] or le["pooled"]:
+                changed.append({"name": entry["name"], "added": [a["effect"] for a in le["added"]],
+                                "pooled": [a["effect"] for a in le["pooled"]]})
     return {"enabled": dopts is not None,
             "options": None if dopts is None else {"alpha": dopts.alpha, "max_added": dopts.max_added,
                                                    "solvers": list(dopts.solvers)},
-            "changed": changed}
+            "changed": changed, "pooled": pooled.document if pooled else None}
 
 
 def _stitch(planned, collected):

@@ -22,8 +22,9 @@ from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, FilterOptions, GraphOptions
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
 
-#: Bumped when a change of the code invalidates cached results.
-CACHE_VERSION = 1
+#: Bumped when a change of the code invalidates cached results (2: the loop's record holds its final round's
+#: candidate statistics, which the pooled score test sums).
+CACHE_VERSION = 2
 
 #: The per-experiment solvers each value of :attr:`CampaignOptions.solvers` (and ``[solver] solvers``) stands for.
 SOLVER_CHOICES = {"both": DEFAULT_SOLVERS, "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",),
@@ -100,6 +101,15 @@ class Task:
         Threads for numba's parallel kernels on the worker; 0: leave numba's default.
     diagnosis : graph_calib.diagnosis.DiagnosisOptions or None
         The closed loop's options (its repr is part of ``options_sha256``); None: the declared model only.
+    wave : int
+        0 for the experiment's own loop; ``k >= 1`` for the ``k``-th wave of the campaign's pooled score test
+        (:mod:`graph_calib.campaign.waves`): the experiment solved again with the effects pooled so far
+        (``options`` hold them), warm-started from the results in ``start_dir``; its files go to
+        ``<experiment>/pooled/<k>/`` and its key covers the starting results' key.
+    start_dir : str or None
+        Where the results a wave starts from are (the previous wave's folder, or the experiment's).
+    pooled : tuple of str
+        The effects the pooled test adopted in this experiment so far, in order (the last one this wave's).
     """
 
     name: str
@@ -112,6 +122,9 @@ class Task:
     options_sha256: str
     numba_threads: int = 0
     diagnosis: DiagnosisOptions | None = None
+    wave: int = 0
+    start_dir: str | None = None
+    pooled: tuple[str, ...] = ()
 
     @property
     def result_path(self):

@@ -129,6 +129,9 @@ def _print_loop(loop, out):
     added = ", ".join(f"{a['effect']} (score {a['statistic']:.1f}, log10 p {a['log10_p']:.1f})"
                       for a in loop["added"]) or "nothing"
     line = f"    loop: added {added}"
+    for a in loop.get("pooled") or []:
+        line += (f"; pooled test adopted {a['effect']} ({a['kind']} score {a['statistic']:.1f} > {a['threshold']:.1f} over "
+                 f"{len(a['experiments'])} experiments, log10 p {a['log10_p']:.1f})")
     err = (loop.get("error_vs_truth") or {}).get("factor-graph") or {}
     if err.get("before") and err.get("after"):
         b, a = err["before"], err["after"]

@@ -25,7 +25,8 @@ Modules, from the data up:
 - :mod:`graph_calib.diagnosis.records`: :class:`DiagnosisOptions` and what the loop records
   (:class:`CandidateTest`, :class:`DriverTest`, :class:`Round`, :class:`Stage`,
   :class:`Diagnosis` with ``to_json``);
-- :mod:`graph_calib.diagnosis.loop`: :func:`diagnose`, the loop as a sequence of steps.
+- :mod:`graph_calib.diagnosis.loop`: :func:`diagnose`, the loop as a sequence of steps, and
+  :func:`diagnose_from`, the loop continued on a model grown from outside (a campaign's pooled test).
 """
 
 from graph_calib.diagnosis.drivers import (
@@ -39,7 +40,7 @@ from graph_calib.diagnosis.drivers import (
     keyframe_context,
     time_basis,
 )
-from graph_calib.diagnosis.loop import diagnose
+from graph_calib.diagnosis.loop import diagnose, diagnose_from
 from graph_calib.diagnosis.records import (
     CandidateTest,
     Diagnosis,
@@ -58,7 +59,7 @@ from graph_calib.diagnosis.residuals import (
 )
 from graph_calib.diagnosis.score import Score, log10_chi2_sf, score_test
 
-__all__ = ["diagnose", "DiagnosisOptions", "Diagnosis", "Stage", "Round", "CandidateTest", "DriverTest",
+__all__ = ["diagnose", "diagnose_from", "DiagnosisOptions", "Diagnosis", "Stage", "Round", "CandidateTest", "DriverTest",
            "Driver", "driver_series", "time_basis", "keyframe_context", "DRIVER_GROUPS", "SENSOR_AXES",
            "REGRESSION_DRIVERS", "RATE_SIGN_DEADBAND", "TIME_SEGMENTS", "ReducedSystem", "linearise", "Score",
            "score_test", "log10_chi2_sf", "ljung_box", "regression_tests", "residual_statistics", "residual_rms",

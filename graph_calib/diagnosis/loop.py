@@ -71,7 +71,7 @@ def _solve_graph(problem, *, options, initial=None):
 
 
 def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None, kf_from=None,
-                linearised=None, context=None, say=lambda msg: None):
+                kf_x=None, linearised=None, context=None, say=lambda msg: None):
     """The stage of ``problem`` solved by the factor graph (``graph``): the filter, residuals, statistics, error.
 
     ``linearised``: the :class:`_Linearised` of the round run at ``graph`` (:func:`_round`): the factor
@@ -82,6 +82,8 @@ def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed
     stay independent; the fixed point is the same, only fewer passes reach it).  Without it the filter
     starts from the prior calibration, as it does on its own, with the graph's keyframe attitudes as its
     first attitudes (instead of fitting attitudes at the prior, ``initial_attitudes``).
+    ``kf_x``: instead, the filter's first calibration in ``problem``'s layout (its solution of a smaller model
+    kept in a result file, :func:`diagnose_from`), with the graph's keyframe attitudes.
     ``context``: the record's :func:`~graph_calib.diagnosis.drivers.keyframe_context` (one for both stages).
     """
     model = problem.model
@@ -95,6 +97,8 @@ def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed
         say("  square-root filter ...")
         if kf_from is not None:
             initial = (kf_from.attitudes, model.layout.embed(kf_from.layout, kf_from.x))
+        elif kf_x is not None:
+            initial = (graph.attitudes, np.asarray(kf_x, dtype=float))
         else:
             # the prior calibration, as the filter starts on its own; the first attitudes the graph's keyframe
             # attitudes instead of the filter's attitude-only fit at the prior (initial_attitudes)
@@ -164,7 +168,8 @@ def _test_candidates(system, layout, names, *, diagnosis_options):
         idx, sc = raw[name]
         thr = float(stats.chi2.isf(diagnosis_options.alpha / m, sc.dof))
         tests.append(CandidateTest(name, sc.statistic, sc.dof, sc.dim, thr, sc.log10_p(), sc.statistic > thr, None,
-                                   tuple(sc.estimate.tolist()), tuple(sc.sigma.tolist())))
+                                   tuple(sc.estimate.tolist()), tuple(sc.sigma.tolist()), tuple(sc.u.tolist()),
+                                   tuple(sc.S.ravel().tolist()), tuple(system.prior_sigma[idx].tolist())))
     return tests, {name: idx for name, (idx, _) in raw.items()}
 
 
@@ -448,10 +453,70 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     options = CalibrationOptions() if options is None else options
     problem = build_problem(experiment, options=options)
     options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
+    say(f"declared model: {problem.model.layout.size} parameters, {problem.model.n_keyframes} keyframes; "
+        "factor graph ...")
+    graph = _solve_graph(problem, options=options)
+    return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=truth,
+                      max_added=diagnosis.max_added, kf_x=None, t_start=t_start, say=say)
+
+
+def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), attitudes=None, kf_start=None,
+                  max_added=None, progress=None):
+    """The closed loop continued on a model grown from outside, warm-started from a smaller model's solution.
+
+    What a campaign runs after its pooled score test adopted an effect in this experiment
+    (:mod:`graph_calib.campaign.pooled`): ``options`` hold the model the experiment's own loop chose plus the
+    adopted effect(s), ``start`` that model's factor-graph solution.  The grown model is solved by the factor
+    graph from ``start`` (the new parameters zero; the keyframe attitudes that solution's own, else
+    dead-reckoned from the alignment with that calibration, which keeps them within the alignment's error, so
+    no attitude-only fit), then the
+    rounds of :func:`diagnose` run on it (at most ``max_added`` further effects).  The filter, when it is one
+    of ``diagnosis.solvers``, starts from ``kf_start`` (its own solution of the smaller model) with the
+    graph's attitudes: the two solvers keep their own fixed points, fewer passes reach them.
+
+    Parameters
+    ----------
+    experiment : graph_calib.experiment.Experiment
+    options : CalibrationOptions
+        The grown model; its ``t_ref_degC`` the smaller model's (one ``T_ref`` for every model).
+    start : dict
+        ``{flat element name: value}`` (SI) of the smaller model's factor-graph solution
+        (:attr:`graph_calib.experiment.Result.values`); elements not given start at zero.
+    diagnosis : DiagnosisOptions
+    attitudes : ndarray (K+1, 3, 3), optional
+        The keyframe attitudes ``C_nb`` of the ``start`` solution (ignored when their shape does not fit).
+    kf_start : dict, optional
+        The same of its filter solution (default: the filter starts from the prior calibration).
+    max_added : int, optional
+        Further effects the rounds may add (default ``diagnosis.max_added``).
+    progress : callable, optional
+
+    Returns
+    -------
+    Diagnosis
+        ``before`` is the grown model's stage (not the declared model's), ``added`` what the rounds added to it.
+    """
+    t_start = time.perf_counter()
+    say = progress or (lambda msg: None)
+    problem = build_problem(experiment, options=options)
+    model = problem.model
+    x0 = model.layout.from_dict(start)
+    if attitudes is not None and np.shape(attitudes) == (model.n_keyframes + 1, 3, 3):
+        R0 = np.asarray(attitudes, dtype=float)
+    else:
+        R0 = model.propagate(model.segment_priors(problem.q_nb0), model.preintegrate(x0), x0)
+    say(f"grown model: {model.layout.size} parameters, warm start; factor graph ...")
+    graph = _solve_graph(problem, options=options, initial=(R0, x0))
+    kf_x = None if kf_start is None else model.layout.from_dict(kf_start)
+    return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=None,
+                      max_added=diagnosis.max_added if max_added is None else max_added, kf_x=kf_x,
+                      t_start=t_start, say=say)
+
+
+def _loop_from(experiment, problem, graph, *, options, diagnosis, truth, max_added, kf_x, t_start, say):
+    """The rounds from ``problem`` solved by the graph (``graph``) until nothing is added: the :class:`Diagnosis`."""
     candidates = tuple(diagnosis.candidates or effects.FURTHER_EFFECTS)
     declared = problem.model
-    say(f"declared model: {declared.layout.size} parameters, {declared.n_keyframes} keyframes; factor graph ...")
-    graph = _solve_graph(problem, options=options)
     sums = DriverSums.of(declared, n_segments=diagnosis.time_segments)   # the record's: one for every round
     context = keyframe_context(declared)                                 # and one for both stages
     rounds, added = [], []
@@ -460,12 +525,12 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     while True:
         rnd, lin = _round(len(rounds) + 1, options=options, problem=problem, graph=graph,
                           diagnosis_options=diagnosis, candidates=candidates,
-                          allow_add=len(added) < diagnosis.max_added, sums=sums, previous=lin)
+                          allow_add=len(added) < max_added, sums=sums, previous=lin)
         rounds.append(rnd)
         say(f"round {rnd.index}: {rnd.decision}")
-        if before is None:      # the declared model's stage, its residuals from the first round's linearisation
+        if before is None:      # the starting model's stage, its residuals from the first round's linearisation
             before = _make_stage(problem, graph, options=options, diagnosis_options=diagnosis, truth=truth,
-                                 linearised=lin, context=context, say=say)
+                                 kf_x=kf_x, linearised=lin, context=context, say=say)
             fixed = {s: r.sigmas for s, r in before.results.items()}
         if rnd.added is None:
             break

@@ -82,6 +82,11 @@ class CandidateTest:
         Why the effect was not tested (not estimable in this experiment, not identifiable).
     estimate, sigma : tuple of float
         One-step estimate of its elements and their sigmas, SI (empty when skipped).
+    score, information, scale : tuple of float
+        The score ``u`` (dim), its information ``S`` (dim x dim, row-major) and the prior sigmas that judge
+        which directions are identifiable, SI, ``u`` and ``S`` divided by the variance factor
+        (:class:`~graph_calib.diagnosis.score.Score`); empty when skipped.  Not in ``diagnosis.json``; a
+        campaign keeps them for its pooled test (``graph_calib.campaign.loop.loop_record``).
     """
 
     name: str
@@ -94,6 +99,9 @@ class CandidateTest:
     skipped: str | None
     estimate: tuple[float, ...]
     sigma: tuple[float, ...]
+    score: tuple[float, ...] = ()
+    information: tuple[float, ...] = ()
+    scale: tuple[float, ...] = ()
 
     def to_json(self):
         s = effects.effect(self.name)

@@ -54,6 +54,11 @@ class Score:
         from every direction (very large where a direction is not identifiable), SI.
     sigma_identifiable : ndarray (dim,)
         The sigma from the identifiable directions only (the spread of ``estimate``).
+    u, S : ndarray (dim,), (dim, dim)
+        The score ``u`` and its information ``S`` (the Schur complement given the base columns), divided by
+        the variance factor, so that ``statistic = u^T S^+ u`` on the identifiable directions: what a
+        campaign's pooled test of one value common to several experiments sums
+        (:mod:`graph_calib.campaign.pooled`).
     """
 
     statistic: float
@@ -62,6 +67,8 @@ class Score:
     estimate: np.ndarray
     sigma: np.ndarray
     sigma_identifiable: np.ndarray | None = None
+    u: np.ndarray | None = None
+    S: np.ndarray | None = None
 
     def p_value(self):
         return float(stats.chi2.sf(self.statistic, self.dof)) if self.dof else 1.0
@@ -136,7 +143,7 @@ def score_test(A, b, base, test, *, scale=None, min_eig=1e-3, scale_factor=1.0):
     sig = np.where(np.isfinite(var) & (var > 0), np.sqrt(np.where(np.isfinite(var), var, 0.0)), np.inf)
     sig_id = np.sqrt(D**2 * np.diag(Sinv) * scale_factor)
     return Score(statistic=T, dof=int(np.count_nonzero(keep)), dim=int(test.size), estimate=est, sigma=sig,
-                 sigma_identifiable=sig_id)
+                 sigma_identifiable=sig_id, u=u / scale_factor, S=S / scale_factor)
 
 
 def with_priors(rs, cols):

@@ -252,7 +252,10 @@ def _load_residuals(path):
 def fig_residuals(run, solver):
     plt = _plt()
     names = [n for n in run.results if solver in run.results[n]]
-    data = {n: _load_residuals(run.out / n / f"{solver}.residuals.h5") for n in names}
+    # beside each experiment's result file (its own folder, or a pooled wave's, campaign.json's results.file)
+    files = {e["name"]: ((e.get("results") or {}).get(solver) or {}).get("file") for e in run.document["experiments"]}
+    data = {n: _load_residuals(run.out / Path(files.get(n) or f"{n}/{solver}.json").parent / f"{solver}.residuals.h5")
+            for n in names}
     kinds = []
     for d in data.values():
         for k in d:

@@ -167,6 +167,10 @@ def _loop_table(doc):
             continue
         added = "; ".join(f"{a['effect']} (score {a['statistic']:.1f} > {a['threshold']:.1f}, log10 p "
                           f"{a['log10_p']:.1f})" for a in lp["added"]) or "nothing"
+        pooled = "; ".join(f"{a['effect']} (wave {a['wave']}: pooled {a['kind']} score {a['statistic']:.1f} > "
+                           f"{a['threshold']:.1f}, "
+                           f"{a['dof']} dof, log10 p {a['log10_p']:.1f}, over {len(a['experiments'])} experiments)"
+                           for a in lp.get("pooled") or []) or "-"
         rr = lp["residual_rms"]
         res = ", ".join(f"{SOLVER_LABEL.get(s, s)} {rr['before'][s]['overall']:.3f} -> {rr['after'][s]['overall']:.3f}"
                         for s in rr["after"] if s in rr["before"])
@@ -178,7 +182,7 @@ def _loop_table(doc):
                 errs.append(f"{SOLVER_LABEL.get(s, s)}: RMS {b['rms_z']:.2f} -> {a['rms_z']:.2f}, max "
                             f"{b['max_abs_z']:.1f} -> {a['max_abs_z']:.1f}, within 3 sigma "
                             f"{100 * b['fraction_within_3sigma']:.0f} -> {100 * a['fraction_within_3sigma']:.0f} %")
-        rows.append([e["name"], added, res, "; ".join(errs) or "-"])
+        rows.append([e["name"], added, pooled, res, "; ".join(errs) or "-"])
     return rows, truth
 
 
@@ -191,14 +195,24 @@ def _loop_section(doc):
             "with the declared model, every further effect of model.md score-tested against its residuals, the most "
             "significant one added and the model solved again, until none is significant (Bonferroni at alpha = "
             f"{doc['loop']['options']['alpha']:g}). The stitched curves come from the models the loop chose. "
+            "Then the campaign's pooled score tests, over the experiments that did not adopt a candidate: 'sum', "
+            "their final-round score statistics summed (chi-square with the summed degrees of freedom), and "
+            "'common', the score test of one value of the effect shared by them; at the same level, Bonferroni "
+            "over every pooled test; the candidate of the most significant one past its threshold is adopted in "
+            "those experiments, which are solved again (an effect each subrange sees weakly, seen by the "
+            "campaign). "
             "Residual RMS: overall RMS of the whitened residuals (graph) or normalised innovations (filter), about 1 "
             "for a model that explains the data.")
+    waves = ((doc["loop"].get("pooled") or {}).get("waves")) or []
+    if waves:
+        text += " Pooled decisions: " + "; ".join(f"{w['wave']}: {w['decision']}" for w in waves) + "."
     if truth:
         text += (" Error against the truth: the declared parameters' estimates minus the truth at the subrange's "
                  "reference temperature, in their own sigmas (RMS, largest, share within 3 sigma).")
     return H.section("The closed loop", H.paragraph(text),
-                     H.table(["experiment", "effects added (score, log10 p)", "residual RMS before -> after",
-                              "error against the truth before -> after"], rows, left=(0, 1, 2, 3)), anchor="loop")
+                     H.table(["experiment", "effects added (score, log10 p)", "adopted by the pooled test",
+                              "residual RMS before -> after", "error against the truth before -> after"], rows,
+                             left=(0, 1, 2, 3, 4)), anchor="loop")
 
 
 def _truth_curves(truths):

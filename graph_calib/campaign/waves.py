@@ -1,0 +1,183 @@
+"""The waves of the campaign's pooled score test: decide, solve again what gained an effect, decide again.
+
+After the first wave of jobs (every experiment's own closed loop, :mod:`graph_calib.campaign.execution`) the
+main process reads each experiment's loop record (its final round's candidate statistics, kept in its result
+files: nothing is recomputed), runs the pooled test (:mod:`graph_calib.campaign.pooled`) and, when an effect
+passes, sends a wave of jobs: each experiment that adopts it, solved again with it by both of the campaign's
+solvers, warm-started from its previous results (:func:`graph_calib.diagnosis.diagnose_from`), its files in
+``<experiment>/pooled/<wave>/``.  Then the pooled test again on the new final rounds, until nothing passes or
+:data:`graph_calib.campaign.pooled.MAX_WAVES` waves have run.
+
+A wave's tasks are cached and resumable like the first wave's: the key covers the grown model's options (the
+adopted effects), the loop's options and the keys of the results it starts from; a campaign run again with
+everything cached replays the same decisions from the records and recomputes nothing.  They run on the same
+executor as the first wave (this process, a local Dask cluster or an existing scheduler).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import sys
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+from graph_calib import io
+from graph_calib.campaign.execution import execute
+from graph_calib.campaign.pooled import MAX_WAVES, RULE, adoption, decision_text, final_statistics, pooled_tests
+from graph_calib.campaign.tasks import Task, cached, options_sha256, task_key
+
+#: Where a wave's files go, under the experiment's folder: ``pooled/<wave>/``.
+POOLED_FOLDER = "pooled"
+
+
+@dataclass
+class _State:
+    """An experiment as the pooled test sees it: its current results, their folder and loop record."""
+
+    tasks: list
+    folder: Path
+    results: dict
+    record: dict
+    pooled: list = field(default_factory=list)
+
+
+@dataclass(frozen=True)
+class PooledRun:
+    """What the waves did.
+
+    Attributes
+    ----------
+    folders : dict
+        ``{experiment: folder}`` (relative to the output folder) of the experiments whose final results are a
+        wave's (``<name>/pooled/<wave>``); the others' stay in ``<name>/``.
+    outcomes : dict
+        ``{(experiment, solver): outcome}`` of the waves' tasks (the last wave that touched each).
+    document : dict
+        ``campaign.json``'s ``loop.pooled``: ``rule``, ``alpha``, ``max_waves``, ``waves`` (per wave every
+        candidate's pooled test, the adopted one and the decision), ``seconds``, ``tasks_computed``,
+        ``tasks_cached``, ``tasks_failed``.
+    adopted : dict
+        ``{experiment: [pooled test dict with its "wave"]}``, what the pooled test adopted in each.
+    """
+
+    folders: dict
+    outcomes: dict
+    document: dict
+    adopted: dict
+
+
+def _start_key(results):
+    """One hash of the keys of the results a wave starts from (their solvers in order)."""
+    text = "|".join(f"{s}:{(r.extra.get('campaign') or {}).get('key', '')}" for s, r in sorted(results.items()))
+    return hashlib.sha256(text.encode("utf-8")).hexdigest()
+
+
+def _wave_tasks(state, *, name, effect, wave, dopts):
+    """The tasks of one experiment in a wave: its model grown by ``effect``, started from its current results."""
+    base = state.tasks[0].options
+    rec = state.record
+    added = tuple(n for n in rec["chosen"] if n not in rec["declared"])
+    t_ref = next(iter(state.results.values())).t_ref_degC
+    copts = replace(base, model=replace(base.model, extra_effects=tuple(base.model.extra_effects) + added + (effect,)),
+                    t_ref_degC=float(t_ref))
+    osha = hashlib.sha256(f"{options_sha256(copts, dopts)}|wave {wave}|start {_start_key(state.results)}"
+                          .encode("utf-8")).hexdigest()
+    out_dir = state.tasks[0].out_dir
+    return [Task(name=name, file=t.file, solver=t.solver, options=copts,
+                 out_dir=str(Path(out_dir) / POOLED_FOLDER / str(wave)),
+                 key=task_key(input_sha256=t.input_sha256, options_sha256=osha, solver=t.solver),
+                 input_sha256=t.input_sha256, options_sha256=osha, numba_threads=t.numba_threads, diagnosis=dopts,
+                 wave=wave, start_dir=str(state.folder), pooled=tuple(state.pooled) + (effect,))
+            for t in state.tasks]
+
+
+def _states(planned, outcomes):
+    """``{experiment: _State}`` of every experiment whose first-wave tasks all finished with the loop."""
+    tasks = {}
+    for t in list(planned.todo) + list(planned.done):
+        tasks.setdefault(t.name, []).append(t)
+    states = {}
+    for e in planned.campaign.experiments:
+        ts = tasks.get(e.name, [])
+        if not ts or any(outcomes.get((e.name, t.solver), {}).get("status") not in ("computed", "cached")
+                         for t in ts):
+            continue
+        results = {t.solver: io.read_result(t.result_path) for t in ts}
+        rec = (next(iter(results.values())).extra.get("campaign") or {}).get("loop")
+        if rec is None:
+            continue
+        states[e.name] = _State(tasks=ts, folder=Path(ts[0].out_dir), results=results, record=rec)
+    return states
+
+
+def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
+    """The pooled score test and its waves after the first wave of jobs (module docstring).
+
+    Parameters
+    ----------
+    planned : graph_calib.campaign.planning.CampaignPlan
+    outcomes : dict
+        ``{(experiment, solver): outcome}`` of the first wave (computed or cached).
+    options : CampaignOptions
+    on_done : callable, optional
+        Called with each finished wave task's outcome, as in the first wave.
+    pool : graph_calib.campaign.execution.Pool, optional
+        The first wave's cluster, kept (default: each wave starts its own).
+
+    Returns
+    -------
+    PooledRun or None
+        None when the loop is off (``--no-diagnose``): no pooled test either.
+    """
+    tasks = list(planned.todo) + list(planned.done)
+    dopts = tasks[0].diagnosis if tasks else None
+    if dopts is None:
+        return None
+    t0 = time.perf_counter()
+    states = _states(planned, outcomes)
+    waves, wave_outcomes, adopted, folders = [], {}, {}, {}
+    counts = {"computed": 0, "cached": 0, "failed": 0}
+    for wave in range(1, MAX_WAVES + 2):
+        tests = pooled_tests({n: final_statistics(st.record) for n, st in states.items()}, alpha=dopts.alpha,
+                             identifiable=dopts.identifiable)
+        pick = adoption(tests)
+        limit = pick is not None and wave > MAX_WAVES
+        text = (f"{pick.effect} passes but the limit of {MAX_WAVES} pooled waves is reached" if limit
+                else decision_text(tests, pick))
+        waves.append({"wave": wave, "tests": [t.to_json() for t in tests],
+                      "adopted": None if pick is None or limit else pick.to_json(), "decision": text})
+        if options.progress:
+            print(f"pooled score test {wave}: {text}", file=sys.stderr, flush=True)
+        if pick is None or limit:
+            break
+        new = [t for n in pick.experiments
+               for t in _wave_tasks(states[n], name=n, effect=pick.effect, wave=wave, dopts=dopts)]
+        todo = [t for t in new if options.force or not cached(t)]
+        outs = execute(todo, options=options, on_done=on_done, pool=pool)
+        for t in new:
+            if t not in todo:
+                outs[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}
+        for n in pick.experiments:
+            mine = [t for t in new if t.name == n]
+            oc = {t.solver: outs[(t.name, t.solver)] for t in mine}
+            for t in mine:
+                wave_outcomes[(n, t.solver)] = oc[t.solver]
+                counts["failed" if oc[t.solver]["status"] == "failed" else oc[t.solver]["status"]] += 1
+            adopted.setdefault(n, []).append(dict(pick.to_json(), wave=wave))
+            folders[n] = Path(n) / POOLED_FOLDER / str(wave)
+            if any(o["status"] == "failed" for o in oc.values()):
+                del states[n]           # its failure is reported; it takes no further part
+                continue
+            st = states[n]
+            st.results = {t.solver: io.read_result(t.result_path) for t in mine}
+            st.record = next(iter(st.results.values())).extra["campaign"]["loop"]
+            st.folder = Path(mine[0].out_dir)
+            st.pooled.append(pick.effect)
+    document = {"rule": RULE, "alpha": dopts.alpha, "max_waves": MAX_WAVES, "waves": waves,
+                "seconds": time.perf_counter() - t0, "tasks_computed": counts["computed"],
+                "tasks_cached": counts["cached"], "tasks_failed": counts["failed"]}
+    return PooledRun(folders=folders, outcomes=wave_outcomes, document=document, adopted=adopted)
+
+
+__all__ = ["POOLED_FOLDER", "PooledRun", "run_waves"]
