@@ -100,3 +100,20 @@ def test_cost_and_damped_step_are_gtsams(problem, robust):
         # in units of the prior sigmas (the calibration) and of the largest attitude change
         np.testing.assert_allclose(dx / x_sigma, dx_ref / x_sigma, rtol=0, atol=1e-7 * np.max(np.abs(dx_ref / x_sigma)))
         np.testing.assert_allclose(dR, dR_ref, rtol=0, atol=1e-7 * np.max(np.abs(dR_ref)))
+
+
+@pytest.mark.parametrize("robust", [None, "huber"])
+def test_cost_by_keyframe_sums_to_the_cost(problem, robust):
+    m = problem.model
+    x, preint, R, R_prior = _point(problem, np.random.default_rng(4))
+    by_key = reduced.cost_by_key(m, preint, R, x, R_prior=R_prior, robust=robust)
+    assert by_key.shape == (m.n_keyframes + 1,)
+    assert np.sum(by_key) == pytest.approx(reduced.cost(m, preint, R, x, R_prior=R_prior, robust=robust), rel=1e-12)
+    # each segment's share depends on that segment's attitudes alone: turn the last segment only
+    last = int(m.segment_keys[-1])
+    turned = R.copy()
+    turned[last:] = exp_so3(np.array([0.0, 0.0, 1.0])) @ R[last:]
+    other = reduced.cost_by_key(m, preint, turned, x, R_prior=R_prior, robust=robust)
+    if last > 0:
+        np.testing.assert_array_equal(other[:last - 1], by_key[:last - 1])
+    assert not np.allclose(other[last:], by_key[last:])

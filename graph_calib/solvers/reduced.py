@@ -34,7 +34,7 @@ from scipy.linalg import cho_solve_banded, cholesky_banded
 from graph_calib.model.factors import sum_by_key
 from graph_calib.rotations import exp_so3
 
-__all__ = ["BAND", "ExperimentSystem", "cost", "linearise", "retract"]
+__all__ = ["BAND", "ExperimentSystem", "cost", "cost_by_key", "linearise", "retract"]
 
 #: Half-bandwidth of the attitudes' block-tridiagonal information (3 x 3 blocks, neighbours only).
 BAND = 5
@@ -267,3 +267,30 @@ def cost(model, preint, R, x, *, R_prior, robust=None, robust_k=3.0):
         group, k_enc = _encoder_groups(enc, robust, robust_k)
         total += _kind_cost(enc, robust=robust, k=k_enc, group=group)[0]
     return total
+
+
+def cost_by_key(model, preint, R, x, *, R_prior, robust=None, robust_k=3.0):
+    """:func:`cost` split by keyframe, (K+1,): each factor's cost (a robust factor's loss) on its first
+    keyframe (``Residuals.key``; a rotation factor never crosses a segment boundary), each attitude prior's on
+    its own.  Sums to :func:`cost` up to rounding."""
+    out = np.zeros(R.shape[0])
+    for key, prior in _attitude_priors(model, R, R_prior):
+        out[key] += prior.cost
+    kinds = [(model.rotation_factors(R, preint, x), None, None),
+             (model.gravity_factors(R, preint, x), robust_k, None)]
+    enc = model.encoder_factors(R, preint, x)
+    if enc.r.shape[0]:
+        group, k_enc = _encoder_groups(enc, robust, robust_k)
+        kinds.append((enc, k_enc, group))
+    for res, k, group in kinds:
+        w = res.r / res.sigma
+        squares = np.sum(w * w, axis=1)
+        if robust is None or k is None:
+            np.add.at(out, res.key, 0.5 * squares)
+            continue
+        g = np.arange(squares.size) if group is None else group
+        loss, _ = _robust(np.sqrt(np.bincount(g, weights=squares)), robust, k)
+        first = np.zeros(loss.size, dtype=np.int64)
+        first[g[::-1]] = res.key[::-1]          # the key of each group's first factor
+        np.add.at(out, first, loss)
+    return out
