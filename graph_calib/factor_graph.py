@@ -47,6 +47,7 @@ from graph_calib.params import Layout
 from graph_calib.rotations import exp_so3, log_so3
 from graph_calib.solvers import reduced
 from graph_calib.solvers.acceleration import Anderson
+from graph_calib.solvers.heading import search_heading
 from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, ResidualSeries, SolverOutput
 
 
@@ -302,42 +303,6 @@ FIRST_ORDER_REJECT_REL = 1e-4
 ACCELERATE_BELOW_REL = 1e-2
 
 
-#: Headings tried by :func:`_search_heading`: turns of a segment about the vertical, rad (every 10 degrees).
-HEADING_GRID = np.radians(np.arange(-180.0, 180.0, 10.0))
-
-
-def _search_heading(model, costs_by_key, R):
-    """The attitudes with each segment turned about the vertical to the heading of least cost on a grid.
-
-    Without table readings a record's heading is held only by the Earth rate (and the gyrocompass prior): a
-    cost that varies along it like a sinusoid of small amplitude (about 85 in 2,600 on the Xsens session),
-    over which Levenberg-Marquardt crawls by steps of 0.2-1 rad (its quadratic model of the sinusoid is poor),
-    twenty iterations with the calibration already settled.  Turning every keyframe of a segment by the same
-    ``Exp([0, 0, psi]) R_k`` changes only the terms in the Earth rate's horizontal part and the segment's
-    prior; the segments' costs are independent, so each segment takes the best ``psi`` of
-    :data:`HEADING_GRID` (``psi = 0``, the attitudes as they are, among them).
-
-    Parameters
-    ----------
-    model : graph_calib.model.CalibrationModel
-    costs_by_key : callable
-        ``costs_by_key(R)``: the cost per keyframe at attitudes ``R`` (:func:`graph_calib.solvers.reduced.cost_by_key`).
-    R : ndarray, shape (K+1, 3, 3)
-
-    Returns
-    -------
-    ndarray, shape (K+1, 3, 3), or None when every segment keeps its heading
-    """
-    starts = model.segment_keys
-    seg = np.searchsorted(starts, np.arange(R.shape[0]), side="right") - 1
-    turns = exp_so3(np.column_stack([np.zeros((HEADING_GRID.size, 2)), HEADING_GRID]))
-    table = np.array([np.bincount(seg, weights=costs_by_key(T @ R), minlength=starts.size) for T in turns])
-    best = np.argmin(table, axis=0)
-    if np.all(HEADING_GRID[best] == 0.0):
-        return None
-    return turns[best][seg] @ R
-
-
 class _Mixing:
     """Anderson mixing of the steps in the coordinates ``D [x; log(R_ref^T R)]``.
 
@@ -499,7 +464,7 @@ def _solve(model, *, q_nb0, options, progress, initial):
     step_of = _Step(prior_graph, P)
     accelerate = False
     # no table readings: the heading is held by the Earth rate alone; searched once the calibration settles
-    search_heading = initial is None and model.record.reading_t.size == 0
+    heading_pending = initial is None and model.record.reading_t.size == 0
     for it in range(1, options.max_iterations + 1):
         mixed = False
         while True:
@@ -535,10 +500,11 @@ def _solve(model, *, q_nb0, options, progress, initial):
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
         turned = False
-        if search_heading and accepted and not mixed and options.rel_tol <= rel < ACCELERATE_BELOW_REL:
-            # the calibration has settled: the heading of least cost, kept only if it lowers the cost
-            search_heading = False
-            R_h = _search_heading(model, lambda R_t: reduced.cost_by_key(model, preint_current, R_t, x, **robust), R)
+        if heading_pending and accepted and not mixed and options.rel_tol <= rel < ACCELERATE_BELOW_REL:
+            # the calibration has settled: each segment's heading of least cost (graph_calib.solvers.heading),
+            # kept only if it lowers the cost
+            heading_pending = False
+            R_h = search_heading(model, lambda R_t: reduced.cost_by_key(model, preint_current, R_t, x, **robust), R)
             if R_h is not None:
                 cost_h, judged_h = cost_at(R_h, x, cost)      # x unchanged: judged exactly
                 if cost_h < cost:

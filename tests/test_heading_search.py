@@ -1,4 +1,4 @@
-"""The factor graph's heading search (graph_calib.factor_graph._search_heading) on the measured Xsens session.
+"""The factor graph's heading search (graph_calib.solvers.heading) on the measured Xsens session.
 
 Without a table the session's heading is held by the Earth rate alone; Levenberg-Marquardt crawled along it
 for twenty iterations with the calibration already settled.  With the search (once, when the calibration has
@@ -15,6 +15,7 @@ from graph_calib.calibrate import build_problem
 from graph_calib.importers import import_xsens
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
+from graph_calib.solvers import heading, solve
 
 from conftest import REAL_DATA, require_real
 
@@ -31,7 +32,7 @@ def problem():
 def test_the_heading_search_reaches_the_same_point_in_fewer_iterations(problem, monkeypatch):
     prob, opts = problem
     searched = factor_graph.solve(prob.model, q_nb0=prob.q_nb0, options=opts.graph)
-    monkeypatch.setattr(factor_graph, "HEADING_GRID", np.zeros(1))
+    monkeypatch.setattr(heading, "HEADING_GRID", np.zeros(1))
     crawled = factor_graph.solve(prob.model, q_nb0=prob.q_nb0, options=opts.graph)
     assert searched.converged and crawled.converged
     assert searched.iterations <= 20 and crawled.iterations >= 30, (searched.iterations, crawled.iterations)
@@ -41,3 +42,15 @@ def test_the_heading_search_reaches_the_same_point_in_fewer_iterations(problem, 
     assert searched.cost_history[-1] == pytest.approx(crawled.cost_history[-1], rel=1e-10)
     # the turn is kept only where it lowers the cost: the cost never rises
     assert np.all(np.diff(searched.cost_history) <= 0)
+
+
+def test_the_filter_reaches_the_same_point_in_fewer_passes(problem, monkeypatch):
+    prob, opts = problem
+    searched = solve("sqrt-kf", prob, options=opts)
+    monkeypatch.setattr(heading, "HEADING_GRID", np.zeros(1))
+    crawled = solve("sqrt-kf", prob, options=opts)
+    assert searched.converged and crawled.converged
+    assert searched.iterations <= 15 and crawled.iterations >= 20, (searched.iterations, crawled.iterations)
+    sigma = np.sqrt(np.diag(crawled.covariance))
+    assert np.max(np.abs(searched.x - crawled.x) / sigma) < 1e-3
+    np.testing.assert_allclose(np.sqrt(np.diag(searched.covariance)), sigma, rtol=1e-4)
