@@ -68,7 +68,7 @@ class GraphResult:
         Whitened residual series per factor kind: ``{kind: (times (F,), whitened (F, 3))}``.
     iterations : int
     cost_history : list of float
-        GTSAM's error (half the sum of squared whitened residuals) after each iteration.
+        The graph's error (half the sum of squared whitened residuals) after each iteration.
     seconds : float
     converged : bool
         Whether a stopping rule ended the iterations (else ``max_iterations`` did).
