@@ -464,7 +464,8 @@ def _solve(model, *, q_nb0, options, progress, initial):
     step_of = _Step(prior_graph, P)
     accelerate = False
     # no table readings: the heading is held by the Earth rate alone; searched once the calibration settles
-    heading_pending = initial is None and model.record.reading_t.size == 0
+    # (one segment only: graph_calib.solvers.heading)
+    heading_pending = initial is None and model.record.reading_t.size == 0 and model.segment_keys.size == 1
     for it in range(1, options.max_iterations + 1):
         mixed = False
         while True:

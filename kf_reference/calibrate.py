@@ -500,7 +500,8 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     mixing = _Mixing()
     mixed = False        # whether the current linearisation point is a mixed (or turned) one
     # no table readings: the heading is held by the Earth rate alone; searched once the calibration settles
-    heading_pending = initial is None and model.record.reading_t.size == 0
+    # (one segment only: graph_calib.solvers.heading)
+    heading_pending = initial is None and model.record.reading_t.size == 0 and model.segment_keys.size == 1
     for i in range(1, max_passes + 1):
         # Step control: a pass's Gauss-Newton step is taken whole unless it raises the batch cost (the
         # factor graph's objective, evaluated by the next linearisation at no extra cost); then it is

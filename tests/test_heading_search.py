@@ -54,3 +54,18 @@ def test_the_filter_reaches_the_same_point_in_fewer_passes(problem, monkeypatch)
     sigma = np.sqrt(np.diag(crawled.covariance))
     assert np.max(np.abs(searched.x - crawled.x) / sigma) < 1e-3
     np.testing.assert_allclose(np.sqrt(np.diag(searched.covariance)), sigma, rtol=1e-4)
+
+
+def test_records_cut_into_segments_are_left_to_the_iterations(monkeypatch):
+    """Several segments: their headings are tied through the calibration, so neither solver turns them
+    (graph_calib.solvers.heading): the results are those of a grid holding only the present heading."""
+    from graph_calib.simulation import simulate
+
+    se = simulate("consumer-handheld", rng=np.random.default_rng(7), cut=True).run()[0]
+    opts = CalibrationOptions(model=ModelOptions(grade="consumer"), t_ref_degC=se.truth.t_ref_degC)
+    prob = build_problem(se.experiment, options=opts)
+    assert prob.model.segment_keys.size > 1 and prob.model.record.reading_t.size == 0
+    default = [solve(s, prob, options=opts) for s in ("factor-graph", "sqrt-kf")]
+    monkeypatch.setattr(heading, "HEADING_GRID", np.zeros(1))
+    for a, b in zip(default, [solve(s, prob, options=opts) for s in ("factor-graph", "sqrt-kf")]):
+        assert a.iterations == b.iterations and np.array_equal(a.x, b.x)
