@@ -37,8 +37,6 @@ from functools import partial
 
 import gtsam
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from gtsam.symbol_shorthand import C, X
 from threadpoolctl import threadpool_limits
 
@@ -234,6 +232,10 @@ def marginal_covariance(graph, values, keys):
         return np.block([[np.asarray(jm.at(a, b)) for b in keys] for a in keys])
     except RuntimeError:
         pass
+    # scipy.sparse only here, in the rare fallback: its import is 0.05 s of every calibrate's start otherwise
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
     ijv = np.asarray(graph.linearize(values).sparseJacobian_())
     i, j, v = ijv[0].astype(np.int64) - 1, ijv[1].astype(np.int64) - 1, ijv[2]
     # sparseJacobian_ orders the columns by key (GTSAM's KeySet); its last column is the right-hand side

@@ -34,3 +34,11 @@ def test_a_command_outside_the_list_is_still_refused_by_the_full_parser(capsys):
     except SystemExit as e:
         assert e.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_the_solvers_load_no_sparse_algebra():
+    """scipy.sparse is the factor graph's rare covariance fallback only (docs/performance.md, session 6)."""
+    probe = ("import sys, graph_calib.commands.calibrate_cmd, graph_calib.factor_graph, kf_reference.calibrate; "
+             "print('SPARSE', 'scipy.sparse' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    assert "SPARSE False" in out, out
