@@ -5,8 +5,8 @@ heading of a segment (every keyframe of it turned about the vertical, ``Exp([0, 
 varies like a sinusoid of small amplitude (on the measured Xsens session about 85 in a cost of 2,600),
 over which Gauss-Newton crawls: its quadratic model of the sinusoid is poor, and the factor graph took
 steps of 0.2-1 rad for twenty iterations, the filter for fifteen passes, with the calibration already
-settled.  Once the calibration has settled, each solver turns each segment to the heading of least cost on
-a grid (:func:`search_heading`) and goes on from there; the point is kept only where it lowers the cost, so
+settled.  Once the calibration has settled, each solver turns each segment to the heading of least cost
+found on a grid and at the least of a sinusoid fitted to it (:func:`search_heading`) and goes on from there; the point is kept only where it lowers the cost, so
 the fixed point and the stopping rules are what they were.
 
 Turning a segment changes only the terms in the Earth rate's horizontal part and that segment's prior; no
@@ -24,12 +24,29 @@ import numpy as np
 
 from graph_calib.rotations import exp_so3
 
-#: Turns about the vertical tried by :func:`search_heading`, rad: every 10 degrees, 0 (no turn) among them.
-HEADING_GRID = np.radians(np.arange(-180.0, 180.0, 10.0))
+#: Turns about the vertical tried first by :func:`search_heading`, rad: every 30 degrees, 0 (no turn) among them.
+HEADING_GRID = np.radians(np.arange(-180.0, 180.0, 30.0))
+
+
+def _sinusoid_minimum(psi, cost):
+    """The least of ``a + b cos(psi) + c sin(psi)`` fitted to ``cost`` (G,) at ``psi`` (G,), rad; None when
+    the fit is flat or fewer than three turns were tried."""
+    if psi.size < 3:
+        return None
+    A = np.column_stack([np.ones_like(psi), np.cos(psi), np.sin(psi)])
+    (_, b, c), *_ = np.linalg.lstsq(A, cost, rcond=None)
+    if b == 0.0 and c == 0.0:
+        return None
+    return float(np.arctan2(-c, -b))
 
 
 def search_heading(model, costs_by_key, R):
-    """The attitudes with each segment turned about the vertical to the heading of least cost on the grid.
+    """The attitudes with each segment turned about the vertical to the heading of least cost found.
+
+    The cost of each segment is evaluated at the turns of :data:`HEADING_GRID` and fitted by a sinusoid of
+    the turn (the Earth rate's horizontal part seen from a turned trajectory: to first order in the small
+    terms, ``a + b cos(psi) + c sin(psi)``); its least is tried too, and each segment takes the turn of least
+    evaluated cost among them all (``psi = 0``, the attitudes as they are, among them).
 
     Parameters
     ----------
@@ -48,12 +65,24 @@ def search_heading(model, costs_by_key, R):
     """
     starts = np.asarray(model.segment_keys)
     seg = np.searchsorted(starts, np.arange(R.shape[0]), side="right") - 1
-    turns = exp_so3(np.column_stack([np.zeros((HEADING_GRID.size, 2)), HEADING_GRID]))
-    table = np.array([np.bincount(seg, weights=costs_by_key(T @ R), minlength=starts.size) for T in turns])
-    best = np.argmin(table, axis=0)
-    if np.all(HEADING_GRID[best] == 0.0):
+
+    def turn(psi):
+        return exp_so3(np.column_stack([np.zeros((psi.size, 2)), psi]))
+
+    def table(psi):                       # (len(psi), S): each segment's cost at each turn
+        return np.array([np.bincount(seg, weights=costs_by_key(T @ R), minlength=starts.size) for T in turn(psi)])
+
+    psi = np.asarray(HEADING_GRID, dtype=float)
+    cost = table(psi)
+    fitted = [_sinusoid_minimum(psi, cost[:, s]) for s in range(starts.size)]
+    extra = np.array([p for p in fitted if p is not None])
+    if extra.size:
+        psi = np.concatenate([psi, extra])
+        cost = np.vstack([cost, table(extra)])
+    best = psi[np.argmin(cost, axis=0)]
+    if np.all(best == 0.0):
         return None
-    return turns[best][seg] @ R
+    return turn(best)[seg] @ R
 
 
 __all__ = ["HEADING_GRID", "search_heading"]
