@@ -425,10 +425,10 @@ def _solve(model, *, q_nb0, options, progress, initial):
     # linearised vectorised by the model, the attitudes eliminated (graph_calib.solvers.reduced)
     prior_graph = gtsam.NonlinearFactorGraph()
     prior_graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
-    robust = dict(R_prior=R_prior, robust=options.robust, robust_k=options.robust_k)
+    factor_args = dict(R_prior=R_prior, robust=options.robust, robust_k=options.robust_k)
 
     def lin(pre, R, x):
-        return reduced.linearise(model, pre, R, x, eye, **robust)
+        return reduced.linearise(model, pre, R, x, eye, **factor_args)
 
     def prior_cost(x):
         return prior_graph.error(_calibration_values(x))
@@ -455,7 +455,7 @@ def _solve(model, *, q_nb0, options, progress, initial):
         pre = preint_current
         if pre.needs_repreintegration(x_t, tol=options.repreintegrate_tol):
             if not pre.needs_repreintegration(x_t, tol=FIRST_ORDER_JUDGE_TOL):
-                first_order = reduced.cost(model, pre, R_t, x_t, **robust) + prior_cost(x_t)
+                first_order = reduced.cost(model, pre, R_t, x_t, **factor_args) + prior_cost(x_t)
                 if first_order > cost * (1.0 + FIRST_ORDER_REJECT_REL):
                     return first_order, None
             pre = model.preintegrate(x_t)
@@ -507,7 +507,8 @@ def _solve(model, *, q_nb0, options, progress, initial):
             # the calibration has settled: each segment's heading of least cost (graph_calib.solvers.heading),
             # kept only if it lowers the cost
             heading_pending = False
-            R_h = search_heading(model, lambda R_t: reduced.cost_by_key(model, preint_current, R_t, x, **robust), R)
+            R_h = search_heading(model, lambda R_t: reduced.cost_by_key(model, preint_current, R_t, x,
+                                                                        **factor_args), R)
             if R_h is not None:
                 cost_h, judged_h = cost_at(R_h, x, cost)      # x unchanged: judged exactly
                 if cost_h < cost:
