@@ -6,12 +6,13 @@ varies like a sinusoid of small amplitude (on the measured Xsens session about 8
 over which Gauss-Newton crawls: its quadratic model of the sinusoid is poor, and the factor graph took
 steps of 0.2-1 rad for twenty iterations, the filter for fifteen passes, with the calibration already
 settled.  Once the calibration has settled, each solver turns each segment to the heading of least cost
-found on a grid and at the least of a sinusoid fitted to it (:func:`search_heading`) and goes on from there; the point is kept only where it lowers the cost, so
-the fixed point and the stopping rules are what they were.
+found on a grid and at the least of a sinusoid fitted to it (:func:`search_heading`) and goes on from
+there; the point is kept only where it lowers the cost, so the fixed point and the stopping rules are what
+they were.
 
 Turning a segment changes only the terms in the Earth rate's horizontal part and that segment's prior; no
 factor ties two segments (:attr:`graph_calib.model.CalibrationModel.segment_keys`), so each segment takes its
-own best heading from one cost evaluation per grid point.  The solvers search only records of one segment:
+own best heading from one cost evaluation per turn tried.  The solvers search only records of one segment:
 on a record cut into segments the segments' headings are tied to each other through the calibration (the
 gyro biases against each static face's view of the Earth rate), and turning each on its own at the settled
 calibration led the factor graph on a cut Ferraris session (``consumer-ferraris``, seed 1, nine segments)
