@@ -16,12 +16,17 @@ alignment): :attr:`CalibrationModel.segment_keys`.
 
 Python factors are slow when GTSAM's own optimiser calls them
 (``shared/notes/engineering-facts.md``), so the Levenberg-Marquardt loop is our
-own around ``graph.linearize``, ``GaussianFactorGraph.optimize`` and
-``Values.retract``.  The factors' callbacks read from a cache that evaluates
-every factor of a kind in one vectorised call of the model whenever GTSAM hands
-them values that differ from the cached ones; each callback fills its Jacobians
-only when GTSAM asks.  The preintegration is redone when the calibration moves
-too far from its linearisation point.
+own.  Each iteration linearises the graph's factors vectorised (the model's
+residuals and Jacobians of every factor of a kind in one call) with the attitude
+chain eliminated by a banded Cholesky (:mod:`graph_calib.solvers.reduced`, as
+GTSAM's elimination of the chain does), and GTSAM solves the reduced graph on
+``C(0)``: that factor, the calibration prior and the damping.  The cost of a
+point is the graph's error evaluated from the same vectorised residuals.  The
+nonlinear graph itself (the factors as ``CustomFactor`` callbacks reading a
+cache of that evaluation) gives the marginal covariance at the solution; tests
+check the reduced step and cost against its own linearisation and error.  The
+preintegration is redone when the calibration moves too far from its
+linearisation point.
 """
 
 from __future__ import annotations
@@ -32,14 +37,15 @@ from functools import partial
 
 import gtsam
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as spla
 from gtsam.symbol_shorthand import C, X
+from threadpoolctl import threadpool_limits
 
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout
 from graph_calib.rotations import exp_so3, log_so3
+from graph_calib.solvers import reduced
 from graph_calib.solvers.acceleration import Anderson
+from graph_calib.solvers.heading import search_heading
 from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, ResidualSeries, SolverOutput
 
 
@@ -60,7 +66,7 @@ class GraphResult:
         Whitened residual series per factor kind: ``{kind: (times (F,), whitened (F, 3))}``.
     iterations : int
     cost_history : list of float
-        GTSAM's error (half the sum of squared whitened residuals) after each iteration.
+        The graph's error (half the sum of squared whitened residuals) after each iteration.
     seconds : float
     converged : bool
         Whether a stopping rule ended the iterations (else ``max_iterations`` did).
@@ -78,12 +84,12 @@ class GraphResult:
 
 
 class _Cache:
-    """Vectorised evaluation of every factor at one set of values.
+    """Vectorised evaluation of every factor at one set of values, for the callbacks of :func:`build_graph`.
 
-    :func:`solve` hands GTSAM one set of values per call (a linearisation, an error, the marginals) and
-    invalidates the cache before each; the first callback of a call evaluates every factor of every kind
-    at once, the others read the cache.  (Comparing the values in every callback, as a guard, cost a
-    third of the solve: 400,000 comparisons on the 1.5 h record's diagnosis.)
+    The first callback of a call into GTSAM (a linearisation, an error, the marginals) evaluates every
+    factor of every kind at once (:meth:`ensure`), the others read the cache; :meth:`invalidate` before
+    each call.  (Comparing the values in every callback, as a guard, cost a third of the solve: 400,000
+    comparisons on the 1.5 h record's diagnosis.)
     """
 
     def __init__(self, model, preint):
@@ -92,51 +98,17 @@ class _Cache:
         self.K = model.n_keyframes
         self.R = None
         self.x = None
-        self.enc_groups = None
-        self.evaluations = 0
-        self._values = None     # the values object the evaluation is held for (see prepare)
-        self._preint = None
         self._x_keys = [X(k) for k in range(self.K + 1)]
-        self._reads = []        # (values, (R, x)) of the last few objects read through read()
-
-    def _read(self, values):
-        R = np.array([values.atRot3(k).matrix() for k in self._x_keys]).reshape(self.K + 1, 3, 3)
-        return R, np.asarray(values.atVector(C(0)), dtype=float)
-
-    def read(self, values):
-        """``(R (K+1, 3, 3), x (P,))`` of ``values``, a ``gtsam.Values`` never changed after it is made: the
-        last few objects read are remembered (a trial is read by the mixing and again to judge it)."""
-        for v, got in self._reads:
-            if v is values:
-                return got
-        got = self._read(values)
-        self._reads = [(values, got)] + self._reads[:2]
-        return got
 
     def invalidate(self):
         """Forget the evaluation: the next callback evaluates at the values GTSAM then hands over."""
         self.R = None
-        self._values = None
-
-    def prepare(self, values):
-        """Hand GTSAM ``values`` (a ``gtsam.Values`` never changed after it is made) with ``self.preint`` next.
-
-        The evaluation is kept when it was made at this very object with the same preintegration: the
-        linearisation at an accepted trial reads what judging the trial evaluated (the model computes
-        residuals and Jacobians together), instead of evaluating every factor again.  Otherwise as
-        :meth:`invalidate`.
-        """
-        if self.R is not None and values is self._values and self.preint is self._preint:
-            return
-        self.invalidate()
-        self._values, self._preint = values, self.preint
 
     def ensure(self, values):
         """Make sure the cache holds the factors at ``values`` (evaluated once per call into GTSAM)."""
         if self.R is None:
-            # the object handed over by prepare() is the one GTSAM passes on; read it through the memo
-            R, x = self.read(self._values) if self._values is not None else self._read(values)
-            self.evaluate(R, x)
+            R = np.array([values.atRot3(k).matrix() for k in self._x_keys]).reshape(self.K + 1, 3, 3)
+            self.evaluate(R, np.asarray(values.atVector(C(0)), dtype=float))
 
     def evaluate(self, R, x):
         m = self.model
@@ -144,7 +116,6 @@ class _Cache:
         self.rot = m.rotation_factors(R, self.preint, x)
         self.grav = m.gravity_factors(R, self.preint, x)
         self.enc = m.encoder_factors(R, self.preint, x)
-        self.evaluations += 1
 
 
 def _rotation_error(cache, k, this, values, H):
@@ -232,14 +203,6 @@ def _values(R, x):
     return v
 
 
-def _ordering(K):
-    o = gtsam.Ordering()
-    for k in range(K + 1):
-        o.push_back(X(k))
-    o.push_back(C(0))
-    return o
-
-
 def _damped(gfg, values_keys, lam, dims):
     damped = gtsam.GaussianFactorGraph()
     damped.push_back(gfg)
@@ -247,24 +210,6 @@ def _damped(gfg, values_keys, lam, dims):
     for key, d in zip(values_keys, dims):
         damped.add(gtsam.JacobianFactor(key, s * np.eye(d), np.zeros(d), gtsam.noiseModel.Unit.Create(d)))
     return damped
-
-
-class _Damping:
-    """:func:`_damped` with the damping factors built once per ``lam`` (rebuilding them cost a quarter of a
-    trial step on the Xsens session: about 1,000 ``JacobianFactor`` made in Python); the same factors in
-    the same order, so the same linear system."""
-
-    def __init__(self, keys, dims):
-        self.keys, self.dims, self.made = keys, dims, {}
-
-    def __call__(self, gfg, lam):
-        factors = self.made.get(lam)
-        if factors is None:
-            factors = self.made[lam] = _damped(gtsam.GaussianFactorGraph(), self.keys, lam, self.dims)
-        damped = gtsam.GaussianFactorGraph()
-        damped.push_back(gfg)
-        damped.push_back(factors)
-        return damped
 
 
 def marginal_covariance(graph, values, keys):
@@ -287,6 +232,10 @@ def marginal_covariance(graph, values, keys):
         return np.block([[np.asarray(jm.at(a, b)) for b in keys] for a in keys])
     except RuntimeError:
         pass
+    # scipy.sparse only here, in the rare fallback: its import is 0.05 s of every calibrate's start otherwise
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
     ijv = np.asarray(graph.linearize(values).sparseJacobian_())
     i, j, v = ijv[0].astype(np.int64) - 1, ijv[1].astype(np.int64) - 1, ijv[2]
     # sparseJacobian_ orders the columns by key (GTSAM's KeySet); its last column is the right-hand side
@@ -322,33 +271,24 @@ ATTITUDE_FIT_ITERATIONS = 10
 ATTITUDE_FIT_TOL = 1e-2
 
 
-def _fit_attitudes(graph, cache, values, *, keys, dims, ordering):
+def _fit_attitudes(lin, preint, R, x):
     """Keyframe attitudes that fit the measurements at the starting calibration: the first linearisation point.
 
     Dead reckoning from the alignment with the prior calibration (zero) drifts with the uncalibrated gyro
     errors, by degrees per minute for a consumer MEMS unit: far beyond where the factors may be linearised,
     and Levenberg-Marquardt then walks the calibration into a wrong minimum (on the measured Xsens session
     cut to 26,103 rows: an accelerometer scale error of 21, chi2/dof 1,263, while the filter, which starts
-    this way, converged).  A few Gauss-Newton passes over the attitudes alone (the calibration held by a
-    stiff factor) pull the trajectory onto the gravity and encoder measurements first, as the filter's
-    :func:`kf_reference.calibrate.initial_attitudes` does.
+    this way, converged).  A few Gauss-Newton passes over the attitudes alone (the calibration held, the
+    attitudes damped by ``1e-9``) pull the trajectory onto the gravity and encoder measurements first, as the
+    filter's :func:`kf_reference.calibrate.initial_attitudes` does.  ``lin(preint, R, x)`` linearises
+    (:class:`graph_calib.solvers.reduced.ExperimentSystem`).
     """
-    x_key = keys[-1]
-    P = dims[-1]
-    hold = gtsam.JacobianFactor(x_key, 1e8 * np.eye(P), np.zeros(P), gtsam.noiseModel.Unit.Create(P))
-    x = np.asarray(values.atVector(x_key), dtype=float)
-    damping = _Damping(keys[:-1], dims[:-1])
     for _ in range(ATTITUDE_FIT_ITERATIONS):
-        cache.invalidate()
-        gfg = damping(graph.linearize(values), 1e-9)
-        gfg.add(hold)
-        delta = gfg.optimize(ordering)
-        moved = max(float(np.linalg.norm(delta.at(k))) for k in keys[:-1])
-        values = values.retract(delta)
-        values.update(x_key, x)
-        if moved < ATTITUDE_FIT_TOL:
+        d = lin(preint, R, x).attitude_only_step(1e-9)
+        R = reduced.retract(R, d)
+        if float(np.max(np.linalg.norm(d, axis=1))) < ATTITUDE_FIT_TOL:
             break
-    return values
+    return R
 
 
 #: Trials whose largest first-order keyframe rotation change exceeds ``GraphOptions.repreintegrate_tol`` but
@@ -368,41 +308,41 @@ ACCELERATE_BELOW_REL = 1e-2
 class _Mixing:
     """Anderson mixing of the steps in the coordinates ``D [x; log(R_ref^T R)]``.
 
-    ``D`` is the square root of the diagonal of the Gauss-Newton information ``J^T J`` at the point that
-    starts the history (every element in units of its own curvature), ``R_ref`` the attitudes there.
+    ``D`` is the square root of the diagonal of the Gauss-Newton information ``J^T J`` (every factor, both
+    priors) at the point that starts the history (every element in units of its own curvature), ``R_ref``
+    the attitudes there.  Points are ``(R (K+1, 3, 3), x (P,))``.
     """
 
-    def __init__(self, cache, P):
+    def __init__(self, prior_information):
         self.acc = Anderson()
-        self.cache = cache
-        self.P = P
+        self.prior_information = prior_information     # (P,): 1 / sigma^2 of the calibration prior
+        self.P = prior_information.size
         self.ref = None
 
     def reset(self):
         self.acc.reset()
         self.ref = None
 
-    def _encode(self, values):
-        R, x = self.cache.read(values)
+    def _encode(self, point):
+        R, x = point
         R_ref, D = self.ref
         return D * np.concatenate([x, log_so3(np.swapaxes(R_ref, 1, 2) @ R).ravel()])
 
-    def next(self, values, trial, gfg):
-        """The mixed point from ``values`` and its step's ``trial``; None while only one step is held."""
+    def next(self, point, trial, system):
+        """The mixed point from ``point`` and its step's ``trial``; None while only one step is held.
+
+        ``system``: the :class:`graph_calib.solvers.reduced.ExperimentSystem` linearised at ``point``.
+        """
         if self.ref is None:
-            ijv = np.asarray(gfg.sparseJacobian_())
-            j, v = ijv[1].astype(np.int64) - 1, ijv[2]
-            n = self.P + 3 * values.size() - 3    # C(0) first (key order), then X(0..K); then b
-            keep = j < n
-            D = np.sqrt(np.bincount(j[keep], weights=v[keep] ** 2, minlength=n))
-            self.ref = (self.cache.read(values)[0], np.where(D > 0, D, 1.0))
-        u = self._encode(values)
+            D = np.sqrt(np.concatenate([np.diag(system.H_tt) + self.prior_information, np.einsum("kii->ki", system.H_RR_diag).ravel()]))
+            self.ref = (point[0], np.where(D > 0, D, 1.0))
+        u = self._encode(point)
         u_new = self.acc.next(u, self._encode(trial) - u)
         if self.acc.depth < 2:
             return None
         R_ref, D = self.ref
         u_new = u_new / D
-        return _values(R_ref @ exp_so3(u_new[self.P:].reshape(-1, 3)), u_new[:self.P])
+        return R_ref @ exp_so3(u_new[self.P:].reshape(-1, 3)), u_new[:self.P]
 
 
 def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
@@ -425,7 +365,49 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     Returns
     -------
     GraphResult
+
+    Notes
+    -----
+    BLAS runs on one thread inside the solve: its products have a few tens of columns, where OpenBLAS's
+    threads gain nothing on two cores and, on a machine shared with other work (or beside the filter in
+    ``calibrate``), spin: one linearisation of the Xsens session took 77 ms with them, 6 ms without.
     """
+    with threadpool_limits(limits=1, user_api="blas"):
+        return _solve(model, q_nb0=q_nb0, options=options, progress=progress, initial=initial)
+
+
+class _Step:
+    """The damped Levenberg-Marquardt step on the graph linearised at one point, attitudes eliminated.
+
+    GTSAM solves the reduced graph on ``C(0)``: the attitudes' Schur complement
+    (:meth:`graph_calib.solvers.reduced.ExperimentSystem.reduce`, ``lam I`` added on every attitude), the
+    calibration prior (GTSAM's own factor, linearised) and ``sqrt(lam) I`` on ``C(0)``; that is
+    ``(J^T J + lam I) d = -J^T r`` over every variable, eliminated attitudes first, as GTSAM's elimination
+    of the whole graph in the ordering ``X(0) .. X(K), C(0)``.  The attitude step follows by back-substitution.
+    """
+
+    def __init__(self, prior_graph, P):
+        self.prior_graph, self.P = prior_graph, P
+        self.ordering = gtsam.Ordering()
+        self.ordering.push_back(C(0))
+
+    def __call__(self, system, x, lam):
+        """``(dR (K+1, 3), dx (P,))``; RuntimeError when the damped system is indeterminate."""
+        H, g, Y = system.reduce(lam)
+        gfg = self.prior_graph.linearize(_calibration_values(x))
+        gfg.add(gtsam.HessianFactor(C(0), H, -g, 0.0))
+        gfg = _damped(gfg, [C(0)], lam, [self.P])
+        dx = np.asarray(gfg.optimize(self.ordering).at(C(0)), dtype=float)
+        return reduced.ExperimentSystem.attitude_step(Y, dx), dx
+
+
+def _calibration_values(x):
+    v = gtsam.Values()
+    v.insert(C(0), np.asarray(x, dtype=float))
+    return v
+
+
+def _solve(model, *, q_nb0, options, progress, initial):
     t0 = time.perf_counter()
     x_prior, x_sigma = model.prior()
     R_prior = model.segment_priors(q_nb0)
@@ -437,90 +419,107 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         R = np.asarray(initial[0], dtype=float)
         x = np.asarray(initial[1], dtype=float).copy()
         preint = model.preintegrate(x)
-    cache = _Cache(model, preint)
-    cache.evaluate(R, x)
-    graph = build_graph(model, cache, R_prior=R_prior,
-                        robust=options.robust, robust_k=options.robust_k)
-    K = model.n_keyframes
     P = model.layout.size
-    keys = [X(k) for k in range(K + 1)] + [C(0)]
-    dims = [3] * (K + 1) + [P]
-    ordering = _ordering(K)
-    values = _values(R, x)
+    eye = np.eye(P)
+    # the calibration prior is GTSAM's factor (its cost and linearisation); every other factor is evaluated and
+    # linearised vectorised by the model, the attitudes eliminated (graph_calib.solvers.reduced)
+    prior_graph = gtsam.NonlinearFactorGraph()
+    prior_graph.add(gtsam.PriorFactorVector(C(0), x_prior, gtsam.noiseModel.Diagonal.Sigmas(x_sigma)))
+    factor_args = dict(R_prior=R_prior, robust=options.robust, robust_k=options.robust_k)
+
+    def lin(pre, R, x):
+        return reduced.linearise(model, pre, R, x, eye, **factor_args)
+
+    def prior_cost(x):
+        return prior_graph.error(_calibration_values(x))
+
     if initial is None:
-        values = _fit_attitudes(graph, cache, values, keys=keys, dims=dims, ordering=ordering)
-        cache.prepare(values)
-    cost = graph.error(values)
+        R = _fit_attitudes(lin, preint, R, x)
+    system = lin(preint, R, x)
+    cost = system.cost + prior_cost(x)
     history = [cost]
     lam = options.lambda_initial
     it = 0
     converged = False
-    preint_current = cache.preint          # preintegrated at the current calibration: its cost is exact
+    preint_current = preint                # preintegrated at the current calibration: its cost is exact
 
-    def cost_at(point, cost):
-        """Cost at ``point``, judged by an exact preintegration when it is far from ``preint_current``.
+    def cost_at(R_t, x_t, cost):
+        """``(cost, (preintegration, linearised system) or None)`` at ``(R_t, x_t)``, judged by an exact
+        preintegration when it is far from ``preint_current``.
 
         Between ``repreintegrate_tol`` and :data:`FIRST_ORDER_JUDGE_TOL` the first-order-corrected
         ``preint_current`` judges first: a cost above ``cost`` by more than :data:`FIRST_ORDER_REJECT_REL`
         rejects the point without the exact preintegration (a rejected trial needs no Jacobians); any
-        other point, which may be accepted, is judged exactly.
+        other point, which may be accepted, is judged exactly and linearised there.
         """
-        x_point = np.asarray(point.atVector(C(0)))
-        cache.preint = preint_current
-        if preint_current.needs_repreintegration(x_point, tol=options.repreintegrate_tol):
-            if not preint_current.needs_repreintegration(x_point, tol=FIRST_ORDER_JUDGE_TOL):
-                cache.prepare(point)
-                first_order = graph.error(point)
+        pre = preint_current
+        if pre.needs_repreintegration(x_t, tol=options.repreintegrate_tol):
+            if not pre.needs_repreintegration(x_t, tol=FIRST_ORDER_JUDGE_TOL):
+                first_order = reduced.cost(model, pre, R_t, x_t, **factor_args) + prior_cost(x_t)
                 if first_order > cost * (1.0 + FIRST_ORDER_REJECT_REL):
-                    return first_order
-            cache.preint = model.preintegrate(x_point)
-        cache.prepare(point)
-        return graph.error(point)
+                    return first_order, None
+            pre = model.preintegrate(x_t)
+        sys_t = lin(pre, R_t, x_t)
+        return sys_t.cost + prior_cost(x_t), (pre, sys_t)
 
-    mixing = _Mixing(cache, P)
-    damping = _Damping(keys, dims)
+    mixing = _Mixing(1.0 / x_sigma**2)
+    step_of = _Step(prior_graph, P)
     accelerate = False
+    # no table readings: the heading is held by the Earth rate alone; searched once the calibration settles
+    # (one segment only: graph_calib.solvers.heading)
+    heading_pending = initial is None and model.record.reading_t.size == 0 and model.segment_keys.size == 1
     for it in range(1, options.max_iterations + 1):
-        cache.preint = preint_current
-        cache.prepare(values)              # after an accepted trial: its evaluation at cost_at
-        gfg = graph.linearize(values)
         mixed = False
         while True:
             try:
-                delta = damping(gfg, lam).optimize(ordering)
+                dR, dx = step_of(system, x, lam)
             except RuntimeError:            # numerically indeterminate: damp harder
                 if lam > 1e8:
                     raise
                 lam = max(lam * 10.0, 1e-6)
                 continue
-            trial = values.retract(delta)
+            trial = (reduced.retract(R, dR), x + dx)
             if accelerate:
                 # near the minimum: the mixed point of the last steps, kept if it lowers the cost
                 accelerate = False
-                point = mixing.next(values, trial, gfg)
+                point = mixing.next((R, x), trial, system)
                 if point is not None:
-                    mixed_cost = cost_at(point, cost)
+                    mixed_cost, judged = cost_at(*point, cost)
                     if mixed_cost <= cost:
                         trial, new_cost, mixed = point, mixed_cost, True
                         break
                     mixing.reset()
-            new_cost = cost_at(trial, cost)
+            new_cost, judged = cost_at(*trial, cost)
             # at convergence a step may change the cost only by rounding: stop damping then
             if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
                 break
             lam *= 10.0
-        step = np.asarray(delta.at(C(0)))
         accepted = new_cost <= cost
         if accepted:
-            values = trial
-            preint_current = cache.preint
+            R, x = trial
+            preint_current, system = judged
             if not mixed:
                 lam = max(lam / 10.0, 1e-9)
         rel = (cost - new_cost) / max(cost, 1e-300)
         cost = min(cost, new_cost)
+        turned = False
+        if heading_pending and accepted and not mixed and options.rel_tol <= rel < ACCELERATE_BELOW_REL:
+            # the calibration has settled: each segment's heading of least cost (graph_calib.solvers.heading),
+            # kept only if it lowers the cost
+            heading_pending = False
+            R_h = search_heading(model, lambda R_t: reduced.cost_by_key(model, preint_current, R_t, x,
+                                                                        **factor_args), R)
+            if R_h is not None:
+                cost_h, judged_h = cost_at(R_h, x, cost)      # x unchanged: judged exactly
+                if cost_h < cost:
+                    R, (preint_current, system), cost, turned = R_h, judged_h, cost_h, True
+                    mixing.reset()
         history.append(cost)
         if progress is not None:
             progress(ProgressEvent(solver=FactorGraphSolver.name, iteration=it, cost=float(cost)))
+        if turned:
+            accelerate = False
+            continue
         if mixed:
             # a mixed step that barely lowers the cost hands over to a plain step: plain steps alone decide
             # convergence (the stopping rules below), so the mixing cannot stop the iterations short
@@ -528,7 +527,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
             if not accelerate:
                 mixing.reset()
             continue
-        if accepted and (abs(rel) < options.rel_tol or np.all(np.abs(step) < options.step_tol_sigma * x_sigma)
+        if accepted and (abs(rel) < options.rel_tol or np.all(np.abs(dx) < options.step_tol_sigma * x_sigma)
                          and options.step_tol_sigma > 0):
             converged = True
             break
@@ -538,9 +537,12 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
         accelerate = accepted and rel < ACCELERATE_BELOW_REL
         if not accelerate:
             mixing.reset()
-    # covariance: re-preintegrate at the solution so the Jacobians are exact there
-    x = np.asarray(values.atVector(C(0)), dtype=float)
-    cache.preint = model.preintegrate(x)
+    # covariance: GTSAM's marginal of the whole graph, re-preintegrated at the solution so the Jacobians are
+    # exact there
+    cache = _Cache(model, model.preintegrate(x))
+    cache.evaluate(R, x)
+    graph = build_graph(model, cache, R_prior=R_prior, robust=options.robust, robust_k=options.robust_k)
+    values = _values(R, x)
     cache.invalidate()
     cov = marginal_covariance(graph, values, [C(0)])
     cache.ensure(values)

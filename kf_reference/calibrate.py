@@ -33,6 +33,8 @@ import numpy as np
 from graph_calib.params import Layout
 from graph_calib.rotations import exp_so3, log_so3
 from graph_calib.solvers.acceleration import Anderson
+from graph_calib.solvers.heading import search_heading
+from graph_calib.solvers.reduced import cost_by_key
 from graph_calib.solvers.interface import ProgressEvent
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
@@ -496,7 +498,10 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     base = None          # (x, R, cost, dx, delta) of the last pass: the point and its Gauss-Newton step
     tau = 1.0
     mixing = _Mixing()
-    mixed = False        # whether the current linearisation point is a mixed one
+    mixed = False        # whether the current linearisation point is a mixed (or turned) one
+    # no table readings: the heading is held by the Earth rate alone; searched once the calibration settles
+    # (one segment only: graph_calib.solvers.heading)
+    heading_pending = initial is None and model.record.reading_t.size == 0 and model.segment_keys.size == 1
     for i in range(1, max_passes + 1):
         # Step control: a pass's Gauss-Newton step is taken whole unless it raises the batch cost (the
         # factor graph's objective, evaluated by the next linearisation at no extra cost); then it is
@@ -554,6 +559,16 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
             mixing.reset()
             x_lin, R_lin, mixed = x_gn, R_gn, False
         preint = _keep_or_drop(model, preint, x_lin)
+        if heading_pending and info.max_dx_sigma < ACCELERATE_BELOW_SIGMA:
+            # the calibration has settled: each segment's heading of least cost (graph_calib.solvers.heading);
+            # a turned point that raises the cost is dropped for the plain step, as a mixed one is
+            heading_pending = False
+            if preint is None:
+                preint = model.preintegrate(x_lin)
+            R_turned = search_heading(model, lambda R: cost_by_key(model, preint, R, x_lin, R_prior=R_prior), R_lin)
+            if R_turned is not None:
+                mixing.reset()
+                R_lin, mixed = R_turned, True
     return FilterResult(
         layout=model.layout, x=x_lin, covariance=p.cov_x, t_key=model.t_key.copy(), C_nb=R_lin,
         C_nb_filtered=C_filtered, attitude_sigma_filtered=p.sigma_filtered, innovation_t=p.t,

@@ -26,7 +26,7 @@ from graph_calib.errors import InputError
 from graph_calib.joint import JointSolver, WarmStart, plan_unknowns, solve_joint
 from graph_calib.joint.result import joint_result, read_joint_result, write_joint_result
 from graph_calib.joint.marginal import unknowns_covariance
-from graph_calib.joint.reduced import ExperimentSystem
+from graph_calib.solvers.reduced import ExperimentSystem
 from graph_calib.joint.solver import _extend, _priors
 from graph_calib.joint.unknowns import MAX_DEGREE, curve_label
 from graph_calib.options import CalibrationOptions

@@ -1,4 +1,4 @@
-"""The joint solver's reduced linear system (graph_calib/joint/reduced.py) against GTSAM's own.
+"""The joint solver's reduced linear system (graph_calib/solvers/reduced.py) against GTSAM's own.
 
 The reference is the whole joint graph as GTSAM would hold it: every keyframe attitude a ``Rot3`` variable,
 the model's rotation, gravity and encoder factors as ``CustomFactor`` callbacks with their parameter
@@ -17,7 +17,7 @@ from gtsam.symbol_shorthand import S, X, Z
 
 from graph_calib.factor_graph import _damped, _noise
 from graph_calib.joint.marginal import unknowns_covariance
-from graph_calib.joint.reduced import ExperimentSystem
+from graph_calib.solvers.reduced import ExperimentSystem
 from graph_calib.joint.solver import _Experiment, _extend, _priors, _reduced_graph
 from graph_calib.joint.unknowns import MAX_DEGREE, plan_unknowns
 from graph_calib.options import CalibrationOptions, GraphOptions

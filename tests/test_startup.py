@@ -34,3 +34,29 @@ def test_a_command_outside_the_list_is_still_refused_by_the_full_parser(capsys):
     except SystemExit as e:
         assert e.code == 2
     assert "invalid choice" in capsys.readouterr().err
+
+
+def test_the_solvers_load_no_sparse_algebra():
+    """scipy.sparse is the factor graph's rare covariance fallback only (docs/performance.md, session 6)."""
+    probe = ("import sys, graph_calib.commands.calibrate_cmd, graph_calib.factor_graph, kf_reference.calibrate; "
+             "print('SPARSE', 'scipy.sparse' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", probe], cwd=ROOT, capture_output=True, text=True, check=True).stdout
+    assert "SPARSE False" in out, out
+
+
+def test_only_the_command_line_itself_freezes_the_objects_for_a_quick_exit(tmp_path, monkeypatch, capsys):
+    """``main()`` on the command line freezes every object before the process ends (no final collection
+    through numba's and gtsam's objects); ``main(argv)`` from Python code freezes nothing."""
+    import gc
+
+    from graph_calib.cli import main
+
+    argv = ["calibrate", str(tmp_path / "missing.h5"), "--out", str(tmp_path / "out")]
+    gc.unfreeze()
+    try:
+        assert main(argv) == 2 and gc.get_freeze_count() == 0
+        monkeypatch.setattr(sys, "argv", ["graph-calib", *argv])
+        assert main() == 2 and gc.get_freeze_count() > 0
+    finally:
+        gc.unfreeze()
+    assert "no such file" in capsys.readouterr().err

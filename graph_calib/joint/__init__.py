@@ -4,8 +4,8 @@
   calibration vector as an exact affine map of them;
 - :mod:`graph_calib.joint.solver`: the graph, its Levenberg-Marquardt loop, the degree chosen by evidence
   (``JointSolver``, registered as ``"joint"``);
-- :mod:`graph_calib.joint.reduced`: one experiment's factors linearised with its attitudes eliminated
-  (the reduced factor GTSAM solves with the others);
+- :mod:`graph_calib.solvers.reduced` (shared with the factor graph): one experiment's factors linearised
+  with its attitudes eliminated (the reduced factor GTSAM solves with the others);
 - :mod:`graph_calib.joint.marginal`: the unknowns' covariance.
 """
 

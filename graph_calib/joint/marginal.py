@@ -20,7 +20,7 @@ def unknowns_covariance(gfg, x_keys, theta_keys):
         The graph linearised at the solution.
     x_keys : sequence of int
         The attitudes' keys (none when the graph holds them eliminated already,
-        :mod:`graph_calib.joint.reduced`).
+        :mod:`graph_calib.solvers.reduced`).
     theta_keys : sequence of int
         The unknowns' keys (vectors), in the order wanted.
 

@@ -1,7 +1,7 @@
 r"""The joint campaign solver: every experiment of a campaign in one factor graph (GTSAM).
 
 Variables: the keyframe attitudes of every experiment (eliminated by the solver, experiment by
-experiment: :mod:`graph_calib.joint.reduced`), the shared unknowns ``Z(0)`` (the
+experiment: :mod:`graph_calib.solvers.reduced`), the shared unknowns ``Z(0)`` (the
 temperature curves' coefficients and the shared elements, :mod:`graph_calib.joint.unknowns`) and each
 experiment's set-up ``S(e)`` (mount, lever arm, table lag, damper stiffness where its layout has them).
 Each experiment keeps its own :class:`graph_calib.model.CalibrationModel`, its layout extended by the
@@ -14,7 +14,7 @@ prior of the family's ``*_tc<j>`` about ``t0``; the alignment of each experiment
 The Levenberg-Marquardt loop is :mod:`graph_calib.factor_graph`'s (the same damping of every variable, the
 same acceptance and stopping rules, each experiment re-preintegrated when its own calibration moves too far
 from its preintegration point), on the graph linearised with every experiment's attitudes eliminated
-(:mod:`graph_calib.joint.reduced`: each experiment's factors evaluated vectorised and reduced to one GTSAM
+(:mod:`graph_calib.solvers.reduced`: each experiment's factors evaluated vectorised and reduced to one GTSAM
 factor on the unknowns it touches, the attitude chain's band factored directly); GTSAM solves the reduced
 graph of the unknowns, the attitudes' steps follow by back-substitution.  The cost is the graph's error:
 the unknowns' priors (GTSAM's factors) plus each experiment's factors and attitude prior.
@@ -41,7 +41,7 @@ from threadpoolctl import threadpool_limits
 
 from graph_calib.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _damped
 from graph_calib.joint.marginal import unknowns_covariance
-from graph_calib.joint.reduced import ExperimentSystem, linearise, retract
+from graph_calib.solvers.reduced import ExperimentSystem, linearise, retract
 from graph_calib.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.params import Layout, split_element_name
@@ -120,7 +120,7 @@ class JointOutput:
 class _Experiment:
     """One experiment of the joint graph: its model, its current preintegration, its attitudes (K+1, 3, 3)
     and ``M_u = d x_e / d theta_e`` (P, Nt), ``theta_e = (u_z, u_s)`` the unknowns it touches in GTSAM's
-    units.  Its factors are linearised by :func:`graph_calib.joint.reduced.linearise` one experiment at a
+    units.  Its factors are linearised by :func:`graph_calib.solvers.reduced.linearise` one experiment at a
     time (their Jacobians, 0.2 GB for 3 h, released at once)."""
 
     def __init__(self, e, model, preint, M_u, nz, R, R_prior):
@@ -154,7 +154,7 @@ class _Experiment:
 def _reduced_graph(exps, systems, prior_lin, lam):
     """The linearised graph with every experiment's attitudes eliminated (``lam`` their damping):
     the priors of the unknowns and one reduced factor per experiment; and each experiment's
-    back-substitution (:meth:`graph_calib.joint.reduced.ExperimentSystem.reduce`)."""
+    back-substitution (:meth:`graph_calib.solvers.reduced.ExperimentSystem.reduce`)."""
     gfg = gtsam.GaussianFactorGraph()
     gfg.push_back(prior_lin)
     Ys = []

@@ -1,23 +1,24 @@
-r"""One experiment's linearised factors with its attitudes eliminated (:mod:`graph_calib.joint.solver`).
+r"""One experiment's linearised factors with its attitudes eliminated (the factor graph and the joint solver).
 
-The joint graph's variables are every experiment's keyframe attitudes and the unknowns ``theta_e = (u_z,
-u_s)`` it touches (in units of their prior sigmas: ``x_e = M_e theta_e``).  Linearised, one experiment's
-factors (rotation, gravity, encoder: the model's own, whitened; the prior of its first attitude) give the
-normal equations
+The variables of an experiment's graph are its keyframe attitudes and the unknowns ``theta_e`` its
+calibration depends on (the factor graph: the calibration vector itself, ``M_e = I``; the joint solver:
+the campaign's unknowns it touches, in units of their prior sigmas, ``x_e = M_e theta_e``).  Linearised, the
+experiment's factors (rotation, gravity, encoder: the model's own, whitened; the prior of each segment's
+first attitude) give the normal equations
 
     [ H_RR   H_Rt ] [dR]      [ g_R ]
     [ H_tR   H_tt ] [dt]  = - [ g_t ]
 
 where ``H_RR`` is block tridiagonal (3 x 3 blocks: a rotation factor ties keyframe ``k`` to ``k+1``, every
-other factor touches one keyframe).  Eliminating the attitudes, as GTSAM's elimination of each experiment's
-chain does, leaves on ``theta_e`` the Schur complement ``H_tt - H_tR (H_RR + lam I)^-1 H_Rt`` (and the
-same for the gradient): the joint solver hands GTSAM that reduced factor per experiment, GTSAM solves the
-reduced graph of the unknowns, and each experiment's attitude step follows by back-substitution.  The
-band of ``H_RR`` (half-width 5) is factored by LAPACK's banded Cholesky
-(:mod:`graph_calib.model.attitude_elimination`, the closed loop's too); no per-factor Python callback,
-and the linear system of a 3 h experiment is a few tens of MB instead of GTSAM's 0.3 GB of Jacobian
-factors.  ``tests/test_joint_reduced.py`` checks cost, step and covariance against GTSAM's linearisation
-and elimination of the whole graph (every attitude a variable, the model's factors as callbacks).
+other factor touches one keyframe).  Eliminating the attitudes, as GTSAM's elimination of the attitude chain
+does, leaves on ``theta_e`` the Schur complement ``H_tt - H_tR (H_RR + lam I)^-1 H_Rt`` (and the same for
+the gradient): the solver hands GTSAM that reduced factor, GTSAM solves the reduced graph of the unknowns
+(with their priors and damping), and the attitude step follows by back-substitution.  The band of ``H_RR``
+(half-width 5) is factored by LAPACK's banded Cholesky (:mod:`graph_calib.model.attitude_elimination`, the
+closed loop's too); no per-factor Python callback, and the linear system of a 3 h experiment is a few tens of MB instead of GTSAM's 0.3 GB of Jacobian factors.
+``tests/test_joint_reduced.py`` and ``tests/test_factor_graph_reduced.py`` check cost, step and covariance
+against GTSAM's linearisation and elimination of the whole graph (every attitude a variable, the model's
+factors as callbacks).
 
 Robust losses are GTSAM's (``noiseModel.Robust``): a factor's whitened rows scaled by the square root of
 the M-estimator's weight of the norm of its whole whitened residual, its cost the estimator's loss.
@@ -31,6 +32,8 @@ import numpy as np
 
 from graph_calib.model.attitude_elimination import NormalEquations, eliminate
 from graph_calib.rotations import exp_so3
+
+__all__ = ["ExperimentSystem", "cost", "cost_by_key", "linearise", "retract"]
 
 #: Factors whitened and chained per block (bounds the temporaries of the 3 h records' 85,000 readings).
 CHUNK = 8192
@@ -128,18 +131,8 @@ class _Accumulator(NormalEquations):
         F = res.r.shape[0]
         if F == 0:
             return np.zeros((0, 3))
-        if res.sigma.ndim != 2:
-            raise ValueError("the reduced system takes diagonal factor noise only")
-        w = res.r / res.sigma
-        if robust is None:
-            s = 1.0 / res.sigma
-            self.cost += 0.5 * float(np.sum(w * w))
-        else:
-            g = np.arange(F) if group is None else group
-            e = np.sqrt(np.bincount(g, weights=np.sum(w * w, axis=1)))
-            loss, weight = _robust(e, robust, k)
-            self.cost += float(np.sum(loss))
-            s = np.sqrt(weight)[g][:, None] / res.sigma
+        loss, w, s = _kind_cost(res, robust=robust, k=k, group=group)
+        self.cost += loss
         for lo in range(0, F, CHUNK):
             sl = slice(lo, min(lo + CHUNK, F))
             sc = s[sl][:, :, None]
@@ -155,6 +148,35 @@ class _Accumulator(NormalEquations):
                                 H_tt=0.5 * (H_tt + H_tt.T), g_t=M_u.T @ self.g_x, whitened=whitened)
 
 
+def _kind_cost(res, *, robust=None, k=None, group=None):
+    """``(cost, whitened (F, 3), row scale s (F, 3))`` of a kind of factors: the cost GTSAM's error gives them
+    (half the squared whitened norm, or the M-estimator's loss of each factor's whitened norm), and the
+    scale of their rows in the linear system (1/sigma times the square root of the robust weight)."""
+    if res.sigma.ndim != 2:
+        raise ValueError("the reduced system takes diagonal factor noise only")
+    w = res.r / res.sigma
+    if robust is None:
+        return 0.5 * float(np.sum(w * w)), w, 1.0 / res.sigma
+    g = np.arange(w.shape[0]) if group is None else group
+    e = np.sqrt(np.bincount(g, weights=np.sum(w * w, axis=1)))
+    loss, weight = _robust(e, robust, k)
+    return float(np.sum(loss)), w, np.sqrt(weight)[g][:, None] / res.sigma
+
+
+def _encoder_groups(enc, robust, robust_k):
+    """``(group, k)`` of the encoder readings: one robust loss per keyframe's readings (GTSAM's factor), its
+    threshold ``robust_k sqrt(m)`` for ``m`` readings (:func:`graph_calib.factor_graph.build_graph`)."""
+    if robust is None or not enc.key.size:
+        return None, None
+    _, group, counts = np.unique(enc.key, return_inverse=True, return_counts=True)
+    return group, robust_k * np.sqrt(counts)
+
+
+def _attitude_priors(model, R, R_prior):
+    """The prior residual of every segment's first attitude; ``R_prior`` (3, 3) or (S, 3, 3)."""
+    return model.attitude_priors(R, R_priors=np.asarray(R_prior, dtype=float).reshape(-1, 3, 3))
+
+
 def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
     """One experiment's factors at ``(R, x)``, linearised, as an :class:`ExperimentSystem`.
 
@@ -168,8 +190,9 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
         The experiment's calibration vector, ``M_u @ theta_e``.
     M_u : ndarray, shape (P, Nt)
         ``d x / d theta_e``.
-    R_prior : ndarray, shape (3, 3)
-        The first keyframe's prior attitude (the alignment).
+    R_prior : ndarray, shape (3, 3) or (S, 3, 3)
+        The prior attitude (the alignment) of the first keyframe of each of the record's ``S`` segments
+        (:attr:`graph_calib.model.CalibrationModel.segment_keys`).
     robust : str or None
         GTSAM's M-estimator on the gravity and encoder factors (``huber``, ``cauchy``).
     robust_k : float
@@ -177,9 +200,9 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
         (:func:`graph_calib.factor_graph.build_graph`).
     """
     acc = _Accumulator(R.shape[0], M_u.shape[0])
-    prior = model.attitude_prior(R[0], R_prior=R_prior)
-    acc.add_attitude_prior(0, prior.H, prior.r)
-    acc.cost += prior.cost
+    for key, prior in _attitude_priors(model, R, R_prior):
+        acc.add_attitude_prior(key, prior.H, prior.r)
+        acc.cost += prior.cost
     rot = model.rotation_factors(R, preint, x)
     w_rot = acc.add_factors(rot)
     del rot
@@ -187,13 +210,47 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
     w_grav = acc.add_factors(grav, robust=robust, k=robust_k)
     del grav
     enc = model.encoder_factors(R, preint, x)
-    group = k_enc = None
-    if robust is not None and enc.key.size:
-        _, group, counts = np.unique(enc.key, return_inverse=True, return_counts=True)
-        k_enc = robust_k * np.sqrt(counts)
+    group, k_enc = _encoder_groups(enc, robust, robust_k)
     w_enc = acc.add_factors(enc, robust=robust, k=k_enc, group=group)
     del enc
     return acc.system(M_u, (w_rot, w_grav, w_enc))
 
 
-__all__ = ["ExperimentSystem", "linearise", "retract"]
+def cost(model, preint, R, x, *, R_prior, robust=None, robust_k=3.0):
+    """The experiment's share of the graph's error at ``(R, x)``, without linearising: its factors' and its
+    attitude priors' cost, as :attr:`ExperimentSystem.cost` of :func:`linearise` (arguments as there)."""
+    total = sum(prior.cost for _, prior in _attitude_priors(model, R, R_prior))
+    total += _kind_cost(model.rotation_factors(R, preint, x))[0]
+    total += _kind_cost(model.gravity_factors(R, preint, x), robust=robust, k=robust_k)[0]
+    enc = model.encoder_factors(R, preint, x)
+    if enc.r.shape[0]:
+        group, k_enc = _encoder_groups(enc, robust, robust_k)
+        total += _kind_cost(enc, robust=robust, k=k_enc, group=group)[0]
+    return total
+
+
+def cost_by_key(model, preint, R, x, *, R_prior, robust=None, robust_k=3.0):
+    """:func:`cost` split by keyframe, (K+1,): each factor's cost (a robust factor's loss) on its first
+    keyframe (``Residuals.key``; a rotation factor never crosses a segment boundary), each attitude prior's on
+    its own.  Sums to :func:`cost` up to rounding."""
+    out = np.zeros(R.shape[0])
+    for key, prior in _attitude_priors(model, R, R_prior):
+        out[key] += prior.cost
+    kinds = [(model.rotation_factors(R, preint, x), None, None),
+             (model.gravity_factors(R, preint, x), robust_k, None)]
+    enc = model.encoder_factors(R, preint, x)
+    if enc.r.shape[0]:
+        group, k_enc = _encoder_groups(enc, robust, robust_k)
+        kinds.append((enc, k_enc, group))
+    for res, k, group in kinds:
+        w = res.r / res.sigma
+        squares = np.sum(w * w, axis=1)
+        if robust is None or k is None:
+            np.add.at(out, res.key, 0.5 * squares)
+            continue
+        g = np.arange(squares.size) if group is None else group
+        loss, _ = _robust(np.sqrt(np.bincount(g, weights=squares)), robust, k)
+        first = np.zeros(loss.size, dtype=np.int64)
+        first[g[::-1]] = res.key[::-1]          # the key of each group's first factor
+        np.add.at(out, first, loss)
+    return out
