@@ -168,42 +168,13 @@ def _run_tasks_with_loop(tasks):
             exp = io.read_experiment(first.file)
             diag = diagnose(exp, options=first.options, diagnosis=first.diagnosis)
             record = loop_record(diag)
-            io.atomic_write_json(first.summary_path,
-                                 experiment_summary(exp, t_ref_degC=diag.before.problem.model.t_ref_degC))
-            js = diag.to_json()
-            js["source"] = Path(first.file).name
-            io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
-            _write_attitudes(first.out_dir, diag.after.graph)
+            _write_diagnosis(first, exp, diag)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - reported per task
         return [_failure(t, exc) for t in tasks]
-    seconds = (time.perf_counter() - t0 - clock.seconds) / len(tasks)
-    outcomes = []
-    for task in tasks:
-        try:
-            output = diag.after.graph if task.solver == "factor-graph" else getattr(diag.after, "kf", None)
-            result = diag.after.results.get(task.solver)
-            if output is None or result is None:
-                raise RuntimeError(f"the loop ran no {task.solver} on the chosen model")
-            if diag.added:
-                declared = declared_path(task)
-                declared.parent.mkdir(parents=True, exist_ok=True)
-                io.write_result(diag.before.results[task.solver], declared)
-            io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
-                               source=Path(task.file).name, kind=output.residual_quantity)
-            extra = dict(result.extra)
-            extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
-                                 "options_sha256": task.options_sha256, "experiment": task.name,
-                                 "seconds": seconds, "compile_seconds": clock.seconds / len(tasks), "loop": record}
-            io.write_result(replace(result, extra=extra), task.result_path)
-            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
-                             "compile_seconds": clock.seconds / len(tasks), "added": list(diag.added)})
-        except (KeyboardInterrupt, SystemExit):
-            raise
-        except Exception as exc:  # noqa: BLE001
-            outcomes.append(_failure(task, exc))
-    return outcomes
+    return _write_chosen(tasks, diag, record, seconds=(time.perf_counter() - t0 - clock.seconds) / len(tasks),
+                         compile_seconds=clock.seconds / len(tasks))
 
 
 def _run_wave_tasks(tasks):
@@ -233,34 +204,52 @@ def _run_wave_tasks(tasks):
                                  attitudes=_read_attitudes(start) if "factor-graph" in previous else None,
                                  kf_start=None if kf_start is None else kf_start.values, max_added=left)
             record = wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
-            io.atomic_write_json(first.summary_path,
-                                 experiment_summary(exp, t_ref_degC=diag.before.problem.model.t_ref_degC))
-            js = diag.to_json()
-            js["source"] = Path(first.file).name
-            io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
-            _write_attitudes(first.out_dir, diag.after.graph)
+            _write_diagnosis(first, exp, diag)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - reported per task
         return [_failure(t, exc) for t in tasks]
-    seconds = (time.perf_counter() - t0 - clock.seconds) / len(tasks)
+    return _write_chosen(tasks, diag, record, seconds=(time.perf_counter() - t0 - clock.seconds) / len(tasks),
+                         compile_seconds=clock.seconds / len(tasks), wave=first.wave,
+                         added=[first.pooled[-1]] + list(diag.added))
+
+
+def _write_diagnosis(first, exp, diag):
+    """An experiment's ``summary.json``, ``diagnosis.json`` and the chosen graph's keyframe attitudes."""
+    io.atomic_write_json(first.summary_path, experiment_summary(exp, t_ref_degC=diag.before.problem.model.t_ref_degC))
+    js = diag.to_json()
+    js["source"] = Path(first.file).name
+    io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
+    _write_attitudes(first.out_dir, diag.after.graph)
+
+
+def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, added=None):
+    """Each task's residual series and result file of the model ``diag`` chose (the declared model's results
+    beside them when the loop added something, first wave only); the tasks' outcomes.  ``wave``: the pooled
+    wave the job belongs to (None: the first wave); ``added``: the outcome's effects (default the loop's)."""
     outcomes = []
     for task in tasks:
         try:
             output = diag.after.graph if task.solver == "factor-graph" else getattr(diag.after, "kf", None)
             result = diag.after.results.get(task.solver)
             if output is None or result is None:
-                raise RuntimeError(f"the pooled wave ran no {task.solver} on the grown model")
+                raise RuntimeError(f"the {'loop' if wave is None else 'pooled wave'} ran no {task.solver} on the "
+                                   f"{'chosen' if wave is None else 'grown'} model")
+            if wave is None and diag.added:
+                declared = declared_path(task)
+                declared.parent.mkdir(parents=True, exist_ok=True)
+                io.write_result(diag.before.results[task.solver], declared)
             io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
                                source=Path(task.file).name, kind=output.residual_quantity)
             extra = dict(result.extra)
             extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
-                                 "options_sha256": task.options_sha256, "experiment": task.name, "wave": task.wave,
-                                 "seconds": seconds, "compile_seconds": clock.seconds / len(tasks), "loop": record}
+                                 "options_sha256": task.options_sha256, "experiment": task.name,
+                                 **({} if wave is None else {"wave": wave}),
+                                 "seconds": seconds, "compile_seconds": compile_seconds, "loop": record}
             io.write_result(replace(result, extra=extra), task.result_path)
             outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
-                             "compile_seconds": clock.seconds / len(tasks),
-                             "added": [task.pooled[-1]] + list(diag.added)})
+                             "compile_seconds": compile_seconds,
+                             "added": list(diag.added) if added is None else list(added)})
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001
