@@ -8,7 +8,11 @@ import numpy as np
 import pytest
 
 from graph_calib import constants as c
+from graph_calib.calibrate import build_problem
 from graph_calib.experiment import Experiment, Table
+from graph_calib.importers import import_xsens
+from graph_calib.model import ModelOptions
+from graph_calib.options import CalibrationOptions
 from graph_calib.solvers import registry
 
 #: Measured recordings beside the repository (``../shared/data/real``), read at test time.
@@ -70,6 +74,16 @@ def require_real(path):
 def real_data():
     """Folder of the measured recordings; the test fails when it is absent."""
     return require_real(REAL_DATA)
+
+
+@pytest.fixture(scope="module")
+def xsens_consumer():
+    """``(problem, options)`` of IMU-TK's Xsens session at the consumer grade (the measured record the
+    solvers' iteration tests run on)."""
+    exp = import_xsens(require_real(REAL_DATA / "imu_tk_xsens" / "xsens_acc.mat"),
+                       require_real(REAL_DATA / "imu_tk_xsens" / "xsens_gyro.mat"))
+    opts = CalibrationOptions(model=ModelOptions(grade="consumer"))
+    return build_problem(exp, options=opts), opts
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -9,21 +9,12 @@ import numpy as np
 import pytest
 
 from graph_calib import factor_graph
-from graph_calib.calibrate import build_problem
-from graph_calib.importers import import_xsens
-from graph_calib.model import CalibrationModel, ModelOptions
-from graph_calib.options import CalibrationOptions
-
-from conftest import REAL_DATA, require_real
-
-XSENS = REAL_DATA / "imu_tk_xsens"
+from graph_calib.model import CalibrationModel
 
 
 @pytest.fixture(scope="module")
-def problem():
-    exp = import_xsens(require_real(XSENS / "xsens_acc.mat"), require_real(XSENS / "xsens_gyro.mat"))
-    opts = CalibrationOptions(model=ModelOptions(grade="consumer"))
-    return build_problem(exp, options=opts), opts
+def problem(xsens_consumer):
+    return xsens_consumer
 
 
 def _solve(problem, opts, monkeypatch, judge_tol):

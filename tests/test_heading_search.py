@@ -12,21 +12,14 @@ import pytest
 
 from graph_calib import factor_graph
 from graph_calib.calibrate import build_problem
-from graph_calib.importers import import_xsens
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.solvers import heading, solve
 
-from conftest import REAL_DATA, require_real
-
-XSENS = REAL_DATA / "imu_tk_xsens"
-
 
 @pytest.fixture(scope="module")
-def problem():
-    exp = import_xsens(require_real(XSENS / "xsens_acc.mat"), require_real(XSENS / "xsens_gyro.mat"))
-    opts = CalibrationOptions(model=ModelOptions(grade="consumer"))
-    return build_problem(exp, options=opts), opts
+def problem(xsens_consumer):
+    return xsens_consumer
 
 
 def test_the_heading_search_reaches_the_same_point_in_fewer_iterations(problem, monkeypatch):
