@@ -107,3 +107,16 @@ def turntable_experiment(*, layout, x, rng=None, noise=None, static_s=120.0, dwe
                      temperature_map=np.zeros(6, dtype=int), rate_hz=rate_hz, latitude_rad=latitude_rad,
                      gravity_mps2=gravity, imu_id="synthetic-turntable", table=table, source="synthetic")
     return exp, C_end
+
+
+def assert_calibration_jacobian_matches_fd(model, factors, R, x, *, H_x, eps, rtol, atol=0.0):
+    """Each column of ``H_x`` (F, 3, P), the calibration Jacobian of ``factors(R, preint, x)`` (a model's
+    factor method), against central differences of step ``eps``, each re-preintegrated:
+    ``max |fd - H_x[:, :, c]| < rtol * scale + atol``, ``scale`` the larger of the two columns' maxima."""
+    for c in range(model.layout.size):
+        xp, xm = x.copy(), x.copy()
+        xp[c] += eps
+        xm[c] -= eps
+        fd = (factors(R, model.preintegrate(xp), xp).r - factors(R, model.preintegrate(xm), xm).r) / (2 * eps)
+        scale = np.abs(fd).max() + np.abs(H_x[:, :, c]).max() + 1e-12
+        assert np.abs(fd - H_x[:, :, c]).max() < rtol * scale + atol, model.layout.element_names()[c]
