@@ -160,21 +160,11 @@ def _run_tasks_with_loop(tasks):
     results, only when something was added), and per task its residual series and ``<solver>.json``
     of the chosen model, last, its ``campaign.loop`` holding :func:`graph_calib.campaign.loop.loop_record`.
     """
-    first = tasks[0]
-    t0 = time.perf_counter()
-    try:
-        with CompileClock() as clock:
-            Path(first.out_dir).mkdir(parents=True, exist_ok=True)
-            exp = io.read_experiment(first.file)
-            diag = diagnose(exp, options=first.options, diagnosis=first.diagnosis)
-            record = loop_record(diag)
-            _write_diagnosis(first, exp, diag)
-    except (KeyboardInterrupt, SystemExit):
-        raise
-    except Exception as exc:  # noqa: BLE001 - reported per task
-        return [_failure(t, exc) for t in tasks]
-    return _write_chosen(tasks, diag, record, seconds=(time.perf_counter() - t0 - clock.seconds) / len(tasks),
-                         compile_seconds=clock.seconds / len(tasks))
+    def loop(first, exp):
+        diag = diagnose(exp, options=first.options, diagnosis=first.diagnosis)
+        return diag, loop_record(diag)
+
+    return _loop_job(tasks, loop)
 
 
 def _run_wave_tasks(tasks):
@@ -188,30 +178,39 @@ def _run_wave_tasks(tasks):
     ``<solver>.json``, last, its ``campaign.loop`` the previous record carried on
     (:func:`graph_calib.campaign.loop.wave_record`).
     """
+    def wave(first, exp):
+        start = Path(first.start_dir)
+        previous = {t.solver: io.read_result(start / f"{t.solver}.json") for t in tasks}
+        record = next(r.extra["campaign"]["loop"] for r in previous.values())
+        graph_start = previous.get("factor-graph") or next(iter(previous.values()))
+        kf_start = previous.get("sqrt-kf")
+        left = max(0, first.diagnosis.max_added - len(record["added"]))
+        diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=graph_start.values,
+                             attitudes=_read_attitudes(start) if "factor-graph" in previous else None,
+                             kf_start=None if kf_start is None else kf_start.values, max_added=left)
+        return diag, wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
+
+    return _loop_job(tasks, wave, wave=tasks[0].wave, pooled_effect=tasks[0].pooled[-1])
+
+
+def _loop_job(tasks, run, *, wave=None, pooled_effect=None):
+    """One experiment's loop job: read it, ``run(first_task, experiment) -> (diagnosis, loop record)``, write
+    its diagnosis (:func:`_write_diagnosis`) and its tasks' files (:func:`_write_chosen`); every task failed
+    with the error when reading or the loop fails."""
     first = tasks[0]
     t0 = time.perf_counter()
     try:
         with CompileClock() as clock:
             Path(first.out_dir).mkdir(parents=True, exist_ok=True)
             exp = io.read_experiment(first.file)
-            start = Path(first.start_dir)
-            previous = {t.solver: io.read_result(start / f"{t.solver}.json") for t in tasks}
-            record = next(r.extra["campaign"]["loop"] for r in previous.values())
-            graph_start = previous.get("factor-graph") or next(iter(previous.values()))
-            kf_start = previous.get("sqrt-kf")
-            left = max(0, first.diagnosis.max_added - len(record["added"]))
-            diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=graph_start.values,
-                                 attitudes=_read_attitudes(start) if "factor-graph" in previous else None,
-                                 kf_start=None if kf_start is None else kf_start.values, max_added=left)
-            record = wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
+            diag, record = run(first, exp)
             _write_diagnosis(first, exp, diag)
     except (KeyboardInterrupt, SystemExit):
         raise
     except Exception as exc:  # noqa: BLE001 - reported per task
         return [_failure(t, exc) for t in tasks]
     return _write_chosen(tasks, diag, record, seconds=(time.perf_counter() - t0 - clock.seconds) / len(tasks),
-                         compile_seconds=clock.seconds / len(tasks), wave=first.wave,
-                         added=[first.pooled[-1]] + list(diag.added))
+                         compile_seconds=clock.seconds / len(tasks), wave=wave, pooled_effect=pooled_effect)
 
 
 def _write_diagnosis(first, exp, diag):
@@ -223,10 +222,11 @@ def _write_diagnosis(first, exp, diag):
     _write_attitudes(first.out_dir, diag.after.graph)
 
 
-def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, added=None):
+def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, pooled_effect=None):
     """Each task's residual series and result file of the model ``diag`` chose (the declared model's results
     beside them when the loop added something, first wave only); the tasks' outcomes.  ``wave``: the pooled
-    wave the job belongs to (None: the first wave); ``added``: the outcome's effects (default the loop's)."""
+    wave the job belongs to (None: the first wave), ``pooled_effect`` the effect it adopted (first among the
+    outcome's ``added``, before the loop's own)."""
     outcomes = []
     for task in tasks:
         try:
@@ -249,7 +249,7 @@ def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, a
             io.write_result(replace(result, extra=extra), task.result_path)
             outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
                              "compile_seconds": compile_seconds,
-                             "added": list(diag.added) if added is None else list(added)})
+                             "added": ([pooled_effect] if pooled_effect else []) + list(diag.added)})
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001
