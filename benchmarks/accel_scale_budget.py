@@ -44,10 +44,10 @@ from pathlib import Path
 import numpy as np
 from scipy import stats
 
-from graph_calib import effects, params
+from graph_calib.sensors import effects, params
 from graph_calib.calibrate import calibrate
 from graph_calib.campaign.loop import truth_errors
-from graph_calib.experiment import Table
+from graph_calib.records.experiment import Table
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.simulation import simulate

@@ -19,7 +19,7 @@ from graph_calib import io
 from graph_calib.calibrate import CalibrationOptions, build_problem
 from graph_calib.solvers import compare, solve, to_result
 from graph_calib.simulation import simulate
-from graph_calib.strapdown import integrate_attitude
+from graph_calib.navigation.strapdown import integrate_attitude
 
 
 SECONDS = {}

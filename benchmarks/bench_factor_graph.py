@@ -21,7 +21,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _synthetic import turntable_experiment  # noqa: E402
 
 from graph_calib.calibrate import CalibrationOptions, build_problem  # noqa: E402
-from graph_calib.params import Layout, grade  # noqa: E402
+from graph_calib.sensors.params import Layout, grade  # noqa: E402
 from graph_calib.solvers import solve  # noqa: E402
 
 

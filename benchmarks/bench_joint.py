@@ -6,7 +6,7 @@ Run by hand, after ``benchmarks/bench_campaign.py`` simulated (and calibrated) t
                                                [--campaign /tmp/bench-campaign/campaign] [--cold]
 
 Reads the six experiments, builds each problem (static detection, alignment, the prepared record), and
-solves them jointly (``graph_calib.joint.solve_joint``), warm-started from the campaign's per-subrange
+solves them jointly (``graph_calib.solvers.joint.solve_joint``), warm-started from the campaign's per-subrange
 factor-graph results when ``--campaign`` holds them (the campaign runs them anyway; ``--cold`` starts
 from the priors instead).  Samples the resident memory of this process (and any children) every 0.2 s.  Prints the time of
 each stage (reading, problems, joint solve; the solve's CPU time too: on a shared machine the wall time is
@@ -32,10 +32,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from graph_calib import io  # noqa: E402
 from graph_calib.campaign.tasks import calibration_options  # noqa: E402
 from graph_calib.compensation.joint import JointCalibration  # noqa: E402
-from graph_calib.joint import WarmStart, solve_joint  # noqa: E402
-from graph_calib.joint.result import joint_element_at, joint_result  # noqa: E402
+from graph_calib.solvers.joint import WarmStart, solve_joint  # noqa: E402
+from graph_calib.solvers.joint.result import joint_element_at, joint_result  # noqa: E402
 from graph_calib.model.calibration_model import CalibrationModel  # noqa: E402
-from graph_calib.problem import build_problem  # noqa: E402
+from graph_calib.records.problem import build_problem  # noqa: E402
 
 
 class Stages:

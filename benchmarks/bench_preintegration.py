@@ -26,8 +26,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from _synthetic import turntable_experiment  # noqa: E402
 
 from graph_calib.model import CalibrationModel, ModelOptions  # noqa: E402
-from graph_calib.effects import FURTHER_EFFECTS
-from graph_calib.params import Layout, grade  # noqa: E402
+from graph_calib.sensors.effects import FURTHER_EFFECTS
+from graph_calib.sensors.params import Layout, grade  # noqa: E402
 
 
 def main():

@@ -1,4 +1,4 @@
-"""Time :func:`graph_calib.strapdown.integrate_attitude` on 6.5 million samples.
+"""Time :func:`graph_calib.navigation.strapdown.integrate_attitude` on 6.5 million samples.
 
 Run by hand (not a test)::
 
@@ -18,9 +18,9 @@ import numpy as np
 from _report import report
 
 from graph_calib.constants import DEG_TO_RAD
-from graph_calib.experiment import Experiment
-from graph_calib.static_detection import detect_static
-from graph_calib.strapdown import integrate_attitude
+from graph_calib.records.experiment import Experiment
+from graph_calib.navigation.static_detection import detect_static
+from graph_calib.navigation.strapdown import integrate_attitude
 
 
 def main():

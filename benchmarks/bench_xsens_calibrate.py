@@ -24,7 +24,7 @@ from _report import report
 
 from graph_calib import io
 from graph_calib.calibrate import build_problem
-from graph_calib.grade_choice import choose_grade
+from graph_calib.records.grade_choice import choose_grade
 from graph_calib.importers import import_xsens
 from graph_calib.model import CalibrationModel
 from graph_calib.options import CalibrationOptions, ModelOptions

@@ -35,7 +35,7 @@ from graph_calib import io
 from graph_calib.campaign import CampaignOptions, run_campaign
 from graph_calib.campaign.loop import truth_errors
 from graph_calib.simulation import simulate, write_simulation
-from graph_calib.validation import simulate_validation_record
+from graph_calib.evaluation.validation import simulate_validation_record
 
 
 def _simulate(out, *, hours, cubic_scale, seed):

@@ -16,8 +16,8 @@ in this process): every experiment's own loop, then the campaign's pooled score 
 (:mod:`graph_calib.campaign.pooled`) and any wave they start.  A subrange counts as clean when neither its own
 loop nor the pooled test added anything to it.
 
-Done means (issue 11): the loop adds nothing in at least 95 % of the subranges.  ``tests/test_loop_clean.py``
-runs three single subranges, ``tests/test_campaign_pooled.py`` one clean campaign; docs/campaign.md records the
+Done means (issue 11): the loop adds nothing in at least 95 % of the subranges.  ``tests/diagnosis/test_loop_clean.py``
+runs three single subranges, ``tests/campaign/test_campaign_pooled.py`` one clean campaign; docs/campaign.md records the
 counts.
 """
 

@@ -2,7 +2,7 @@ r"""graph-calib: thermal calibration of inertial measurement units on a turntabl
 
 One model of the sensors and of the two measurements of the method (gravity and
 encoder attitude) is written once, in :mod:`graph_calib.model`, and fed to two
-solvers: a GTSAM factor graph (:mod:`graph_calib.factor_graph`) and the reference
+solvers: a GTSAM factor graph (:mod:`graph_calib.solvers.factor_graph`) and the reference
 square-root Kalman filter (:mod:`kf_reference`).
 
 Conventions (they follow ``shared/spec/model.md`` to the letter)

@@ -15,9 +15,9 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import Mapping
 
-from graph_calib.experiment import Result
+from graph_calib.records.experiment import Result
 from graph_calib.options import CalibrationOptions
-from graph_calib.problem import Problem, build_problem
+from graph_calib.records.problem import Problem, build_problem
 from graph_calib.solvers.concurrent import solve_pair
 from graph_calib.solvers.interface import SolverOutput
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
@@ -31,7 +31,7 @@ class CalibrationRun:
 
     Attributes
     ----------
-    problem : graph_calib.problem.Problem
+    problem : graph_calib.records.problem.Problem
     outputs : mapping of str to SolverOutput
         Each solver's output, by solver name, in the order run.
     results : mapping of str to Result
@@ -55,7 +55,7 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
 
     Parameters
     ----------
-    problem : graph_calib.problem.Problem
+    problem : graph_calib.records.problem.Problem
     options : CalibrationOptions
     solvers : sequence of str
         Registered solver names (:func:`graph_calib.solvers.solver_names`).
@@ -91,7 +91,7 @@ def calibrate(experiment, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVE
 
     Parameters
     ----------
-    experiment : graph_calib.experiment.Experiment
+    experiment : graph_calib.records.experiment.Experiment
     options : CalibrationOptions
     solvers : sequence of str
     progress : callable, optional

@@ -2,7 +2,7 @@ r"""The reference square-root Kalman filter of graph-calib.
 
 An iterated, linearised square-root filter over keyframes that consumes the
 shared model's factors (:mod:`graph_calib.model`) and must agree with the factor
-graph (:mod:`graph_calib.factor_graph`) on every parameter.  It imports only the
+graph (:mod:`graph_calib.solvers.factor_graph`) on every parameter.  It imports only the
 shared model and the solver interface (:mod:`graph_calib.solvers.interface`), and is
 registered as the solver ``"sqrt-kf"`` (:class:`kf_reference.solver.SqrtKalmanSolver`).
 See ``docs/kf_reference.md``.
@@ -13,7 +13,7 @@ See ``docs/kf_reference.md``.
 >>> fr = calibrate(problem.model, q_nb0=problem.q_nb0)                # the native FilterResult  # doctest: +SKIP
 """
 
-from kf_reference.calibrate import (  # noqa: F401  (public)
+from kf_reference.passes import (  # noqa: F401  (public)
     ENCODER,
     GRAVITY,
     KIND_NAMES,

@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from graph_calib.solvers.interface import NORMALISED_INNOVATION, ResidualSeries, SolverOutput
-from kf_reference.calibrate import SOLVER_NAME, calibrate
+from kf_reference.passes import SOLVER_NAME, calibrate
 
 
 def output_of(fr, *, t_key, seconds=0.0):
@@ -31,7 +31,7 @@ class SqrtKalmanSolver:
     name = SOLVER_NAME
 
     def solve(self, problem, *, options, progress=None, initial=None):
-        """Calibrate ``problem`` (:class:`graph_calib.problem.Problem`) with ``options.filter``."""
+        """Calibrate ``problem`` (:class:`graph_calib.records.problem.Problem`) with ``options.filter``."""
         t0 = time.perf_counter()
         fo = options.filter
         fr = calibrate(problem.model, q_nb0=problem.q_nb0, max_passes=fo.max_passes, x_tol=fo.x_tol,

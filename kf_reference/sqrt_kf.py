@@ -1,7 +1,7 @@
 r"""The linear square-root Kalman filter over keyframes (numba), and the state layout.
 
 The filter here knows nothing about IMUs: it runs a linear Gaussian recursion
-whose matrices :mod:`kf_reference.calibrate` takes from the shared model's
+whose matrices :mod:`kf_reference.passes` takes from the shared model's
 factors.  Error state at keyframe ``k`` (names used everywhere, never bare
 indices)::
 

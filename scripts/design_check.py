@@ -4,8 +4,8 @@
 
 For each program and seed (noise, every declared error and the curved temperature truth on): both solvers'
 calibration of the record, their agreement, and the remaining sensor errors of each against the truth over
-the record's windows (:mod:`graph_calib.validation`: the largest static gyro error and the largest
-accelerometer error), beside the predicted bound (:mod:`graph_calib.prediction`).  docs/design.md
+the record's windows (:mod:`graph_calib.evaluation.validation`: the largest static gyro error and the largest
+accelerometer error), beside the predicted bound (:mod:`graph_calib.design.prediction`).  docs/design.md
 records the figures.
 """
 
@@ -18,10 +18,10 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
-from graph_calib.prediction import predict
+from graph_calib.design.prediction import predict
 from graph_calib.simulation.program import program_simulation, read_program
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
-from graph_calib.validation import ResultCalibration, validate
+from graph_calib.evaluation.validation import ResultCalibration, validate
 
 
 def main(argv=None):

@@ -25,7 +25,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from graph_calib.calibrate import CalibrationOptions, build_problem
-from graph_calib.rotations import quat_to_dcm
+from graph_calib.navigation.rotations import quat_to_dcm
 from graph_calib.simulation import simulate
 
 

@@ -15,8 +15,8 @@ import numpy as np  # noqa: E402
 from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem  # noqa: E402
 from graph_calib.importers import import_mpu6050, import_xsens, mpu6050_reference_calibration  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
-from graph_calib.static_detection import detect_static  # noqa: E402
-from graph_calib.validation import static_pose_consistency  # noqa: E402
+from graph_calib.navigation.static_detection import detect_static  # noqa: E402
+from graph_calib.evaluation.validation import static_pose_consistency  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "data" / "real"
@@ -24,7 +24,7 @@ DOCS = ROOT / "docs"
 
 
 def pose_metrics(exp, layout, x, poses):
-    """``(|f| per pose, mismatch per pose pair)``: :func:`graph_calib.validation.static_pose_consistency`."""
+    """``(|f| per pose, mismatch per pose pair)``: :func:`graph_calib.evaluation.validation.static_pose_consistency`."""
     return static_pose_consistency(exp, poses=poses, layout=layout, x=x)
 
 

@@ -4,10 +4,10 @@
 [--elements] [--save z.npz]``
 
 Each seed simulates the shortened navigation-grade programme (``nav-subrange-short``, noise on, linear
-temperature truth), predicts its accuracy (:func:`graph_calib.prediction.predict`) and calibrates it;
+temperature truth), predicts its accuracy (:func:`graph_calib.design.prediction.predict`) and calibrates it;
 prints the RMS of z = (estimate - truth) / predicted sigma per parameter (its elements pooled) and the
 range of the per-element RMS, with the chi-square band of that many seeds.  docs/design.md records the
-figures (tests/test_prediction.py runs the same 20 seeds).
+figures (tests/design/test_prediction.py runs the same 20 seeds).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
-from graph_calib.prediction import predict
+from graph_calib.design.prediction import predict
 from graph_calib.simulation import simulate
 
 

@@ -14,7 +14,7 @@ continuous
     Duration ``6 L``.
 
 The initial soak at -10 degC is the same for both and is not counted.  Accuracy: the validation of
-``graph_calib.validation`` on one independent 3 h record sweeping -10..+50 degC (largest remaining gyro
+``graph_calib.evaluation.validation`` on one independent 3 h record sweeping -10..+50 degC (largest remaining gyro
 error at rest, largest accelerometer error), averaged over ``--seeds`` noise realisations.
 
 Run (about 20-40 min on 2 cores; results are cached in ``--work`` and reused)::
@@ -87,7 +87,7 @@ def run_job(job, work):
     from graph_calib import io
     from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
     from graph_calib.model import ModelOptions
-    from graph_calib.validation import simulate_validation_record
+    from graph_calib.evaluation.validation import simulate_validation_record
 
     profile, L, seed, k, start, span = job
     path = job_path(work, job)
@@ -122,7 +122,7 @@ def _load(path):
 
 def validation_record(work):
     from graph_calib import io
-    from graph_calib.validation import simulate_validation_record
+    from graph_calib.evaluation.validation import simulate_validation_record
 
     rec = Path(work) / "validation.h5"
     if not rec.is_file():
@@ -136,7 +136,7 @@ def evaluate(work, seeds, lengths):
     from graph_calib import constants as c
     from graph_calib import io
     from graph_calib.stitching import stitch
-    from graph_calib.validation import ResultCalibration, validate, window_means
+    from graph_calib.evaluation.validation import ResultCalibration, validate, window_means
 
     rec = validation_record(work)
     exp = io.read_experiment(rec)

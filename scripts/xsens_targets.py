@@ -7,7 +7,7 @@ Usage::
 Runs, as ``graph-calib calibrate`` does with no options (grade chosen from the data,
 both solvers, the verdict), on the Xsens MTi session of ``../shared/data/real/imu_tk_xsens``:
 
-- **in-sample**: IMU-TK's figures (:mod:`graph_calib.measured_metrics`) of the default
+- **in-sample**: IMU-TK's figures (:mod:`graph_calib.evaluation.imu_tk`) of the default
   calibration and of IMU-TK's own fit, over IMU-TK's static intervals;
 - **hold-out**: both fitted on the record up to the end of the 20th static interval,
   figures over the 18 transitions after it (the full record);
@@ -25,10 +25,10 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib.calibrate import build_problem, solve_problem
-from graph_calib.calibration import Calibration
-from graph_calib.grade_choice import choose_grade
+from graph_calib.compensation.calibration import Calibration
+from graph_calib.records.grade_choice import choose_grade
 from graph_calib.importers import import_xsens
-from graph_calib.measured_metrics import imu_tk_fit, imu_tk_static_intervals, transition_figures
+from graph_calib.evaluation.imu_tk import imu_tk_fit, imu_tk_static_intervals, transition_figures
 from graph_calib.options import CalibrationOptions, ModelOptions
 
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real" / "imu_tk_xsens"

@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from graph_calib.experiment import Experiment
-from graph_calib.rotations import quat_conjugate, quat_multiply, quat_to_rotvec
+from graph_calib.records.experiment import Experiment
+from graph_calib.navigation.rotations import quat_conjugate, quat_multiply, quat_to_rotvec
 
 LAT = 0.9  # rad, about 51.6 deg
 G = 9.81

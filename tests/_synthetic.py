@@ -2,8 +2,8 @@
 
 import numpy as np
 
-from graph_calib.experiment import Experiment, Table
-from graph_calib.rotations import dcm_to_quat, exp_so3
+from graph_calib.records.experiment import Experiment, Table
+from graph_calib.navigation.rotations import dcm_to_quat, exp_so3
 
 
 def wobbly_experiment(*, rng, n=600, rate_hz=100.0, with_table=True, rate_scale=0.5):
@@ -55,7 +55,7 @@ def turntable_experiment(*, layout, x, rng=None, noise=None, static_s=120.0, dwe
     (gyro rad/sqrt(s), accel m/s/sqrt(s), encoder rad)`` when given.
     Returns ``(experiment, true C_nb at every sample end (N, 3, 3))``.
     """
-    from graph_calib import sensor_model as sm
+    from graph_calib.sensors import sensor_model as sm
     from graph_calib.constants import omega_ie_n
 
     h = 1.0 / rate_hz

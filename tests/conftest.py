@@ -9,7 +9,7 @@ import pytest
 
 from graph_calib import constants as c
 from graph_calib.calibrate import build_problem
-from graph_calib.experiment import Experiment, Table
+from graph_calib.records.experiment import Experiment, Table
 from graph_calib.importers import import_xsens
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions

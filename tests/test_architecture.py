@@ -21,13 +21,13 @@ def test_imports_follow_the_layers_without_circles():
 def test_the_checker_sees_an_upward_import(tmp_path, monkeypatch):
     """Not vacuous: a model module importing a solver is reported."""
     mod = _checker()
-    assert mod.layer("graph_calib.model.factors") < mod.layer("graph_calib.factor_graph")
+    assert mod.layer("graph_calib.model.factors") < mod.layer("graph_calib.solvers.factor_graph")
     src = tmp_path / "graph_calib" / "model"
     src.mkdir(parents=True)
     (tmp_path / "graph_calib" / "__init__.py").write_text("")
     (src / "__init__.py").write_text("")
-    (src / "bad.py").write_text("def f():\n    from graph_calib.factor_graph import solve\n")
+    (src / "bad.py").write_text("def f():\n    from graph_calib.solvers.factor_graph import solve\n")
     (tmp_path / "kf_reference").mkdir()
     monkeypatch.setattr(mod, "ROOT", tmp_path)
-    assert any("graph_calib/model/bad.py:2" in p and "layer 4 imports graph_calib.factor_graph" in p
+    assert any("graph_calib/model/bad.py:2" in p and "layer 4 imports graph_calib.solvers.factor_graph" in p
                for p in mod.check())

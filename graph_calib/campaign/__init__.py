@@ -27,7 +27,7 @@ process.  A task writes, into ``OUT/<experiment name>/``, each file atomically:
 
 The main process then writes ``comparison.json`` per experiment, stitches every
 solver's results over temperature (:mod:`graph_calib.stitching`), validates the
-stitched calibration on independent records (:mod:`graph_calib.validation`), and
+stitched calibration on independent records (:mod:`graph_calib.evaluation.validation`), and
 writes ``campaign.json`` and ``report.html``.
 
 Caching and resuming

@@ -6,7 +6,7 @@
 - :func:`execute`: every job, one after the other in this process (``workers=0``), on a local Dask
   cluster of processes with one thread each, or on an existing cluster given by its scheduler address;
   a tqdm bar and a line per finished task on stderr.  Before any job it warms the numba kernels in this
-  process (:func:`graph_calib.warmup.warm_kernels`): compiled once per machine into numba's on-disk cache,
+  process (:func:`graph_calib.campaign.warmup.warm_kernels`): compiled once per machine into numba's on-disk cache,
   which the workers then load instead of each compiling them inside its first job.  Numba compile time
   that still happens inside a job is measured and kept out of the job's seconds.
 
@@ -31,11 +31,11 @@ from graph_calib import io
 from graph_calib.campaign.loop import declared_path, loop_record, wave_record
 from graph_calib.diagnosis import diagnose, diagnose_from
 from graph_calib.errors import InputError
-from graph_calib.problem import build_problem
+from graph_calib.records.problem import build_problem
 from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import to_result
 from graph_calib.stitching import SENSORS
-from graph_calib.warmup import CompileClock, cache_present, warm_kernels
+from graph_calib.campaign.warmup import CompileClock, cache_present, warm_kernels
 
 
 # ---------------------------------------------------------------------------
@@ -298,7 +298,7 @@ def _groups(tasks):
 
 
 def warm_up(*, progress):
-    """Warm the numba kernels in this process (:func:`graph_calib.warmup.warm_kernels`); its ``WarmUp``.
+    """Warm the numba kernels in this process (:func:`graph_calib.campaign.warmup.warm_kernels`); its ``WarmUp``.
 
     With ``progress`` one line on stderr before (when the cache is missing: the compile takes minutes)
     and one after.  The warm-up only saves time: when it fails, one line says so and the run goes on (each

@@ -6,7 +6,7 @@
    file, the calibration options of each and the solver) matches;
 2. else every experiment is read and made a problem in this process, warm-started from its factor-graph
    result when the campaign has it, and solved jointly through the solver registry (``"joint"``); the
-   result file (:mod:`graph_calib.joint.result`) is written atomically;
+   result file (:mod:`graph_calib.solvers.joint.result`) is written atomically;
 3. the cross-check: per subrange and element, the joint calibration at the subrange's ``T_ref`` minus
    each per-subrange solver's estimate, in units of that estimate's sigma;
 4. the truth check: against a truth file's ``temperature_curves`` (``data-format.md``) over each
@@ -28,12 +28,12 @@ from graph_calib import io
 from graph_calib.campaign.tasks import calibration_options, file_sha256, options_sha256, task_key
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
-from graph_calib.joint.result import joint_element_at, joint_result, read_joint_result
-from graph_calib.joint.solver import JOINT, WarmStart
-from graph_calib.problem import build_problem
+from graph_calib.solvers.joint.result import joint_element_at, joint_result, read_joint_result
+from graph_calib.solvers.joint.solver import JOINT, WarmStart
+from graph_calib.records.problem import build_problem
 from graph_calib.solvers.registry import get_solver
 from graph_calib.stitching import sensor_of
-from graph_calib.validation import ResultCalibration, validate
+from graph_calib.evaluation.validation import ResultCalibration, validate
 
 #: The joint result's file name in the campaign's output folder.
 JOINT_FILE = "joint.json"

@@ -21,7 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
-from graph_calib import effects, io
+from graph_calib.sensors import effects
+from graph_calib import io
 from graph_calib.diagnosis import DiagnosisOptions, residual_rms
 from graph_calib.errors import InputError
 
@@ -187,7 +188,7 @@ def loop_entry(folder, results, truth=None):
         The experiment's output folder.
     results : dict
         ``{solver: Result}`` of the chosen model.
-    truth : graph_calib.experiment.Result, optional
+    truth : graph_calib.records.experiment.Result, optional
 
     Returns
     -------

@@ -14,7 +14,7 @@
    subrange's own truth inside its range (:func:`graph_calib.campaign.truth.truth_check`); the joint
    campaign solver, its cross-check and its truth check
    (:func:`graph_calib.campaign.joint_run.run_joint`, ``campaign.json``'s ``joint``);
-6. validate: the stitched calibration on each independent record (:func:`graph_calib.validation.validate`);
+6. validate: the stitched calibration on each independent record (:func:`graph_calib.evaluation.validation.validate`);
 7. document and report: ``campaign.json`` (:class:`CampaignRun.document`) and ``report.html``.
 """
 
@@ -35,12 +35,12 @@ from graph_calib.campaign.tasks import CampaignOptions
 from graph_calib.campaign.truth import truth_check, truth_path
 from graph_calib.campaign.waves import run_waves
 from graph_calib.errors import InputError
-from graph_calib.experiment import Result
+from graph_calib.records.experiment import Result
 from graph_calib.reports.campaign_report import write_report
 from graph_calib.solvers.results import compare
 from graph_calib.solvers.verdict import verdict_of
 from graph_calib.stitching import Stitched, stitch
-from graph_calib.validation import Validation, truth_reference, validate, window_means
+from graph_calib.evaluation.validation import Validation, truth_reference, validate, window_means
 
 #: Format name of ``campaign.json``.
 CAMPAIGN_FORMAT = "imu-calibration-campaign"
@@ -65,12 +65,12 @@ class CampaignRun:
     stitched : dict
         ``{solver: graph_calib.stitching.Stitched}``.
     validations : list
-        :class:`graph_calib.validation.Validation` objects (default model, primary solver first).
+        :class:`graph_calib.evaluation.validation.Validation` objects (default model, primary solver first).
     failed : list of dict
         Tasks that raised: ``{"name", "solver", "error"}``.
     report_path : Path or None
         ``report.html``, when written.
-    joint : graph_calib.experiment.Result or None
+    joint : graph_calib.records.experiment.Result or None
         The joint campaign solver's result (``joint.json``), when it ran.
     """
 
@@ -312,7 +312,7 @@ def _validate(planned, stitched, outcomes, *, primary, stitch_model):
 
     Returns
     -------
-    validations : list of graph_calib.validation.Validation
+    validations : list of graph_calib.evaluation.validation.Validation
         Those of ``stitch_model``.
     validation_doc : list of dict
         ``campaign.json``'s ``validation``.

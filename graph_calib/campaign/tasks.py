@@ -29,7 +29,7 @@ CACHE_VERSION = 2
 #: The per-experiment solvers each value of :attr:`CampaignOptions.solvers` (and ``[solver] solvers``) stands for.
 SOLVER_CHOICES = {"both": DEFAULT_SOLVERS, "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",),
                   "per-subrange": DEFAULT_SOLVERS, "joint": (), "factor-graph+joint": ("factor-graph",)}
-#: The choices that also run the joint campaign solver (graph_calib.joint; docs/campaign.md): by default it
+#: The choices that also run the joint campaign solver (graph_calib.solvers.joint; docs/campaign.md): by default it
 #: runs beside both per-subrange solvers ("both"); "per-subrange" leaves it out, "joint" runs it alone.
 JOINT_CHOICES = ("both", "joint", "factor-graph+joint")
 

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib.stitching import family_z_limit, sensor_of
-from graph_calib.validation import ResultCalibration, TruthCurves
+from graph_calib.evaluation.validation import ResultCalibration, TruthCurves
 
 
 def truth_path(experiment_file):
@@ -53,7 +53,7 @@ def truth_check(stitched, truth, *, model=None, n=61, sensor_ranges=None):
     truth : Result, sequence or dict of Result, or evaluator
         The experiments' truth files (``{experiment name: Result}`` or a list; one Result is a list
         of one); or anything with ``evaluate(T_sensors)`` giving ``{element: values}`` valid over the
-        whole range (a :class:`graph_calib.validation.TruthCurves`, another stitch).  When one truth
+        whole range (a :class:`graph_calib.evaluation.validation.TruthCurves`, another stitch).  When one truth
         file has ``temperature_curves`` those are the reference over each curve's covered range;
         otherwise each truth file is used only inside its own sensor temperature range.
     model : str, optional

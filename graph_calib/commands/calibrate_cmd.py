@@ -10,10 +10,10 @@ from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
 from graph_calib.errors import InputError
-from graph_calib.grade_choice import choose_grade
+from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, GraphOptions
-from graph_calib.effects import FURTHER_EFFECTS
+from graph_calib.sensors.effects import FURTHER_EFFECTS
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
 from graph_calib.solvers.results import comparison_text
 

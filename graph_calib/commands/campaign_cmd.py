@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from graph_calib.errors import InputError
-from graph_calib.validation import validation_text
+from graph_calib.evaluation.validation import validation_text
 
 
 def add_arguments(p):

@@ -39,7 +39,7 @@ DEMO_HOURS = 0.4
 VALIDATION_HOURS = 2.0
 #: Sample rate of the validation record, Hz (its 1 s window means are what validation uses).
 VALIDATION_RATE_HZ = 50.0
-#: Further effect planted in the record the demo diagnoses (its simulated size: graph_calib.effects).
+#: Further effect planted in the record the demo diagnoses (its simulated size: graph_calib.sensors.effects).
 DIAGNOSIS_EFFECT = "accel.bias_dtdt"
 #: Shortest diagnosed record, h: with seed 1 accel.bias_dtdt scores 252 (threshold 17) at 0.2 h, 30 at 0.1 h
 #: and is not seen at 0.05 h (too little change of the temperature rate).
@@ -74,7 +74,7 @@ def simulate_demo(out, *, hours, seed, validation_hours=VALIDATION_HOURS):
     """
     from graph_calib import io
     from graph_calib.simulation import simulate, write_simulation
-    from graph_calib.validation import simulate_validation_record
+    from graph_calib.evaluation.validation import simulate_validation_record
 
     out = Path(out)
     manifest = out / "campaign.toml"

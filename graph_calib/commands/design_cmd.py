@@ -1,6 +1,6 @@
 """``graph-calib design --out DIR [--spec SPEC.toml] [--baseline PROGRAM.toml]``.
 
-The shortest bench program whose predicted accuracy meets the targets (:mod:`graph_calib.program_design`:
+The shortest bench program whose predicted accuracy meets the targets (:mod:`graph_calib.design.program_search`:
 CasADi/IPOPT on a reduced model, every candidate verified with the full prediction).  Writes
 ``program.toml``, ``prediction.json``, ``design.json`` and ``report.html``.
 """
@@ -15,8 +15,8 @@ import numpy as np
 from graph_calib import io
 from graph_calib.constants import RS_TO_DH
 from graph_calib.errors import InputError
-from graph_calib.prediction import prediction_result
-from graph_calib.program_design import DesignSpec, design, design_document, read_spec
+from graph_calib.design.prediction import prediction_result
+from graph_calib.design.program_search import DesignSpec, design, design_document, read_spec
 from graph_calib.reports.design_report import design_report_html
 from graph_calib.simulation import simulate
 from graph_calib.simulation.program import program_text, read_program, scenario_program

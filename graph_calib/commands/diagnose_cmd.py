@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from graph_calib.errors import InputError
-from graph_calib.grade_choice import choose_grade
+from graph_calib.records.grade_choice import choose_grade
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
 from graph_calib.solvers.results import compare
 from graph_calib.solvers.verdict import verdict_of
@@ -46,7 +46,7 @@ def add_arguments(p):
 
 def _options(args, *, grade="navigation"):
     from graph_calib.diagnosis import DiagnosisOptions
-    from graph_calib.effects import FURTHER_EFFECTS
+    from graph_calib.sensors.effects import FURTHER_EFFECTS
     from graph_calib.model import ModelOptions
     from graph_calib.options import CalibrationOptions, GraphOptions
 

@@ -1,6 +1,6 @@
 """``graph-calib predict INPUT --out prediction.json [--grade G] [--gyro-noise ...] [--effect ...]``.
 
-The predicted accuracy of the calibration of an experiment file or of a bench program (:mod:`graph_calib.prediction`): the Fisher
+The predicted accuracy of the calibration of an experiment file or of a bench program (:mod:`graph_calib.design.prediction`): the Fisher
 information of the model at the nominal calibration, no noise simulated and no solver run.
 """
 
@@ -13,13 +13,13 @@ import numpy as np
 
 from graph_calib import io
 from graph_calib.constants import RS_TO_DH
-from graph_calib.effects import FURTHER_EFFECTS
+from graph_calib.sensors.effects import FURTHER_EFFECTS
 from graph_calib.errors import InputError
-from graph_calib.grade_choice import choose_grade
+from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
-from graph_calib.prediction import predict, prediction_result
-from graph_calib.problem import build_problem
+from graph_calib.design.prediction import predict, prediction_result
+from graph_calib.records.problem import build_problem
 from graph_calib.simulation.program import nominal_experiment, read_program
 
 

@@ -1,10 +1,10 @@
 r"""Compensation: a calibration applied to raw records, and the table an INS loads.
 
 Three things correct a raw record, all through the one sensor model
-(:func:`graph_calib.calibration.correct_record`, the solvers' inverse fed as the
+(:func:`graph_calib.compensation.calibration.correct_record`, the solvers' inverse fed as the
 solvers feed it; no second copy of the sensor equations):
 
-:class:`graph_calib.calibration.Calibration`
+:class:`graph_calib.compensation.calibration.Calibration`
     One experiment's result: its parameters with their temperature coefficients about
     its reference temperature (``Calibration.from_result``, ``Calibration.correct``).
 :class:`StitchedCalibration`

@@ -1,7 +1,7 @@
 """Applying a calibration to a raw record: what ``graph-calib apply`` does, as functions.
 
 :func:`read_compensation` reads what corrects: a result file (``data-format.md``,
-one experiment's calibration: :class:`graph_calib.calibration.Calibration`), a
+one experiment's calibration: :class:`graph_calib.compensation.calibration.Calibration`), a
 calibration document (:meth:`Calibration.to_dict`), a compensation table (JSON or
 CSV: :class:`~graph_calib.compensation.table.CompensationTable`) or a campaign
 folder or its ``campaign.json`` (the stitched calibration applied directly:
@@ -26,14 +26,14 @@ import h5py
 import numpy as np
 
 from graph_calib import __version__, io
-from graph_calib.calibration import CALIBRATION_FORMAT, Calibration, corrected_experiment
+from graph_calib.compensation.calibration import CALIBRATION_FORMAT, Calibration, corrected_experiment
 from graph_calib.compensation.formats import read_table
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.compensation.stitched import CAMPAIGN_FORMAT, StitchedCalibration
 from graph_calib.compensation.table import TABLE_FORMAT
 from graph_calib.constants import MPS2_TO_UG, RS_TO_DH
 from graph_calib.errors import InputError
-from graph_calib.joint.result import read_joint_result
+from graph_calib.solvers.joint.result import read_joint_result
 
 #: Root attribute of a corrected experiment file: the provenance of its correction, JSON.
 PROVENANCE_ATTRIBUTE = "corrected_by"
@@ -166,13 +166,13 @@ def apply(compensation, experiment, *, provenance):
     Parameters
     ----------
     compensation : Calibration, CompensationTable or StitchedCalibration
-    experiment : graph_calib.experiment.Experiment
+    experiment : graph_calib.records.experiment.Experiment
     provenance : dict
         From :func:`read_compensation`; completed with the input and the counts.
 
     Returns
     -------
-    corrected : graph_calib.experiment.Experiment
+    corrected : graph_calib.records.experiment.Experiment
         Increments ``omega_ib_b dt`` and ``f_b dt``; description headed by :func:`note_of`.
     provenance : dict
         With ``input`` (the experiment's source), ``samples`` and ``outside`` (samples

@@ -8,7 +8,7 @@ y channel of the record's ``temperature_map``, ``gyro.misalignment.zx`` its row,
 gyro z; :func:`graph_calib.stitching.sensor_of`), or as a constant.  Applying it
 (:meth:`ElementCompensation.correct`) evaluates every element at each sample's
 temperatures, which gives one calibration vector per sample, and inverts the one
-sensor model with them (:func:`graph_calib.calibration.correct_record`): the
+sensor model with them (:func:`graph_calib.compensation.calibration.correct_record`): the
 solvers' inverse, fed as the solvers feed it.
 
 Temperature coefficients (``*_tc``, ``*_tc2``, ``*_tc3``) are never elements of a
@@ -22,10 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib.calibration import correct_record, corrected_experiment, prepare
-from graph_calib.effects import EFFECTS, REGISTRY
+from graph_calib.compensation.calibration import correct_record, corrected_experiment, prepare
+from graph_calib.sensors.effects import EFFECTS, REGISTRY
 from graph_calib.model import ModelOptions
-from graph_calib.params import Layout, split_element_name
+from graph_calib.sensors.params import Layout, split_element_name
 from graph_calib.stitching import SENSORS, sensor_columns, sensor_of
 
 #: Parameters a compensation may hold: every parameter with a sensor term that is not a temperature coefficient.
@@ -99,7 +99,7 @@ class ElementCompensation:
 
     @property
     def layout(self):
-        """:class:`graph_calib.params.Layout` of every parameter the compensation holds (missing elements zero)."""
+        """:class:`graph_calib.sensors.params.Layout` of every parameter the compensation holds (missing elements zero)."""
         return Layout(tuple({parameter_of(n) for n in self.elements()}))
 
     def element_values(self, T_sensors):
@@ -109,7 +109,7 @@ class ElementCompensation:
         ----------
         T_sensors : array_like, shape (N, 6)
             Temperatures of gyro x, y, z and accel x, y, z, degC
-            (:meth:`graph_calib.experiment.Experiment.sensor_temperatures`).
+            (:meth:`graph_calib.records.experiment.Experiment.sensor_temperatures`).
         """
         T = np.atleast_2d(np.asarray(T_sensors, dtype=float))
         out = {n: self.curve_values(n, sensor_columns(T, sensor_of(n)))[0] for n in self.curve_elements()}
@@ -151,7 +151,7 @@ class ElementCompensation:
 
         Every element at each sample's own sensor temperature (:meth:`rows`), then the
         inverse sensor model with those per-sample vectors, fed as the solvers feed it
-        (:func:`graph_calib.calibration.correct_record`).
+        (:func:`graph_calib.compensation.calibration.correct_record`).
 
         Returns
         -------
@@ -164,7 +164,7 @@ class ElementCompensation:
         return correct_record(self.layout, X, prepare(experiment), n_newton=n_newton)
 
     def corrected(self, experiment, *, n_newton=ModelOptions.n_newton, note=None):
-        """The experiment with its increments corrected (:func:`graph_calib.calibration.corrected_experiment`)."""
+        """The experiment with its increments corrected (:func:`graph_calib.compensation.calibration.corrected_experiment`)."""
         return corrected_experiment(experiment, *self.correct(experiment, n_newton=n_newton),
                                     note=self.describe() if note is None else note)
 

@@ -36,9 +36,9 @@ from graph_calib.compensation.elements import BENCH_PARAMETERS, sensor_name, uni
 from graph_calib.compensation.table import (
     INTERPOLATION, TABLE_FORMAT, TABLE_VERSION, CompensationTable, check_header,
 )
-from graph_calib.effects import EFFECTS
+from graph_calib.sensors.effects import EFFECTS
 from graph_calib.errors import InputError
-from graph_calib.params import split_element_name
+from graph_calib.sensors.params import split_element_name
 
 #: Table file formats :func:`write_table` writes.
 TABLE_FORMATS = ("json", "csv", "c-header")
@@ -110,7 +110,7 @@ def _equations(table):
         "  true = (I + diag(s) + M)^-1 (measured - b),  measured = dtheta/dt (rad/s) or dv/dt (m/s^2).",
     ]
     if further:
-        lines.append("Further terms held here (see docs/model.md and graph_calib/sensor_model.py): "
+        lines.append("Further terms held here (see docs/model.md and graph_calib/sensors/sensor_model.py): "
                      + ", ".join(f"{p} ({EFFECTS[p].term})" for p in further) + ".")
     return lines
 

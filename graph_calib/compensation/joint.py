@@ -1,11 +1,11 @@
-"""A campaign's joint calibration (:mod:`graph_calib.joint`) as a compensation, like the stitched one.
+"""A campaign's joint calibration (:mod:`graph_calib.solvers.joint`) as a compensation, like the stitched one.
 
 :class:`JointCalibration` evaluates every temperature-dependent element's joint curve at each sample's
 own sensor temperature, with its one-sigma band straight from the joint covariance of the curve's
 coefficients (no stitching step); the shared elements are constants.  It has what
 :class:`graph_calib.compensation.StitchedCalibration` has: ``correct``/``corrected`` (through the one
 sensor model), ``table`` (the compensation table ``graph-calib export`` writes), and ``evaluate``,
-``element_sigmas`` and ``curves[...].t_span`` for :func:`graph_calib.validation.validate`.
+``element_sigmas`` and ``curves[...].t_span`` for :func:`graph_calib.evaluation.validation.validate`.
 """
 
 from __future__ import annotations
@@ -20,8 +20,8 @@ from graph_calib.compensation.elements import TABLE_PARAMETERS, ElementCompensat
 from graph_calib.compensation.stitched import INTERPOLATION_CHECK_POINTS, read_campaign
 from graph_calib.compensation.table import CompensationTable, TableCurve, interpolate
 from graph_calib.errors import InputError
-from graph_calib.joint.result import read_joint_result
-from graph_calib.joint.unknowns import evaluate_curve
+from graph_calib.solvers.joint.result import read_joint_result
+from graph_calib.solvers.joint.unknowns import evaluate_curve
 from graph_calib.stitching import sensor_of
 
 
@@ -68,7 +68,7 @@ class JointCalibration(ElementCompensation):
 
     @classmethod
     def from_result(cls, result, *, source=""):
-        """From a joint result (:func:`graph_calib.joint.result.joint_result`)."""
+        """From a joint result (:func:`graph_calib.solvers.joint.result.joint_result`)."""
         block = result.extra["joint"]
         t0 = float(block["t0_degC"])
         spans = np.asarray(block["sensor_ranges_degC"], dtype=float).reshape(6, 2)
@@ -92,7 +92,7 @@ class JointCalibration(ElementCompensation):
 
     @classmethod
     def from_file(cls, path):
-        """From a joint result file (:func:`graph_calib.joint.result.read_joint_result`)."""
+        """From a joint result file (:func:`graph_calib.solvers.joint.result.read_joint_result`)."""
         return cls.from_result(read_joint_result(path), source=str(Path(path).resolve()))
 
     @classmethod

@@ -93,7 +93,7 @@ class TableCurve:
 
     @property
     def t_span(self):
-        """:attr:`calibrated_range_degC`, under the name :func:`graph_calib.validation.validate` reads (the
+        """:attr:`calibrated_range_degC`, under the name :func:`graph_calib.evaluation.validation.validate` reads (the
         stitched curves' ``t_span``): a window counts as inside where its sensor temperature lies in it (none
         does when the table states no range)."""
         return self.calibrated_range_degC
@@ -175,11 +175,11 @@ class CompensationTable(ElementCompensation):
         return (f"corrected with the compensation table of {i.get('imu_id') or 'an unnamed IMU'} ({what}, "
                 f"{self.grid_degC[0]:g}..{self.grid_degC[-1]:g} degC, from {i.get('source') or '?'})")
 
-    # -- what graph_calib.validation.validate reads ----------------------------------------
+    # -- what graph_calib.evaluation.validation.validate reads ----------------------------------------
 
     def evaluate(self, T_sensors, model=None):
         """Every element at the sensor temperatures of each row, ``{flat element: (N,)}``, SI: the table as
-        :func:`graph_calib.validation.validate` evaluates a calibration.
+        :func:`graph_calib.evaluation.validation.validate` evaluates a calibration.
 
         The values :meth:`element_values` gives, which are those :meth:`correct` (``graph-calib apply``)
         uses: each element interpolated (:func:`interpolate`) at its own sensor's temperature of the row,

@@ -22,7 +22,7 @@ Modules, from the data up:
 - :mod:`graph_calib.diagnosis.residuals`: residual series of the factor graph and the filter,
   their whiteness (:func:`ljung_box`), driver regressions, :func:`residual_statistics`,
   :func:`residual_rms`, :func:`error_against_truth`;
-- :mod:`graph_calib.diagnosis.records`: :class:`DiagnosisOptions` and what the loop records
+- :mod:`graph_calib.diagnosis.rounds`: :class:`DiagnosisOptions` and what the loop records
   (:class:`CandidateTest`, :class:`DriverTest`, :class:`Round`, :class:`Stage`,
   :class:`Diagnosis` with ``to_json``);
 - :mod:`graph_calib.diagnosis.loop`: :func:`diagnose`, the loop as a sequence of steps, and
@@ -41,7 +41,7 @@ from graph_calib.diagnosis.drivers import (
     time_basis,
 )
 from graph_calib.diagnosis.loop import diagnose, diagnose_from
-from graph_calib.diagnosis.records import (
+from graph_calib.diagnosis.rounds import (
     CandidateTest,
     Diagnosis,
     DiagnosisOptions,

@@ -25,8 +25,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import stats
 
-from graph_calib import effects
-from graph_calib.diagnosis.records import (
+from graph_calib.sensors import effects
+from graph_calib.diagnosis.rounds import (
     CandidateTest,
     Diagnosis,
     DiagnosisOptions,
@@ -44,8 +44,8 @@ from graph_calib.diagnosis.residuals import (
 )
 from graph_calib.diagnosis.score import score_test, with_priors
 from graph_calib.options import CalibrationOptions
-from graph_calib.problem import build_problem
-from graph_calib.rotations import exp_so3
+from graph_calib.records.problem import build_problem
+from graph_calib.navigation.rotations import exp_so3
 from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import to_result
 
@@ -131,7 +131,7 @@ def _test_candidates(system, layout, names, *, diagnosis_options):
     Parameters
     ----------
     system : ReducedSystem
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
         The extended layout (a candidate absent from it is not estimable in this experiment).
     names : sequence of str
     diagnosis_options : DiagnosisOptions
@@ -435,11 +435,11 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
 
     Parameters
     ----------
-    experiment : graph_calib.experiment.Experiment
+    experiment : graph_calib.records.experiment.Experiment
     options : graph_calib.calibrate.CalibrationOptions, optional
         The declared model (grade, keyframes, effects already modelled, priors).
     diagnosis : DiagnosisOptions
-    truth : graph_calib.experiment.Result, optional
+    truth : graph_calib.records.experiment.Result, optional
         A simulator's truth: the error of the declared parameters before and after.
     progress : callable, optional
         Called with one-line messages.
@@ -476,12 +476,12 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), a
 
     Parameters
     ----------
-    experiment : graph_calib.experiment.Experiment
+    experiment : graph_calib.records.experiment.Experiment
     options : CalibrationOptions
         The grown model; its ``t_ref_degC`` the smaller model's (one ``T_ref`` for every model).
     start : dict
         ``{flat element name: value}`` (SI) of the smaller model's factor-graph solution
-        (:attr:`graph_calib.experiment.Result.values`); elements not given start at zero.
+        (:attr:`graph_calib.records.experiment.Result.values`); elements not given start at zero.
     diagnosis : DiagnosisOptions
     attitudes : ndarray (K+1, 3, 3), optional
         The keyframe attitudes ``C_nb`` of the ``start`` solution (ignored when their shape does not fit).

@@ -24,7 +24,7 @@ import scipy.linalg as sla
 
 from graph_calib.diagnosis.drivers import SENSOR_AXES, TIME_SEGMENTS, DriverSums
 from graph_calib.model.attitude_elimination import AttitudeSolve, NormalEquations
-from graph_calib.params import Layout
+from graph_calib.sensors.params import Layout
 
 
 @dataclass(frozen=True)

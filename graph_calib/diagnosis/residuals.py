@@ -5,7 +5,7 @@
 - :func:`ljung_box`, :func:`regression_tests`: whiteness, and the (descriptive) relation of
   each component to the drivers' keyframe means (:func:`~graph_calib.diagnosis.drivers.keyframe_context`);
 - :func:`residual_statistics`, :func:`residual_rms`: the figures of a
-  :class:`~graph_calib.diagnosis.records.Stage` that ``diagnosis.json`` holds;
+  :class:`~graph_calib.diagnosis.rounds.Stage` that ``diagnosis.json`` holds;
 - :func:`error_against_truth`: the error of a result against a simulator's truth.
 """
 
@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from graph_calib import effects
+from graph_calib.sensors import effects
 from graph_calib.diagnosis.drivers import keyframe_context
 
 
@@ -168,7 +168,7 @@ def residual_statistics(stage, *, top=5, lags=10, context=None):
 
     Parameters
     ----------
-    stage : graph_calib.diagnosis.records.Stage
+    stage : graph_calib.diagnosis.rounds.Stage
         Its ``residuals`` and ``innovations`` (and its problem's model, for the drivers).
     top : int
         Driver regressions kept per series (the most significant).
@@ -214,7 +214,7 @@ def residual_statistics(stage, *, top=5, lags=10, context=None):
 def residual_rms(stage):
     """``{solver: {kind: [rms of the whitened residuals per component]}}`` plus SI figures.
 
-    ``stage`` is a :class:`~graph_calib.diagnosis.records.Stage`; the factor graph's entry also has
+    ``stage`` is a :class:`~graph_calib.diagnosis.rounds.Stage`; the factor graph's entry also has
     ``"overall"`` and ``"si"`` (RMS in SI per kind; gravity over the static keyframes only).
     """
     out = {}
@@ -241,7 +241,7 @@ def residual_rms(stage):
 
 
 def error_against_truth(result, truth, *, names=None, sigmas=None):
-    """Error of ``result`` against a truth :class:`~graph_calib.experiment.Result`.
+    """Error of ``result`` against a truth :class:`~graph_calib.records.experiment.Result`.
 
     Over the declared parameters both hold (or ``names``): per element
     ``z = (estimate - truth) / sigma`` (the result's own sigma, or ``sigmas``: e.g. the

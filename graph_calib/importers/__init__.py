@@ -1,4 +1,4 @@
-r"""Converters from bench and third-party logs into :class:`~graph_calib.experiment.Experiment`.
+r"""Converters from bench and third-party logs into :class:`~graph_calib.records.experiment.Experiment`.
 
 Each importer reads raw sensor output (counts, rates or increments, in the
 units the log uses), converts it to SI with *nominal* (datasheet) scales — the

@@ -1,4 +1,4 @@
-r"""Building the imported :class:`~graph_calib.experiment.Experiment` and validating it.
+r"""Building the imported :class:`~graph_calib.records.experiment.Experiment` and validating it.
 
 Rates become increments over the interval each sample closes (:func:`_intervals`);
 a log without temperature gets the one channel :data:`ASSUMED_TEMPERATURE_NAME`
@@ -15,7 +15,7 @@ import math
 import numpy as np
 
 from graph_calib.errors import InputError
-from graph_calib.experiment import Experiment
+from graph_calib.records.experiment import Experiment
 from graph_calib.importers.text import _data_line_numbers, _num, _show
 from graph_calib.io import validate_experiment
 

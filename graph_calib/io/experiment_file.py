@@ -10,7 +10,7 @@ samples.  The writer runs the same checks before writing, and writes atomically
 Examples
 --------
 >>> import numpy as np, tempfile, pathlib
->>> from graph_calib.experiment import Experiment
+>>> from graph_calib.records.experiment import Experiment
 >>> n = 100
 >>> exp = Experiment(
 ...     t=np.arange(n) / 100.0, dtheta=np.zeros((n, 3)),
@@ -34,7 +34,7 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib.errors import InputError
-from graph_calib.experiment import Experiment, Table
+from graph_calib.records.experiment import Experiment, Table
 from graph_calib.io.atomic import atomic_path
 from graph_calib.io.checks import _first, _is_int, _is_real, _show
 

@@ -18,7 +18,7 @@ if sys.version_info >= (3, 11):
 else:  # Python 3.10: the tomli backport, declared in pyproject.toml for it
     import tomli as tomllib
 
-from graph_calib import effects, params
+from graph_calib.sensors import effects, params
 from graph_calib.errors import InputError
 from graph_calib.io.checks import _is_int, _is_real, _show
 
@@ -75,7 +75,7 @@ class Campaign:
         The manifest file (absolute).
     imu_id : str
     grade : str
-        A key of :data:`graph_calib.params.GRADES`.
+        A key of :data:`graph_calib.sensors.params.GRADES`.
     experiments : tuple of CampaignExperiment
     priors : dict
         ``{parameter name: one-sigma prior}``, SI, overriding the grade's.
@@ -98,7 +98,7 @@ class Campaign:
     solver: dict = field(default_factory=dict)
 
     def layout(self):
-        """The :class:`~graph_calib.params.Layout` of the modelled parameters."""
+        """The :class:`~graph_calib.sensors.params.Layout` of the modelled parameters."""
         return params.Layout.declared(extra=self.effects, exclude=self.exclude)
 
     def prior_sigmas(self):

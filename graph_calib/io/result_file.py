@@ -14,9 +14,9 @@ from pathlib import Path
 
 import numpy as np
 
-from graph_calib import effects, params
+from graph_calib.sensors import effects, params
 from graph_calib.errors import InputError
-from graph_calib.experiment import Result
+from graph_calib.records.experiment import Result
 from graph_calib.io.atomic import atomic_write_text, dumps_json
 from graph_calib.io.checks import _first, _is_int, _is_real, _show
 
@@ -47,7 +47,7 @@ def _check_finite_real(v, *, path, dataset, what="value"):
 
 
 def validate_result(result, *, path):
-    """Check a :class:`~graph_calib.experiment.Result` against the result file format.
+    """Check a :class:`~graph_calib.records.experiment.Result` against the result file format.
 
     Rules: ``source`` and ``solver`` strings; ``t_ref_degC`` finite;
     ``temperature_range_degC`` two finite numbers, low first; ``effects`` known

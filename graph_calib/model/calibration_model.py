@@ -13,14 +13,14 @@ from dataclasses import replace
 import numpy as np
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
-from graph_calib.effects import uninformed
+from graph_calib.sensors.effects import uninformed
 from graph_calib.model import factors
 from graph_calib.model.options import ModelOptions
 from graph_calib.model.preintegration import SensorTerms, preintegrate
 from graph_calib.model.record import PreparedRecord
 from graph_calib.model.unresolved import heading_drift_direction, without_data_along
-from graph_calib.params import Layout, grade as _grade
-from graph_calib.rotations import quat_to_dcm
+from graph_calib.sensors.params import Layout, grade as _grade
+from graph_calib.navigation.rotations import quat_to_dcm
 
 #: Prior sigma of the first attitude when valid table readings give it (faceplate
 #: attitude through the nominal mounting; the mounting error is estimated), rad.
@@ -50,7 +50,7 @@ class CalibrationModel:
 
     Parameters
     ----------
-    experiment : graph_calib.experiment.Experiment
+    experiment : graph_calib.records.experiment.Experiment
     options : ModelOptions
     t_ref_degC : float, optional
         Reference temperature; default the mean of the six sensors' temperatures.
@@ -61,7 +61,7 @@ class CalibrationModel:
     ----------
     record : graph_calib.model.record.PreparedRecord
         The prepared data (shared by every layout of the same record: :meth:`with_effects`).
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
         What is estimated: the declared model, the requested further effects, less what the record
         cannot inform (``auto_excluded``) and ``options.exclude``.
     noise : graph_calib.model.factors.Noise
@@ -133,7 +133,7 @@ class CalibrationModel:
     def _unobservable(self):
         """Parameters the record cannot inform, left out of the layout (sorted tuple).
 
-        What each parameter needs is in the effect registry (:func:`graph_calib.effects.uninformed`).
+        What each parameter needs is in the effect registry (:func:`graph_calib.sensors.effects.uninformed`).
         Without a table nothing ties the attitude to the faceplate or to a fixed
         rotation centre: ``mount``, ``time_lag.table``, ``damping.stiffness`` and
         ``lever_arm`` go.  With a table whose valid readings are all taken at rest

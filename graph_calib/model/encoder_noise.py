@@ -18,7 +18,7 @@ Per valid reading the covariance of the attitude noise, in body axes (the encode
    ``(n - 1) / (n - 5)`` so that its inverse, the weight, is unbiased (Wishart, three dimensions);
    a dwell never spans a segment boundary (``/imu/segment``);
 2. **the table's axes**, for the readings of such a dwell, when the experiment carries them
-   (:attr:`graph_calib.experiment.Table.axes_f`: a bench program simulated without noise for
+   (:attr:`graph_calib.records.experiment.Table.axes_f`: a bench program simulated without noise for
    ``predict``, which knows its axes and has no scatter to show; never read from a file): the
    declared ``encoder_noise`` squared about each axis;
 3. otherwise (readings in motion, short runs, a dwell whose readings scatter less than the floor
@@ -50,7 +50,7 @@ from itertools import permutations
 
 import numpy as np
 
-from graph_calib.rotations import log_so3
+from graph_calib.navigation.rotations import log_so3
 
 #: Fewest consecutive static readings whose scatter is taken as their noise covariance.
 MIN_DWELL_READINGS = 20

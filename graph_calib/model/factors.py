@@ -2,7 +2,7 @@ r"""The factors of the shared model: one place for every equation every solver u
 
 The record is cut into keyframe intervals (about 0.1-1 s).  For interval ``k``,
 ``R_k = C_nb`` at its start, and with the gyro and accelerometer samples
-corrected by the calibration ``x`` (:mod:`graph_calib.sensor_model`):
+corrected by the calibration ``x`` (:mod:`graph_calib.sensors.sensor_model`):
 
 Rotation (process) model
     ``R_{k+1} = E(T_k) @ R_k @ dR_k(x)``, with ``dR_k`` the preintegrated
@@ -70,7 +70,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.model.preintegration import READING_BLOCK
-from graph_calib.rotations import exp_so3, log_so3, right_jacobian, right_jacobian_inv, skew
+from graph_calib.navigation.rotations import exp_so3, log_so3, right_jacobian, right_jacobian_inv, skew
 
 
 @dataclass(frozen=True)
@@ -177,7 +177,7 @@ def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None, s
     R : ndarray, shape (K+1, 3, 3) or (K, 3, 3)
     preint : graph_calib.model.preintegration.Preintegrated
     x : ndarray, shape (P,)
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
     noise : Noise
     moving_sigma : float, optional
         Sigma (m/s^2) of the keyframes that are not static (a bench that may translate).
@@ -245,7 +245,7 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
     R : ndarray, shape (K+1, 3, 3) or (K, 3, 3)
     preint : graph_calib.model.preintegration.Preintegrated
     x : ndarray, shape (P,)
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
     noise : Noise
 
     Returns

@@ -1,7 +1,7 @@
 r"""The compiled per-sample preintegration kernel (numba), one keyframe after the other.
 
 :func:`graph_calib.model.preintegration.preintegrate` calls it; nothing else should.  The
-sensor-model inversion it applies per sample is :mod:`graph_calib.sensor_model`'s: the kernel calls
+sensor-model inversion it applies per sample is :mod:`graph_calib.sensors.sensor_model`'s: the kernel calls
 its compiled ``invert_sample`` and ``sample_features`` (compiled once, without reference counting),
 and inlines only the small 3x3 helpers.  It is not ``parallel=True`` and does not inline the sensor
 model: numba's parfor passes and inlining took three to four minutes of compiling on two cores, and
@@ -14,8 +14,8 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graph_calib.rotations import exp_so3_nb, right_jacobian_nb
-from graph_calib.sensor_model import gsens_coupling, invert_sample, is_nonlinear, sample_features
+from graph_calib.navigation.rotations import exp_so3_nb, right_jacobian_nb
+from graph_calib.sensors.sensor_model import gsens_coupling, invert_sample, is_nonlinear, sample_features
 
 _C12 = 1.0 / 12.0   # coning Jacobians
 _C6 = 1.0 / 6.0     # velocity-rotation Jacobians; the values divide by 6 as the recursion is written
@@ -129,7 +129,7 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
 
     It is not evaluated that way.  ``G = R J`` (the Jacobian in the keyframe-start
     frame) obeys ``G_j = G_{j-1} + R_j Jr_j dphi_j/dx``, and every ``x``-derivative
-    of a sample is ``-h Ai Phi`` (:func:`graph_calib.sensor_model.invert_sample`):
+    of a sample is ``-h Ai Phi`` (:func:`graph_calib.sensors.sensor_model.invert_sample`):
     per term row one feature value on one axis.  So each sample costs 3x3 products
     plus a few multiply-adds per term row:
 
@@ -145,13 +145,13 @@ def _preintegrate(dt, k0, x, grows, arows, dTg, dTdtg, dTa, dTdta,
 
     The gyro rows accumulate ``(G, H_S, H_S1)``, the accelerometer rows
     ``(dS, dS1)``; at the end ``J = R^T G``, ``dS = H_S - [S x] G`` and
-    ``dS1 = H_S1 - [S1 x] G`` (tests/test_model.py checks this against the direct
+    ``dS1 = H_S1 - [S1 x] G`` (tests/model/test_model.py checks this against the direct
     recursion).
 
     With ``gyro.g_sensitivity`` the gyros see the calibrated specific force
-    (:func:`graph_calib.sensor_model.correct_pair`): each sample is inverted
+    (:func:`graph_calib.sensors.sensor_model.correct_pair`): each sample is inverted
     accelerometers first, and ``dth`` gains ``h Ai_g Gm Ai_a`` per accelerometer
-    term row (``Gm`` from :func:`graph_calib.sensor_model.gsens_coupling`), so the
+    term row (``Gm`` from :func:`graph_calib.sensors.sensor_model.gsens_coupling`), so the
     accelerometer rows also accumulate ``(G, H_S, H_S1)`` exactly like the gyro
     rows (``accGA``, pending one sample like them).  Without the coupling that
     path is skipped and the results are those of the uncoupled model bit for bit.

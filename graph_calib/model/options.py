@@ -33,8 +33,8 @@ class ModelOptions:
     sway_sigma : float, ``"estimate"`` or None
         The bench's own acceleration at rest (a hand holding the unit sways it), averaged over a
         keyframe: one sigma (m/s^2) added in quadrature to every gravity measurement.  None: zero;
-        ``"estimate"``: :func:`graph_calib.problem.build_problem` estimates it from the static
-        intervals (:func:`graph_calib.problem.sway_from_static`, docs/model.md).
+        ``"estimate"``: :func:`graph_calib.records.problem.build_problem` estimates it from the static
+        intervals (:func:`graph_calib.records.problem.sway_from_static`, docs/model.md).
     n_newton : int
         Newton steps of the sensor-model inversion.
     """

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.model.kernel import _preintegrate
-from graph_calib.rotations import exp_so3
-from graph_calib.sensor_model import GSENS, correct_pair_with_jacobian, term_rows
+from graph_calib.navigation.rotations import exp_so3
+from graph_calib.sensors.sensor_model import GSENS, correct_pair_with_jacobian, term_rows
 
 #: Largest first-order keyframe rotation change (rad) for which a preintegration is updated to first
 #: order (``dR Exp(J dx)``, ``S + J_S dx``) instead of redone; every solver uses it.
@@ -30,7 +30,7 @@ class SensorTerms:
     Attributes
     ----------
     gyro_rows, accel_rows : ndarray of int64, shape (R, 4)
-        Term rows ``(column of x, axis, code, aux)`` (:func:`graph_calib.sensor_model.term_rows`).
+        Term rows ``(column of x, axis, code, aux)`` (:func:`graph_calib.sensors.sensor_model.term_rows`).
     columns : ndarray of int64
         The columns of ``x`` any term touches.
     gyro_rows_compact, accel_rows_compact : ndarray of int64
@@ -50,7 +50,7 @@ class SensorTerms:
 
     @classmethod
     def of(cls, layout):
-        """The terms of ``layout`` (:class:`graph_calib.params.Layout`)."""
+        """The terms of ``layout`` (:class:`graph_calib.sensors.params.Layout`)."""
         gyro = term_rows(layout, "gyro")
         accel = term_rows(layout, "accel")
         cols = np.unique(np.concatenate([gyro[:, 0], accel[:, 0]])).astype(np.int64)
@@ -191,7 +191,7 @@ def preintegrate(record, terms, x, *, layout, n_newton):
     terms : SensorTerms
         The sensor terms of ``layout``.
     x : ndarray, shape (P,)
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
     n_newton : int
         Newton steps of the sensor-model inversion.
 

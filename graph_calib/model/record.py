@@ -12,7 +12,7 @@ import numpy as np
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
 from graph_calib.model.encoder_noise import dwell_scatter, noise_frame
-from graph_calib.rotations import exp_so3, quat_to_dcm
+from graph_calib.navigation.rotations import exp_so3, quat_to_dcm
 
 
 def _limited_derivative(y, t):
@@ -34,7 +34,7 @@ def _quadratic_slope(y, win, delta):
 
     Savitzky-Golay's first derivative of order 2 with scipy's ``mode='interp'``
     (``scipy.signal.savgol_filter(y, win, 2, deriv=1, delta=delta, axis=0,
-    mode='interp')``, checked in tests/test_model.py): inside, the slope of the
+    mode='interp')``, checked in tests/model/test_model.py): inside, the slope of the
     quadratic through the window, ``sum(k y_{i+k}) / (delta sum k^2)``; in the
     first and last ``win // 2`` rows, the slope at each row of the quadratic fitted
     to the first (last) ``win`` rows.  Written here so that the solvers do not
@@ -152,7 +152,7 @@ class PreparedRecord:
 
     Parameters
     ----------
-    experiment : graph_calib.experiment.Experiment
+    experiment : graph_calib.records.experiment.Experiment
     keyframe_s : float
         Keyframe interval, s.
     t_ref_degC : float, optional

@@ -41,7 +41,7 @@ def heading_drift_direction(layout, x):
 
     Parameters
     ----------
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
         Must hold ``gyro.g_sensitivity``.
     x : ndarray, shape (P,)
     """

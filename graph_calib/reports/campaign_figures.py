@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib import effects, io
+from graph_calib.sensors import effects
+from graph_calib import io
 
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
            "#17becf")

@@ -14,7 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib import effects, io, params
+from graph_calib.sensors import effects, params
+from graph_calib import io
 from graph_calib.reports.joint_report import joint_sections
 from graph_calib.reports import html as H
 from graph_calib.reports.campaign_figures import (
@@ -28,7 +29,7 @@ from graph_calib.reports.campaign_figures import (
     report_unit,
 )
 from graph_calib.solvers.results import sigma_ratio_range_text
-from graph_calib.validation import TruthCurves, validation_text
+from graph_calib.evaluation.validation import TruthCurves, validation_text
 
 
 def _fmt(v, digits=4):

@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib import effects
-from graph_calib.effects import REGISTRY
+from graph_calib.sensors import effects
+from graph_calib.sensors.effects import REGISTRY
 from graph_calib.reports import html
 
 #: For each further effect: the driver its signature follows, and the triad whose residuals show it.

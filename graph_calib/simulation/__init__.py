@@ -15,7 +15,7 @@ Modules
     further-effect sizes.
 :mod:`~graph_calib.simulation.imu`
     True rates and specific force, sensor errors through
-    :func:`graph_calib.sensor_model.measure`, Gauss-Legendre increments.
+    :func:`graph_calib.sensors.sensor_model.measure`, Gauss-Legendre increments.
 :mod:`~graph_calib.simulation.design`
     The rotation design of a table experiment and its turntable programme.
 :mod:`~graph_calib.simulation.experiments`

@@ -4,8 +4,8 @@ r"""Simulated experiments: the turntable and hand-held builders and their truth.
 two-axis table (rotation programme, chamber and temperature lags, increments,
 encoder readings); :func:`_make_handheld_experiment` a consumer IMU turned by
 hand (no table).  Each returns a :class:`SimulatedExperiment`: the
-:class:`~graph_calib.experiment.Experiment`, its truth
-:class:`~graph_calib.experiment.Result` (``solver = "truth"``) and the true
+:class:`~graph_calib.records.experiment.Experiment`, its truth
+:class:`~graph_calib.records.experiment.Result` (``solver = "truth"``) and the true
 signals, temperatures and parameters behind them.
 
 Both builders draw everything from the ``seed`` they are given: independent
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from graph_calib import params
-from graph_calib.experiment import Experiment, Result, Table
-from graph_calib.rotations import exp_so3, log_so3, quat_to_dcm
+from graph_calib.sensors import params
+from graph_calib.records.experiment import Experiment, Result, Table
+from graph_calib.navigation.rotations import exp_so3, log_so3, quat_to_dcm
 from graph_calib.simulation.design import rotation_program
 from graph_calib.simulation.ferraris import ferraris_motion
 from graph_calib.simulation.handheld import HandheldMotion

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib.rotations import exp_so3, log_so3
+from graph_calib.navigation.rotations import exp_so3, log_so3
 from graph_calib.simulation.handheld import HandheldMotion
 
 #: The six faces: the body axis that points up, in order.

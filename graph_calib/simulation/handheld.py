@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib.rotations import exp_so3
+from graph_calib.navigation.rotations import exp_so3
 from graph_calib.simulation.turntable import Kinematics
 
 

@@ -25,7 +25,7 @@ inside one smooth segment); the lever arm is applied in the housing axes and
 the tilt's own angular acceleration is left out of the size-effect term (both
 of relative order ``|delta|`` ~ 1e-5 of an effect that is itself small).
 
-Sensor errors come from :func:`graph_calib.sensor_model.measure`, with
+Sensor errors come from :func:`graph_calib.sensors.sensor_model.measure`, with
 ``dT = T - T_ref`` and ``dT/dt`` of each sensor at the same instant.
 
 Increments are the integrals of the measured rate and specific force over each
@@ -41,8 +41,8 @@ from __future__ import annotations
 import numpy as np
 
 from graph_calib.constants import omega_ie_n
-from graph_calib.rotations import exp_so3, right_jacobian
-from graph_calib.sensor_model import measure
+from graph_calib.navigation.rotations import exp_so3, right_jacobian
+from graph_calib.sensors.sensor_model import measure
 
 def _cross(a, b):
     """Row-wise cross product of (N, 3) arrays (either may be (1, 3))."""
@@ -152,7 +152,7 @@ def simulate_increments(signal_model, thermal, *, rate_hz, n_samples, layout, x,
     thermal : ThermalModel
     rate_hz : float
     n_samples : int
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
         Every parameter the data are made with.
     x : ndarray, shape (layout.size,)
     t_ref : float

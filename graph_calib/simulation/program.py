@@ -252,7 +252,7 @@ def parse_program(doc, *, path=""):
 
 def read_toml(path):
     """The parsed TOML document of ``path`` (dict); :class:`InputError` naming the file if it is missing or
-    not TOML (bench programs here, design specs in :mod:`graph_calib.program_design`)."""
+    not TOML (bench programs here, design specs in :mod:`graph_calib.design.program_search`)."""
     path = Path(path)
     if not path.exists():
         raise InputError("no such file", path=path)
@@ -338,7 +338,7 @@ def program_simulation(program, *, rng, noise=True, errors=True, effects=(), eff
 
 
 def nominal_experiment(program, *, channels=None):
-    """The program's experiment without noise or sensor errors (what :mod:`graph_calib.prediction` needs).
+    """The program's experiment without noise or sensor errors (what :mod:`graph_calib.design.prediction` needs).
 
     Its table carries the axes the encoders read at each reading (``Table.axes_f``): without noise the
     readings show no scatter, so the model takes the declared encoder noise about the program's own

@@ -24,7 +24,7 @@ from typing import Callable
 
 import numpy as np
 
-from graph_calib import effects
+from graph_calib.sensors import effects
 from graph_calib.errors import InputError
 from graph_calib.simulation.design import NAV_DESIGN, SHORT_DESIGN
 from graph_calib.simulation.experiments import (

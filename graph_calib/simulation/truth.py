@@ -13,7 +13,7 @@ the campaign's range,
     p(T) = c_0 + c_1 (T - T_c) + c_2 (T - T_c)^2, \qquad T_c = 20\ \mathrm{degC},
 
 (quadratic by default; the simulator must produce its errors through
-:func:`graph_calib.sensor_model.measure`, whose terms go up to ``dT^2``, and
+:func:`graph_calib.sensors.sensor_model.measure`, whose terms go up to ``dT^2``, and
 ``dT^3`` for the biases).  In an experiment with reference temperature ``T_ref``
 the same curve is exactly
 
@@ -47,8 +47,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from graph_calib import constants as c
-from graph_calib.effects import DECLARED, EFFECTS, FURTHER_EFFECTS, REGISTRY
-from graph_calib.params import Layout
+from graph_calib.sensors.effects import DECLARED, EFFECTS, FURTHER_EFFECTS, REGISTRY
+from graph_calib.sensors.params import Layout
 
 DH = c.DH_TO_RS
 AS = c.ARCSEC_TO_RAD

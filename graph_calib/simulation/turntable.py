@@ -55,7 +55,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from graph_calib.rotations import dcm_to_quat
+from graph_calib.navigation.rotations import dcm_to_quat
 
 OUTER, INNER = 0, 1
 _DWELL = -1

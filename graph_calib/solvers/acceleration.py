@@ -23,7 +23,7 @@ which test a plain Gauss-Newton step at the final point, still decide convergenc
 chooses where the next step is taken from, and the solvers keep a mixed point only if it lowers the cost.
 
 The iterate is a plain vector: the solvers pass attitudes as rotation vectors about a fixed reference
-(:func:`graph_calib.rotations.log_so3` of ``R_ref^T R``) and every element divided by a scale (its
+(:func:`graph_calib.navigation.rotations.log_so3` of ``R_ref^T R``) and every element divided by a scale (its
 sigma), so the least squares weigh the elements alike.
 """
 

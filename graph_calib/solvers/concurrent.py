@@ -71,7 +71,7 @@ def solve_pair(names, problem, *, options, progress=None):
     ----------
     names : sequence of two str
         Registered solver names; the first runs in a worker process.
-    problem : graph_calib.problem.Problem
+    problem : graph_calib.records.problem.Problem
     options : graph_calib.options.CalibrationOptions
     progress : callable, optional
         Called (in this process) with each :class:`graph_calib.solvers.interface.ProgressEvent`, every

@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib.rotations import exp_so3
+from graph_calib.navigation.rotations import exp_so3
 
 #: Turns about the vertical tried first by :func:`search_heading`, rad: every 30 degrees, 0 (no turn) among them.
 HEADING_GRID = np.radians(np.arange(-180.0, 180.0, 30.0))

@@ -4,7 +4,7 @@ A solver is an object with a ``name`` and a method
 
     ``solve(problem, *, options, progress=None, initial=None) -> SolverOutput``
 
-that calibrates a :class:`graph_calib.problem.Problem` (the shared model of one experiment, aligned).
+that calibrates a :class:`graph_calib.records.problem.Problem` (the shared model of one experiment, aligned).
 It reads its own part of :class:`graph_calib.options.CalibrationOptions`, reports each iteration to
 ``progress`` as a :class:`ProgressEvent`, and may start from ``initial`` (keyframe attitudes and a
 calibration vector, e.g. a smaller model's solution embedded in a larger layout).  Solvers are found
@@ -26,7 +26,7 @@ from typing import Callable, Mapping, Protocol
 
 import numpy as np
 
-from graph_calib.params import Layout
+from graph_calib.sensors.params import Layout
 
 #: The two quantities a residual series can hold.
 WHITENED_RESIDUAL = "whitened residual"
@@ -100,7 +100,7 @@ class SolverOutput:
     ----------
     solver : str
         The solver's registered name.
-    layout : graph_calib.params.Layout
+    layout : graph_calib.sensors.params.Layout
     x : ndarray, shape (P,)
         Calibration estimate, SI, ``layout`` order.
     covariance : ndarray, shape (P, P)

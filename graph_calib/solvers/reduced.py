@@ -16,7 +16,7 @@ the gradient): the solver hands GTSAM that reduced factor, GTSAM solves the redu
 (with their priors and damping), and the attitude step follows by back-substitution.  The band of ``H_RR``
 (half-width 5) is factored by LAPACK's banded Cholesky (:mod:`graph_calib.model.attitude_elimination`, the
 closed loop's too); no per-factor Python callback, and the linear system of a 3 h experiment is a few tens of MB instead of GTSAM's 0.3 GB of Jacobian factors.
-``tests/test_joint_reduced.py`` and ``tests/test_factor_graph_reduced.py`` check cost, step and covariance
+``tests/solvers/test_joint_reduced.py`` and ``tests/solvers/test_factor_graph_reduced.py`` check cost, step and covariance
 against GTSAM's linearisation and elimination of the whole graph (every attitude a variable, the model's
 factors as callbacks).
 
@@ -31,7 +31,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.model.attitude_elimination import NormalEquations, eliminate
-from graph_calib.rotations import exp_so3
+from graph_calib.navigation.rotations import exp_so3
 
 __all__ = ["ExperimentSystem", "cost", "cost_by_key", "linearise", "retract"]
 
@@ -165,7 +165,7 @@ def _kind_cost(res, *, robust=None, k=None, group=None):
 
 def _encoder_groups(enc, robust, robust_k):
     """``(group, k)`` of the encoder readings: one robust loss per keyframe's readings (GTSAM's factor), its
-    threshold ``robust_k sqrt(m)`` for ``m`` readings (:func:`graph_calib.factor_graph.build_graph`)."""
+    threshold ``robust_k sqrt(m)`` for ``m`` readings (:func:`graph_calib.solvers.factor_graph.build_graph`)."""
     if robust is None or not enc.key.size:
         return None, None
     _, group, counts = np.unique(enc.key, return_inverse=True, return_counts=True)
@@ -197,7 +197,7 @@ def linearise(model, preint, R, x, M_u, *, R_prior, robust=None, robust_k=3.0):
         GTSAM's M-estimator on the gravity and encoder factors (``huber``, ``cauchy``).
     robust_k : float
         Its threshold for one 3-row factor; an encoder factor of ``m`` readings uses ``robust_k sqrt(m)``
-        (:func:`graph_calib.factor_graph.build_graph`).
+        (:func:`graph_calib.solvers.factor_graph.build_graph`).
     """
     acc = _Accumulator(R.shape[0], M_u.shape[0])
     for key, prior in _attitude_priors(model, R, R_prior):

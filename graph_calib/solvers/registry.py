@@ -54,7 +54,7 @@ def solve(name, problem, *, options, progress=None, initial=None):
     ----------
     name : str
         A registered solver name (:func:`solver_names`).
-    problem : graph_calib.problem.Problem
+    problem : graph_calib.records.problem.Problem
     options : graph_calib.options.CalibrationOptions
     progress : callable, optional
         Called with a :class:`graph_calib.solvers.interface.ProgressEvent` after each iteration.

@@ -1,7 +1,7 @@
 """Result assembly, the same for every solver: the result file, its ``residuals`` block, comparisons.
 
 :func:`to_result` turns a :class:`graph_calib.solvers.interface.SolverOutput` into the result layout of
-``data-format.md`` (:class:`graph_calib.experiment.Result`); :func:`residual_block` is its
+``data-format.md`` (:class:`graph_calib.records.experiment.Result`); :func:`residual_block` is its
 ``residuals`` block, one layout for every solver; :func:`compare` is ``comparison.json``.
 """
 
@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib.experiment import Result
+from graph_calib.records.experiment import Result
 
 
 def residual_block(output):
@@ -72,7 +72,7 @@ def prior_dominated(model, output):
 
 
 def to_result(model, output, *, extra=None):
-    """The :class:`graph_calib.experiment.Result` of a solver's output.
+    """The :class:`graph_calib.records.experiment.Result` of a solver's output.
 
     Parameters
     ----------

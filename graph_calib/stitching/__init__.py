@@ -55,7 +55,7 @@ coefficients are kept.
 Examples
 --------
 >>> import numpy as np
->>> from graph_calib.experiment import Result
+>>> from graph_calib.records.experiment import Result
 >>> def sub(t_ref, a, b):
 ...     names = ("gyro.bias.x", "gyro.bias_tc.x")
 ...     return Result(source="s", solver="factor-graph", t_ref_degC=t_ref,

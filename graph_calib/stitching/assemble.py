@@ -7,8 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib import params
-from graph_calib.effects import REGISTRY
+from graph_calib.sensors import params
+from graph_calib.sensors.effects import REGISTRY
 from graph_calib.stitching.fits import fit_element
 from graph_calib.stitching.pieces import Stitched, SubrangePoint, family, is_stitched, sensor_of
 
@@ -28,7 +28,7 @@ def result_points(result, *, name=None, sensor_ranges=None, values=None):
 
     Parameters
     ----------
-    result : graph_calib.experiment.Result
+    result : graph_calib.records.experiment.Result
     name : str, optional
         Label of the points (default: the result's source).
     sensor_ranges : array_like (6, 2), optional
@@ -68,7 +68,7 @@ def stitch(results, *, names=None, sensor_ranges=None, solver=None):
 
     Parameters
     ----------
-    results : sequence of graph_calib.experiment.Result
+    results : sequence of graph_calib.records.experiment.Result
         One per subrange (same solver), each with sigmas and preferably its covariance.
     names : sequence of str, optional
         Experiment names (default: the results' sources).

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib import params
+from graph_calib.sensors import params
 from graph_calib.stitching.pieces import BoundaryCheck, ElementCurve, Fit, family, sensor_of
 
 #: Two subranges closer than this (degC, reference temperatures) share a segment of the linear model.

@@ -14,8 +14,8 @@ from math import comb
 import numpy as np
 from scipy.stats import norm
 
-from graph_calib import params
-from graph_calib.effects import REGISTRY, temperature_family
+from graph_calib.sensors import params
+from graph_calib.sensors.effects import REGISTRY, temperature_family
 
 #: The six sensors whose temperatures the model uses, in ``temperature_map`` order.
 SENSORS = ("gyro.x", "gyro.y", "gyro.z", "accel.x", "accel.y", "accel.z")
@@ -51,7 +51,7 @@ def family(parameter):
     """``(base, {order: coefficient name})`` of a parameter: ``gyro.bias_tc`` -> ``('gyro.bias', ...)``.
 
     The temperature coefficients of each parameter come from the effect registry
-    (:func:`graph_calib.effects.temperature_family`).
+    (:func:`graph_calib.sensors.effects.temperature_family`).
     """
     return temperature_family(parameter)
 

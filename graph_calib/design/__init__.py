@@ -1,0 +1,1 @@
+"""Predicted accuracy of a record or program, and the shortest program meeting targets."""

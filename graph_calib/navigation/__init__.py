@@ -1,0 +1,1 @@
+"""Navigation primitives: rotations, strapdown integration, static detection, alignment."""

@@ -1,0 +1,199 @@
+"""One experiment made ready for any solver: the shared model, its static intervals and its alignment.
+
+>>> problem = build_problem(experiment, options=CalibrationOptions())      # doctest: +SKIP
+>>> problem.model.layout.size, problem.q_nb0                                # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
+from graph_calib.options import CalibrationOptions
+from graph_calib.sensors.params import grade
+from graph_calib.navigation.alignment import Alignment, alignment
+from graph_calib.errors import InputError
+from graph_calib.records.plausibility import check_record
+from graph_calib.navigation.static_detection import accelerometer_threshold, detect_static
+
+
+@dataclass(frozen=True)
+class Problem:
+    """A calibration model with its initial attitude, ready for any solver.
+
+    Attributes
+    ----------
+    model : graph_calib.model.CalibrationModel
+    q_nb0 : ndarray, shape (4,), or (S, 4) for a record of S > 1 segments
+        Attitude ``q_nb`` (scalar first) at the start of the record (of each segment), from the
+        alignment.
+    alignment : graph_calib.navigation.alignment.Alignment
+        How the first ``q_nb0`` was found.
+    segment_alignments : tuple of graph_calib.navigation.alignment.Alignment
+        How each segment's was found (``(alignment,)`` for one segment); the intervals are sample
+        indices of the whole record.
+    """
+
+    model: CalibrationModel
+    q_nb0: np.ndarray
+    alignment: Alignment
+    segment_alignments: tuple = ()
+
+    def with_effects(self, extra_effects):
+        """The same record, static intervals and alignment, with ``extra_effects`` as the further effects."""
+        return replace(self, model=self.model.with_effects(extra_effects))
+
+
+def build_problem(experiment, *, options=CalibrationOptions()):
+    """Set up the shared model of ``experiment`` and align it.
+
+    Without a table, gravity measurements count only where the IMU is static
+    (``ModelOptions.moving_sigma`` then defaults to 1 m/s^2 for moving keyframes).
+    A record whose gyro increments cannot be in radians (degrees written for radians, rates for
+    increments: :func:`graph_calib.records.plausibility.check_record`) is refused first, with an
+    :class:`~graph_calib.errors.InputError` (exit 2 on the command line, nothing written), and so is
+    a record cut together without ``/imu/segment`` (:func:`graph_calib.records.plausibility.check_continuity`).
+
+    A record of several segments (``/imu/segment``) is detected static and aligned segment by
+    segment: each segment's first keyframe gets its own attitude prior, from a static interval of
+    that segment (levelling, and gyrocompassing or the table for the heading).
+
+    Parameters
+    ----------
+    experiment : graph_calib.records.experiment.Experiment
+    options : CalibrationOptions
+
+    Returns
+    -------
+    Problem
+    """
+    check_record(experiment)
+    model_options = options.model
+    bounds = experiment.segment_bounds()
+    pieces = [experiment.slice(a, b) if len(bounds) > 1 else experiment for a, b in bounds]
+    if len(pieces) > 1:
+        th = [accelerometer_threshold(piece) for piece in pieces]
+        th = min((v for v in th if v is not None), default=None)
+        static_per = [detect_static(piece, threshold=th) for piece in pieces]
+    else:
+        static_per = [detect_static(experiment)]
+    static = np.concatenate([np.asarray(st, dtype=np.int64).reshape(-1, 2) + a
+                             for st, (a, _) in zip(static_per, bounds)])
+    static_mask = None
+    if experiment.table is None:
+        static_mask = np.zeros(experiment.n_samples, dtype=bool)
+        for a, b in static:
+            static_mask[a:b] = True
+        if model_options.moving_sigma is None:
+            model_options = replace(model_options, moving_sigma=1.0)
+    interval = tuple(static[0]) if len(static) else None
+    if interval is not None:
+        model_options = _noise_from_static(experiment, interval, model_options)
+    if isinstance(model_options.sway_sigma, str):
+        if model_options.sway_sigma != "estimate":
+            raise InputError(f"sway_sigma must be a number of m/s^2, 'estimate' or None, not "
+                             f"{model_options.sway_sigma!r}", dataset="sway_sigma")
+        model_options = replace(model_options, sway_sigma=sway_from_static(
+            experiment, static, keyframe_s=model_options.keyframe_s,
+            accel_noise=model_options.accel_noise if model_options.accel_noise is not None
+            else grade(model_options.grade).accel_noise))
+    method = "table" if (experiment.table is not None and np.any(experiment.table.valid)) else "gyrocompass"
+    aligned = []
+    for i, (piece, st, (a, b)) in enumerate(zip(pieces, static_per, bounds)):
+        if len(bounds) > 1 and not len(st):
+            raise InputError(f"segment {i} (samples {a}..{b - 1}) has no static interval to align it: each piece "
+                             f"of a record cut together needs a rest of a few seconds for its own initial attitude",
+                             path=experiment.source or None, dataset="/imu/segment", index=a)
+        al, table_failed = _align(piece, interval=tuple(st[0]) if len(st) else None, method=method)
+        if table_failed and model_options.initial_attitude_sigma is None:
+            # the table could not give the attitude: the prior is as loose as gyrocompassing is
+            model_options = replace(model_options, initial_attitude_sigma=gyrocompass_attitude_sigma(
+                model_options, latitude_rad=experiment.latitude_rad))
+        aligned.append(replace(al, interval=(al.interval[0] + a, al.interval[1] + a)) if a else al)
+    model = CalibrationModel(experiment, options=model_options, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
+    q_nb0 = aligned[0].q_nb0 if len(aligned) == 1 else np.array([al.q_nb0 for al in aligned])
+    return Problem(model=model, q_nb0=q_nb0, alignment=aligned[0], segment_alignments=tuple(aligned))
+
+
+def _align(experiment, *, interval, method):
+    """``(alignment, whether the table failed and gyrocompassing was used)`` of one segment."""
+    try:
+        return alignment(experiment, interval=interval, method=method), False
+    except Exception:
+        if method != "table":
+            raise
+        return alignment(experiment, interval=interval, method="gyrocompass"), True
+
+
+#: The sway is estimated only when the keyframe means scatter this much more than white noise would
+#: (in variance); below, it is taken as zero.
+SWAY_VARIANCE_FACTOR = 2.0
+
+
+def sway_from_static(experiment, static, *, keyframe_s, accel_noise):
+    """The bench's own acceleration at rest over a keyframe, one sigma, m/s^2 (0 when not seen).
+
+    In every static interval the specific force is averaged over blocks of one keyframe; the sample
+    variance of those block means about their interval's mean, pooled over the intervals and the
+    axes, is what a gravity factor of a resting keyframe sees.  White noise explains
+    ``accel_noise^2 / keyframe_s`` of it; a hand's sway (coloured, 0.3-3 Hz, which a per-sample
+    variance does not reach) the rest.  When the pooled variance exceeds the white part by more than
+    :data:`SWAY_VARIANCE_FACTOR` the difference's root is returned, else 0.
+
+    Parameters
+    ----------
+    experiment : graph_calib.records.experiment.Experiment
+    static : ndarray of int, shape (P, 2)
+        Static intervals, sample indices.
+    keyframe_s : float
+    accel_noise : float
+        White-noise density, m/s/sqrt(s).
+
+    Returns
+    -------
+    float
+    """
+    m = max(1, int(round(keyframe_s * experiment.rate_hz)))
+    f = experiment.dv / experiment.dt[:, None]
+    ss, dof = 0.0, 0
+    for a, b in np.asarray(static, dtype=np.int64).reshape(-1, 2):
+        nb = (b - a) // m
+        if nb < 2:
+            continue
+        means = f[a:a + nb * m].reshape(nb, m, 3).mean(axis=1)
+        ss += float(np.sum((means - means.mean(axis=0)) ** 2))
+        dof += 3 * (nb - 1)
+    if dof == 0:
+        return 0.0
+    white = accel_noise**2 / (m / experiment.rate_hz)
+    var = ss / dof
+    return float(np.sqrt(var - white)) if var > SWAY_VARIANCE_FACTOR * white else 0.0
+
+
+def _noise_from_static(experiment, interval, model_options):
+    """White-noise densities: the grade's, raised to what the first static interval shows.
+
+    The density is the per-sample standard deviation of the rate (force) times
+    ``sqrt(dt)``, averaged over the axes.  Options set explicitly are kept.  The
+    grade's value is a floor, so noise-free data keep a sensible weighting.
+    """
+    a, b = int(interval[0]), int(interval[1])
+    if b - a < 50:
+        return model_options
+    g = grade(model_options.grade)
+    dt = experiment.dt[a:b, None]
+    w = experiment.dtheta[a:b] / dt
+    f = experiment.dv[a:b] / dt
+    h = float(np.median(dt))
+    est_g = float(np.sqrt(np.mean(np.var(w, axis=0)) * h))
+    est_a = float(np.sqrt(np.mean(np.var(f, axis=0)) * h))
+    return replace(
+        model_options,
+        gyro_noise=model_options.gyro_noise if model_options.gyro_noise is not None else max(g.gyro_noise, est_g),
+        accel_noise=model_options.accel_noise if model_options.accel_noise is not None else max(g.accel_noise, est_a),
+    )
+
+
+__all__ = ["Problem", "SWAY_VARIANCE_FACTOR", "build_problem", "sway_from_static"]

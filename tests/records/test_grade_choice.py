@@ -1,0 +1,53 @@
+"""The grade chosen from the data when none is named (graph_calib/records/grade_choice.py)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from graph_calib.cli import main
+from graph_calib.records.grade_choice import choose_grade
+from graph_calib.importers import import_mpu6050, import_xsens
+from graph_calib.simulation import simulate
+
+from conftest import REAL_DATA, require_real
+
+
+def _sim(name, **kw):
+    return simulate(name, rng=np.random.default_rng(1), **kw).run()[0].experiment
+
+
+@pytest.mark.parametrize("scenario, kw, grade", [("nav-subrange-short", {"hours": 0.1}, "navigation"),
+                                                  ("nav-subrange", {"hours": 0.5}, "navigation"),
+                                                  ("consumer-handheld", {}, "consumer")])
+def test_simulated_units_get_their_grade(scenario, kw, grade):
+    choice = choose_grade(_sim(scenario, **kw))
+    assert choice.grade == grade, choice.reason
+    assert grade in choice.reason
+
+
+def test_measured_consumer_units_are_not_run_as_navigation_grade():
+    xs = require_real(REAL_DATA / "imu_tk_xsens")
+    mpu = require_real(REAL_DATA / "mpu6050_uncuyo")
+    for exp in (import_xsens(xs / "xsens_acc.mat", xs / "xsens_gyro.mat"),
+                import_mpu6050(mpu / "example_data_calibration.csv")):
+        choice = choose_grade(exp)
+        assert choice.grade == "consumer", choice.reason
+        assert "gyro noise" in choice.reason            # the reason names the measured figure
+
+
+def test_calibrate_prints_and_records_the_choice(tmp_path, capsys):
+    data = tmp_path / "sim"
+    assert main(["simulate", "nav-subrange-short", "--seed", "3", "--hours", "0.05", "--out", str(data)]) == 0
+    (h5,) = data.glob("*.h5")
+    rc = main(["calibrate", str(h5), "--out", str(tmp_path / "cal"), "--solver", "factor-graph"])
+    out = capsys.readouterr().out
+    assert rc in (0, 3)
+    assert "grade: navigation" in out
+    doc = json.loads((tmp_path / "cal" / "factor-graph.json").read_text())
+    assert doc["grade"] == "navigation" and doc["grade_choice"]["grade"] == "navigation"
+    # a named grade is used as given, and no choice is recorded
+    rc = main(["calibrate", str(h5), "--out", str(tmp_path / "cal2"), "--solver", "factor-graph",
+               "--grade", "tactical"])
+    doc = json.loads((tmp_path / "cal2" / "factor-graph.json").read_text())
+    assert doc["grade"] == "tactical" and "grade_choice" not in doc

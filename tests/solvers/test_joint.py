@@ -1,0 +1,347 @@
+"""The joint campaign solver (graph_calib/solvers/joint/): the exact map, chained Jacobians, agreement with the
+per-subrange graph on linear truth, the curves against the truth curves, the result file, validation and export.
+
+Short simulated subranges (``nav-campaign``, 0.05 h each at 100 Hz: 18,000 samples per experiment).
+"""
+
+import json
+from dataclasses import replace
+from functools import partial
+import tomllib
+from pathlib import Path
+
+import gtsam
+import numpy as np
+import pytest
+from gtsam.symbol_shorthand import S, X, Z
+
+from graph_calib import io
+from graph_calib.campaign import CampaignOptions, run_campaign
+from graph_calib.campaign.joint_run import truth_check
+from graph_calib.cli import main
+from graph_calib.compensation import read_compensation
+from graph_calib.compensation import read_table, write_table
+from graph_calib.compensation.joint import JointCalibration
+from graph_calib.errors import InputError
+from graph_calib.solvers.joint import JointSolver, WarmStart, plan_unknowns, solve_joint
+from graph_calib.solvers.joint.result import joint_result, read_joint_result, write_joint_result
+from graph_calib.solvers.joint.marginal import unknowns_covariance
+from graph_calib.solvers.reduced import ExperimentSystem
+from graph_calib.solvers.joint.solver import _extend, _priors
+from graph_calib.solvers.joint.unknowns import MAX_DEGREE, curve_label
+from graph_calib.options import CalibrationOptions
+from graph_calib.sensors.params import Layout, split_element_name
+from graph_calib.records.problem import build_problem
+from graph_calib.reports import html as H
+from graph_calib.reports.joint_report import joint_sections
+from graph_calib.simulation import simulate, write_simulation
+from graph_calib.solvers.registry import get_solver, solve
+from graph_calib.evaluation.validation import simulate_validation_record, validate
+
+HOURS = 0.05
+OPTS = CalibrationOptions()
+
+
+def _campaign(curvature, seed):
+    sim = simulate("nav-campaign", rng=np.random.default_rng(seed), hours=HOURS, curvature=curvature)
+    runs = sim.run()
+    problems = [build_problem(s.experiment, options=OPTS) for s in runs]
+    return sim, runs, problems
+
+
+@pytest.fixture(scope="module")
+def linear():
+    sim, runs, problems = _campaign(False, 11)
+    graphs = [solve("factor-graph", p, options=OPTS) for p in problems]
+    out = solve_joint(problems, options=OPTS.graph)
+    return sim, runs, problems, graphs, out
+
+
+@pytest.fixture(scope="module")
+def curved():
+    sim, runs, problems = _campaign(True, 7)
+    graphs = [solve("factor-graph", p, options=OPTS) for p in problems]
+    out = JointSolver().solve_campaign(problems, options=OPTS,
+                                       initial=[WarmStart(layout=g.layout, x=g.x, sigma=g.sigma) for g in graphs])
+    return sim, runs, problems, graphs, out
+
+
+def _ranges(runs):
+    out = []
+    for s in runs:
+        T = s.experiment.sensor_temperatures()
+        out.append(np.column_stack([T.min(axis=0), T.max(axis=0)]))
+    return out
+
+
+def test_the_map_is_the_exact_taylor_expansion_of_the_curves():
+    degrees = {b: d for b, d in MAX_DEGREE.items()}
+    lay = Layout.declared(extra=("gyro.bias_tc2", "gyro.bias_tc3", "accel.bias_tc2", "accel.bias_tc3",
+                                 "gyro.scale_tc2", "accel.scale_tc2"))
+    u = plan_unknowns([lay, lay], [3.0, 41.0], degrees=degrees)
+    rng = np.random.default_rng(1)
+    z = rng.normal(size=u.nz)
+    A, B = u.experiment_map(1, lay, 41.0)
+    x = A @ z
+    T = np.linspace(-10.0, 50.0, 7)
+    for flat in ("gyro.bias.y", "accel.scale.z"):
+        base, el = split_element_name(flat)
+        curve = sum(z[u.z_index()[curve_label(flat, j)]] * (T - u.t0_degC) ** j for j in range(degrees[base] + 1))
+        names = lay.element_names()
+        tcs = [base] + [f"{base}_tc{'' if k == 1 else k}" for k in range(1, degrees[base] + 1)]
+        taylor = sum(x[names.index(f"{n}.{el}")] * (T - 41.0) ** k for k, n in enumerate(tcs))
+        np.testing.assert_allclose(taylor, curve, rtol=1e-12, atol=1e-12 * np.abs(curve).max())
+    assert B.shape[1] == len(u.setup_names[1]) and "mount.x" in u.setup_names[1]
+    assert np.all(A[[lay.index(n) for n in u.setup_names[1]]] == 0.0)
+
+
+def test_chained_jacobians_match_finite_differences(linear):
+    _, _, problems, graphs, out = linear
+    ps = [_extend(p, {b: d for b, d in MAX_DEGREE.items()}) for p in problems[:2]]
+    u = plan_unknowns([p.model.layout for p in ps], [p.model.t_ref_degC for p in ps])
+    m = ps[1].model
+    A, B = u.experiment_map(1, m.layout, m.t_ref_degC)
+    rng = np.random.default_rng(3)
+    z_sigma, s_sigmas = _priors(u, [p.model for p in ps])
+    z = rng.normal(size=u.nz) * 0.01 * z_sigma
+    s = rng.normal(size=B.shape[1]) * 0.01 * s_sigmas[1]
+    x = A @ z + B @ s
+    preint = m.preintegrate(x)
+    R = m.propagate(np.eye(3), preint, x)
+    kinds = {"rot": m.rotation_factors, "grav": m.gravity_factors, "enc": m.encoder_factors}
+
+    def chained(kind, x):     # the joint solver's chaining, H_z = H_x A, H_s = H_x B
+        H = kinds[kind](R, preint, x).H_x
+        return H @ A, H @ B
+
+    idx = u.z_index()
+    z_cols = [idx[curve_label("gyro.bias.x", j)] for j in range(4)] + [idx[curve_label("accel.bias.y", 2)],
+                                                                       idx["gyro.misalignment.xy"]]
+    for kind in ("rot", "grav", "enc"):
+        Hz, Hs = chained(kind, x)
+        for col in z_cols:
+            h = 1e-3 * z_sigma[col]
+            zp, zm = z.copy(), z.copy()
+            zp[col] += h
+            zm[col] -= h
+            fd = (kinds[kind](R, preint, A @ zp + B @ s).r - kinds[kind](R, preint, A @ zm + B @ s).r) / (2 * h)
+            np.testing.assert_allclose(Hz[:, :, col], fd, rtol=1e-3, atol=1e-5 * np.abs(fd).max() + 1e-300,
+                                       err_msg=f"{kind} d/d{u.z_names[col]}")
+    Hz, Hs = chained("enc", x)
+    mount = list(u.setup_names[1]).index("mount.y")
+    h = 1e-5 * s_sigmas[1][mount]
+    sp, sm = s.copy(), s.copy()
+    sp[mount] += h
+    sm[mount] -= h
+    fd = (m.encoder_factors(R, preint, A @ z + B @ sp).r - m.encoder_factors(R, preint, A @ z + B @ sm).r) / (2 * h)
+    np.testing.assert_allclose(Hs[:, :, mount], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
+
+
+def test_the_unknowns_covariance_is_gtsams_marginal_over_every_attitude():
+    """The attitudes eliminated and the unknowns' remaining information inverted (unknowns_covariance) give
+    GTSAM's own joint marginal (Marginals, the whole graph factored), on two chains of attitudes tied to a
+    shared vector and one chain's own set-up vector, with arbitrary (seeded) factor Jacobians."""
+    rng = np.random.default_rng(5)
+    nz, ns, K = 4, 2, 6
+    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
+    graph.add(gtsam.PriorFactorVector(Z(0), np.zeros(nz), gtsam.noiseModel.Isotropic.Sigma(nz, 10.0)))
+    graph.add(gtsam.PriorFactorVector(S(1), np.zeros(ns), gtsam.noiseModel.Isotropic.Sigma(ns, 10.0)))
+    values.insert(Z(0), rng.normal(size=nz))
+    values.insert(S(1), rng.normal(size=ns))
+    x_keys = []
+
+    def fixed(blocks, r, this, v, H):
+        if H is not None:
+            for i, b in enumerate(blocks):
+                H[i] = b
+        return r
+
+    for e in range(2):
+        keys = [X(10 * e + k) for k in range(K)]
+        x_keys += keys
+        for k, key in enumerate(keys):
+            values.insert(key, gtsam.Rot3.Expmap(rng.normal(size=3)))
+            theta = [Z(0)] + ([S(1)] if e == 1 else [])
+            blocks = [rng.normal(size=(3, 3)), rng.normal(size=(3, nz))] + ([rng.normal(size=(3, ns))] if e else [])
+            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, 0.5), [key] + theta,
+                                         partial(fixed, blocks, rng.normal(size=3))))
+            if k:
+                graph.add(gtsam.BetweenFactorRot3(keys[k - 1], key, gtsam.Rot3.Expmap(rng.normal(size=3)),
+                                                  gtsam.noiseModel.Isotropic.Sigma(3, 0.1)))
+    tkeys = [Z(0), S(1)]
+    got = unknowns_covariance(graph.linearize(values), x_keys, tkeys)
+    jm = gtsam.Marginals(graph, values).jointMarginalCovariance(gtsam.KeyVector(tkeys))
+    want = np.block([[np.asarray(jm.at(a, b)) for b in tkeys] for a in tkeys])
+    assert got.shape == (nz + ns, nz + ns)
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
+    # not a covariance that could pass by accident: the attitudes matter (the shared vector's prior alone is 100)
+    assert np.all(np.diag(got)[:nz] < 50.0)
+
+
+def test_linear_truth_keeps_linear_curves_and_agrees_with_each_subrange_graph(linear):
+    _, _, problems, graphs, out = linear
+    assert out.converged
+    assert all(c.degree == 1 for c in out.degree_choices), [c.to_json() for c in out.degree_choices]
+    z_all = []
+    for g, j in zip(graphs, out.outputs):
+        jn = {n: i for i, n in enumerate(j.layout.element_names())}
+        for i, n in enumerate(g.layout.element_names()):
+            z_all.append((j.x[jn[n]] - g.x[i]) / g.sigma[i])
+    z_all = np.abs(np.array(z_all))
+    # the joint sees every subrange: its value at T_ref differs from one subrange's own estimate by that
+    # subrange's noise less what the others add, well inside the subrange's sigma on the whole
+    assert np.sqrt(np.mean(z_all ** 2)) < 1.0, np.sqrt(np.mean(z_all ** 2))
+    assert z_all.max() < 4.0, z_all.max()
+
+
+def test_warm_started_at_its_own_solution_the_joint_solver_starts_there(curved):
+    """Handed its own solution (each experiment's view: calibration, sigmas, attitudes) as the warm start, the
+    solver's first cost is the solution's: the factors are evaluated at the warm calibration, as GTSAM's
+    values hold it (a start once preintegrated at the prior-scaled map applied to SI unknowns, near a zero
+    calibration, began orders of magnitude higher and re-preintegrated every experiment)."""
+    _, _, problems, _, out = curved
+    starts = [WarmStart(layout=o.layout, x=o.x, sigma=o.sigma, attitudes=o.attitudes) for o in out.outputs]
+    again = JointSolver().solve_campaign(problems, options=OPTS, initial=starts)
+    assert again.converged
+    assert again.cost_history[0] == pytest.approx(out.final_cost, rel=0.05), (again.cost_history, out.final_cost)
+    assert again.final_cost == pytest.approx(out.final_cost, rel=1e-6)
+
+
+def test_a_rejected_trial_is_undone_and_the_solve_ends_where_it_would(curved, monkeypatch):
+    """The first trial spoiled (every attitude step off by 0.05 rad: its cost far higher, rejected): the solver
+    damps harder, rebuilds the linearised systems it freed for the trial and ends at the same solution."""
+    _, _, problems, graphs, out = curved
+    original = ExperimentSystem.attitude_step
+    calls = []
+
+    def spoiled(Y, d_theta):
+        calls.append(1)
+        return original(Y, d_theta) + (0.05 if len(calls) <= len(problems) else 0.0)
+
+    monkeypatch.setattr(ExperimentSystem, "attitude_step", staticmethod(spoiled))
+    again = JointSolver().solve_campaign(problems, options=OPTS,
+                                         initial=[WarmStart(layout=g.layout, x=g.x, sigma=g.sigma) for g in graphs])
+    assert again.converged and len(calls) >= (again.iterations + 1) * len(problems)
+    assert again.theta_names == out.theta_names
+    z = (again.theta - out.theta) / np.sqrt(np.diag(out.covariance))
+    assert np.abs(z).max() < 1e-2, np.abs(z).max()
+    np.testing.assert_allclose(np.diag(again.covariance), np.diag(out.covariance), rtol=1e-4)
+
+
+def test_curved_truth_the_joint_curves_follow_the_truth_curves(curved):
+    sim, runs, problems, graphs, out = curved
+    assert out.converged
+    degrees = out.unknowns.degrees
+    # the accelerometer curvature is far above the noise of even 3-minute subranges; the gyro one is not
+    assert degrees["accel.bias"] >= 2, [c.to_json() for c in out.degree_choices]
+    truth = runs[0].truth.extra["temperature_curves"]          # data-format.md's truth over temperature
+    res = joint_result(out, source="campaign.toml", experiments=[f"e{i}" for i in range(len(runs))],
+                       t_refs=[p.model.t_ref_degC for p in problems], sensor_ranges=_ranges(runs))
+    cal = JointCalibration.from_result(res)
+    zs = []
+    for name, cv in cal.curves.items():
+        if name not in truth:
+            continue
+        T = np.linspace(cv.t_span[0], cv.t_span[1], 25)
+        v, s = cv.evaluate(T)
+        t0, coefficients = float(truth[name]["t0_degC"]), truth[name]["coefficients"]
+        zs.append((v - np.polynomial.polynomial.polyval(T - t0, coefficients)) / s)
+    z = np.abs(np.concatenate(zs))
+    assert np.mean(z < 2.0) >= 0.9, np.mean(z < 2.0)
+    assert z.max() < 4.0, z.max()
+
+
+def test_result_file_round_trip_and_its_bad_input(curved, tmp_path):
+    _, runs, problems, _, out = curved
+    res = joint_result(out, source="campaign.toml", experiments=[f"e{i}" for i in range(len(runs))],
+                       t_refs=[p.model.t_ref_degC for p in problems], sensor_ranges=_ranges(runs))
+    p = tmp_path / "joint.json"
+    write_joint_result(res, p)
+    back = read_joint_result(p)
+    assert back.values == res.values and back.sigmas == res.sigmas
+    np.testing.assert_array_equal(back.covariance, res.covariance)
+    assert back.extra["verdict"]["passed"] and back.extra["verdict"]["converged"] == {"joint": True}
+    assert back.t_ref_degC == out.unknowns.t0_degC and back.extra["joint"]["degrees"] == out.unknowns.degrees
+    a, b = JointCalibration.from_result(res), JointCalibration.from_file(p)
+    T = np.tile(np.linspace(-5, 45, 9)[:, None], (1, 6))
+    for n, v in a.element_values(T).items():
+        np.testing.assert_array_equal(v, b.element_values(T)[n])
+    # the mount of each experiment with its sigma
+    assert set(back.extra["joint"]["setups"]["e0"]["estimates"]) >= {"mount.x", "lever_arm.z"}
+    # a per-experiment result is not a joint one: one clear message naming file and key
+    io.write_result(res.__class__(**{**res.__dict__, "extra": {}}), tmp_path / "plain.json")
+    with pytest.raises(InputError, match=r"plain\.json.*joint.*no 'joint' block"):
+        read_joint_result(tmp_path / "plain.json")
+
+
+def test_validation_and_export_accept_the_joint_calibration(curved, tmp_path):
+    sim, runs, problems, _, out = curved
+    res = joint_result(out, source="campaign.toml", experiments=[f"e{i}" for i in range(len(runs))],
+                       t_refs=[p.model.t_ref_degC for p in problems], sensor_ranges=_ranges(runs))
+    cal = JointCalibration.from_result(res)
+    se = simulate_validation_record(sim, hours=0.1, rate_hz=20.0, seed=8, start_degC=5.0, span_degC=20.0)
+    v = validate(se.experiment, cal, se.truth, record_name="validation.h5")
+    summ = v.summary()
+    assert min(summ["fraction_inside"]) > 0.9, summ["fraction_inside"]
+    # 3-minute subranges do not resolve the gyro biases to the 0.01 deg/h of the full-length campaign; the
+    # remaining errors must lie inside the joint bands, and the accelerometers meet the 2e-4 m/s^2
+    assert summ["pass"]["accel"], summ["largest"]
+    assert summ["largest_z"]["gyro"] < 4.0 and summ["largest_z"]["accel"] < 4.0, summ["largest_z"]
+    table = cal.table(step_degC=1.0)
+    path = write_table(table, tmp_path / "joint.table.json")
+    back = read_table(path)
+    T = np.tile(table.grid_degC[3:6, None], (1, 6))
+    for n, vals in cal.element_values(T).items():
+        np.testing.assert_allclose(back.element_values(T)[n], vals, rtol=1e-12, atol=1e-300)
+
+
+def test_the_joint_solver_is_registered_by_its_entry_point():
+    doc = tomllib.loads((Path(__file__).resolve().parents[2] / "pyproject.toml").read_text())
+    assert doc["project"]["entry-points"]["graph_calib.solvers"]["joint"] == "graph_calib.solvers.joint:JointSolver"
+    assert get_solver("joint").name == "joint" and get_solver("joint").campaign
+
+
+def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(tmp_path):
+    sim = simulate("nav-campaign", rng=np.random.default_rng(5), hours=HOURS, curvature=False)
+    write_simulation(sim, tmp_path / "data")
+    opts = CampaignOptions(workers=0, solvers="factor-graph+joint", report=False, progress=False)
+    run = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
+    doc = json.loads((tmp_path / "out" / "campaign.json").read_text())
+    entry = doc["joint"]["joint"]
+    assert entry["status"] == "computed" and entry["verdict"]["passed"], entry["verdict"]
+    assert (tmp_path / "out" / "joint.json").is_file() and run.joint.solver == "joint"
+    assert all(v == 1 for v in entry["degrees"].values()), entry["degree_choice"]
+    cc = entry["cross_check"]["factor-graph"]
+    assert len(cc["experiments"]) == 6 and cc["rms_z"] < 1.0 and cc["max_abs_z"] < 4.0, cc
+    # the simulator's truth files carry temperature_curves (data-format.md): the curves against them
+    tc = doc["truth_check"]["joint"]["joint"]
+    assert tc["mode"] == "temperature_curves" and tc["max_abs_z"] < 4.0 and tc["fraction_within_2sigma"] > 0.9, tc
+    # without them, each curve only against each subrange's own truth, inside that subrange's range
+    bare = {n: replace(t, extra={k: v for k, v in t.extra.items() if k != "temperature_curves"})
+            for n, t in run.truths.items()}
+    tc = truth_check(run.joint, bare, run.summaries)
+    assert tc["mode"] == "per-subrange" and tc["max_abs_z"] < 4.5 and tc["fraction_within_2sigma"] > 0.9, tc
+    # the report's joint section (the rest of the report is tests/campaign/test_campaign.py's)
+    figures = []
+    sections = joint_sections(run, lambda f, caption: figures.append(caption) or H.figure(f, caption=caption))
+    assert len(sections) == 1 and len(figures) == 4 and "degree 1" in figures[0]
+    html = H.page("t", *sections)
+    assert "Joint solver: one model over the whole range" in html and "Degree by evidence" in html
+    # export and apply take the campaign's joint calibration like a stitched one
+    assert main(["export", str(tmp_path / "out"), "--out", str(tmp_path / "joint.csv"), "--solver", "joint"]) == 0
+    comp, prov = read_compensation(tmp_path / "out", solver="joint")
+    assert isinstance(comp, JointCalibration) and prov["solver"] == "joint"
+    comp2, _ = read_compensation(tmp_path / "out" / "joint.json")
+    assert isinstance(comp2, JointCalibration) and set(comp2.curves) == set(comp.curves)
+    again = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
+    assert again.document["joint"]["joint"]["status"] == "cached"
+
+
+def test_a_manifest_asking_for_an_unknown_solver_choice_is_refused(tmp_path):
+    write_simulation(simulate("nav-campaign", rng=np.random.default_rng(2), hours=0.005), tmp_path)
+    m = tmp_path / "campaign.toml"
+    m.write_text(m.read_text() + '\n[solver]\nsolvers = "joint-only"\n')
+    with pytest.raises(InputError, match=r"campaign\.toml.*solvers.*must be one of 'both', 'per-subrange'.*'joint'"):
+        io.read_manifest(m)
+    m.write_text(m.read_text().replace('"joint-only"', '"factor-graph+joint"'))
+    assert io.read_manifest(m).solver["solvers"] == "factor-graph+joint"
