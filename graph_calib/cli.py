@@ -28,6 +28,7 @@ COMMANDS = {
     "design": "the shortest bench program whose predicted accuracy meets the targets (CasADi)",
     "campaign": "calibrate every experiment of a campaign and stitch over temperature",
     "diagnose": "the closed loop: residuals, the effect they point to, before and after",
+    "crossval": "calibrate without each fold of a record's poses and judge on the held-out ones",
     "apply": "correct a raw record with a result, a compensation table or a campaign's stitched calibration",
     "export": "write a campaign's stitched calibration as a compensation table (JSON, CSV, C header)",
     "demo": "simulate a navigation-grade campaign and run campaign and diagnose on it",

@@ -1,0 +1,90 @@
+"""Cross-validation of a calibration on held-out poses (graph_calib.evaluation.crossval, ``graph-calib crossval``)."""
+
+import json
+
+import numpy as np
+import pytest
+
+from graph_calib import io
+from graph_calib.cli import main
+from graph_calib.compensation.calibration import Calibration
+from graph_calib.errors import InputError
+from graph_calib.evaluation.crossval import (cross_validate, held_out_figures, make_folds, record_rests,
+                                             training_record)
+
+
+@pytest.fixture(scope="module")
+def ferraris(tmp_path_factory):
+    out = tmp_path_factory.mktemp("fer")
+    assert main(["simulate", "consumer-ferraris", "--seed", "1", "--out", str(out)]) == 0
+    return io.read_experiment(out / "ferraris.h5"), io.read_result(out / "ferraris.truth.json"), out
+
+
+@pytest.mark.parametrize("by", ["pairs", "rests"])
+def test_folds_hold_out_disjoint_spans_and_training_keeps_the_rest(ferraris, by):
+    exp, _, _ = ferraris
+    rests = record_rests(exp)
+    assert rests.shape[0] >= 8                      # six faces, three turns: a dozen rests
+    folds = make_folds(exp, folds=2, by=by, rests=rests)
+    assert [f.index for f in folds] == [0, 1]
+    held = np.zeros(exp.n_samples, dtype=int)
+    for f in folds:
+        for a, b in f.spans:
+            held[a:b] += 1
+    assert held.max() == 1                          # no sample held out twice
+    assert sum(f.n_rests for f in folds) == rests.shape[0]
+    for f in folds:
+        train = training_record(exp, f, rests=rests)
+        in_fold = np.zeros(exp.n_samples, dtype=bool)
+        for a, b in f.spans:
+            in_fold[a:b] = True
+        # the training record is exactly the samples outside the fold that lie in pieces with a rest
+        assert not np.any(np.isin(train.t, exp.t[in_fold]))
+        assert train.n_samples <= exp.n_samples - in_fold.sum()
+        if train.segment is not None:
+            for a, b in train.segment_bounds():    # each piece starts at one of the record's rests
+                assert np.any(rests[:, 0] == np.searchsorted(exp.t, train.t[a]))
+
+
+def test_the_truth_beats_the_raw_samples_out_of_sample(ferraris):
+    exp, truth, _ = ferraris
+    truth_cal = Calibration.from_result(truth)
+    cv = cross_validate(exp, fit=lambda train: truth_cal, folds=2)
+    for f in cv.folds:
+        assert f.calibrated.static_norm_std_mps2 < 0.05 * f.raw.static_norm_std_mps2
+        assert f.calibrated.transitions_rms_deg < 0.1 * f.raw.transitions_rms_deg
+        assert f.calibrated.static_rate_rms_dps < 0.05 * f.raw.static_rate_rms_dps
+    assert cv.worse_than_raw() == ()
+    doc = cv.to_json()
+    assert doc["format"] == "imu-calibration-crossval" and len(doc["folds"]) == 2
+
+
+def test_a_calibration_that_adds_errors_is_worse_than_raw(ferraris):
+    exp, truth, _ = ferraris
+    wrong = {k: -v for k, v in truth.values.items()}          # the errors doubled instead of removed
+    cal = Calibration.from_values(wrong, t_ref_degC=truth.t_ref_degC, parameters=tuple(truth.effects))
+    cv = cross_validate(exp, fit=lambda train: cal, folds=2)
+    assert "static_norm_std_mps2" in cv.worse_than_raw()
+    fold = cv.folds[0].fold
+    assert held_out_figures(exp, fold).static_norm_std_mps2 == cv.folds[0].raw.static_norm_std_mps2
+
+
+def test_crossval_command_writes_its_file_and_its_exit_code_follows_the_figures(ferraris, tmp_path, capsys):
+    _, _, folder = ferraris
+    code = main(["crossval", str(folder / "ferraris.h5"), "--out", str(tmp_path / "cv"), "--grade", "consumer",
+                 "--by", "rests"])
+    doc = json.loads((tmp_path / "cv" / "crossval.json").read_text())
+    assert code == (3 if doc["worse_than_raw"] else 0)
+    out = capsys.readouterr().out
+    assert "transitions rms" in out and ("verdict: FAIL" in out) == bool(doc["worse_than_raw"])
+    assert doc["by"] == "rests" and doc["grade"] == "consumer"
+
+
+def test_crossval_refuses_too_few_folds_and_too_few_rests(ferraris, tmp_path, capsys):
+    exp, _, folder = ferraris
+    assert main(["crossval", str(folder / "ferraris.h5"), "--out", str(tmp_path / "x"), "--folds", "1"]) == 2
+    assert "--folds" in capsys.readouterr().err
+    with pytest.raises(InputError, match="rest"):
+        make_folds(exp, folds=8, rests=record_rests(exp)[:6])
+    with pytest.raises(InputError, match="segment"):
+        make_folds(exp, folds=2, by="segments")
