@@ -19,7 +19,13 @@ the units are dealt to the ``K`` folds:
     ``K`` contiguous blocks of rests (fold ``j`` holds rest ``i`` when ``floor(i K / P) = j``): the
     strictest split, where a fold's poses may be absent from its training record altogether;
 ``by="segments"``
-    a record cut together from pieces (``/imu/segment``) folded by whole segments.
+    a record cut together from pieces (``/imu/segment``) folded by whole segments;
+``by="transitions"``
+    only the rotations between consecutive rests are held out (the motion from the end of rest ``i``
+    to the start of rest ``i + 1``, dealt in turn), every rest stays in the training record: the gyro
+    triad is judged out of sample on the transitions while the accelerometer triad keeps every pose
+    (a six-face session has no face to spare); the static figures are then not held out and are left
+    out (NaN).
 
 A unit's held-out span runs from the first sample of its first rest to the first sample of the rest
 after its last (or the record's end), so the rotations inside a unit are held out with its rests and
@@ -71,12 +77,16 @@ class Fold:
     spans : tuple of (int, int)
         The held-out samples, ``start:stop`` per span, in order.
     rests : tuple of ndarray of int, shape (K_s, 2)
-        Each span's rests, ``[start, stop)`` sample indices of the whole record.
+        Each span's rests, ``[start, stop)`` sample indices of the whole record (for a transitions
+        fold: the two rests the held-out rotation joins, which stay in the training record).
+    transitions_only : bool
+        Only the rotations are held out (``by="transitions"``).
     """
 
     index: int
     spans: tuple
     rests: tuple
+    transitions_only: bool = False
 
     @property
     def n_rests(self):
@@ -173,7 +183,7 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
     experiment : graph_calib.records.experiment.Experiment
     folds : int
         Number of folds, at least 2.
-    by : {'pairs', 'rests', 'segments'}
+    by : {'pairs', 'rests', 'segments', 'transitions'}
     rests : array_like of int, shape (P, 2), optional
         ``[start, stop)`` of the rests; default :func:`record_rests`.
 
@@ -196,6 +206,14 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
             out.append(Fold(index=j, spans=spans, rests=tuple(
                 rests[(rests[:, 0] >= a) & (rests[:, 1] <= b)] for a, b in spans)))
         return out
+    if by == "transitions":
+        if p - 1 < folds:
+            raise InputError(f"has {p} rest(s), {max(p - 1, 0)} transition(s): fewer than the {folds} folds asked "
+                             f"for", path=experiment.source or None, dataset="/imu")
+        owner = np.arange(p - 1) % folds
+        return [Fold(index=j, spans=tuple((int(rests[i, 1]), int(rests[i + 1, 0])) for i in np.flatnonzero(owner == j)),
+                     rests=tuple(rests[i:i + 2] for i in np.flatnonzero(owner == j)), transitions_only=True)
+                for j in range(folds)]
     if by == "pairs":
         units = [np.arange(i, min(i + 2, p)) for i in range(0, p, 2)]
         owner = np.arange(len(units)) % folds
@@ -204,7 +222,8 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
         units = [idx for idx in np.array_split(np.arange(p), folds)]
         owner = np.arange(len(units))
     else:
-        raise InputError(f"folds are made by 'pairs', 'rests' or 'segments', not {by!r}", dataset="--by")
+        raise InputError(f"folds are made by 'pairs', 'rests', 'segments' or 'transitions', not {by!r}",
+                         dataset="--by")
     if p < 2 * folds or len(units) < folds:
         raise InputError(f"has {p} rest(s): {folds} folds need at least {2 * folds} (two per fold, one rotation "
                          f"between them)", path=experiment.source or None, dataset="/imu")
@@ -272,6 +291,8 @@ def held_out_figures(experiment, fold, calibration=None):
     for (start, stop), rests in zip(fold.spans, fold.rests):
         if not rests.shape[0]:
             continue
+        if fold.transitions_only:
+            start, stop = int(rests[0, 0]), int(rests[-1, 1])
         part = experiment.slice(start, stop)
         iv = rests - start
         iv = np.column_stack([iv[:, 0], iv[:, 1] - 1])               # IMU-TK's [a, e], both included
@@ -284,6 +305,8 @@ def held_out_figures(experiment, fold, calibration=None):
         rates.append(np.linalg.norm(mean_rate, axis=1) * RAD_TO_DEG)
     norm, ang, rate = (np.concatenate(v) if v else np.zeros(0) for v in (norms, angles, rates))
     nan = float("nan")
+    if fold.transitions_only:
+        norm, rate = np.zeros(0), np.zeros(0)
     return HeldOutFigures(
         n_rests=int(norm.size),
         static_norm_std_mps2=float(np.std(norm)) if norm.size > 1 else nan,
@@ -303,7 +326,7 @@ def cross_validate(experiment, *, fit, folds=2, by="pairs", progress=None):
     fit : callable
         ``fit(training_experiment) -> Calibration`` (anything with ``correct(experiment) -> (omega_ib_b, f_b)``).
     folds : int
-    by : {'pairs', 'rests', 'segments'}
+    by : {'pairs', 'rests', 'segments', 'transitions'}
     progress : callable, optional
         Called with a line of text per fold.
 
