@@ -277,7 +277,7 @@ def build_experiment(*, t, dtheta, dv, temperature, names, temperature_map, rate
     try:
         validate_experiment(exp, path=source)
     except InputError as exc:
-        if exc.index is None:
+        if exc.index is None or skip_lines is None:
             raise
         line = data_line_numbers(source, skip_lines)[exc.index]
         err = InputError(f"{exc} (input line {line})")
