@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from typing import Callable
 
 #: Modules of :mod:`graph_calib.importers` holding a ``FORMAT``, in the order the command line lists them.
-FORMAT_MODULES = ("xsens", "mpu6050", "csv", "rosbag")
+FORMAT_MODULES = ("xsens", "mpu6050", "csv", "rosbag", "ulog")
 
 
 @dataclass(frozen=True)

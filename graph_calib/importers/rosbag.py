@@ -50,13 +50,10 @@ from graph_calib.importers.common import (
     positive,
 )
 from graph_calib.importers.registry import ImportFormat, Option
-from graph_calib.importers.timing import regular_times
-from graph_calib.io import MAX_GAP_PERIODS
+from graph_calib.importers.timing import RATE_MEANINGS, increments, message_times
 
 IMU_TYPES = ("sensor_msgs/msg/Imu", "sensor_msgs/Imu")
 TEMPERATURE_TYPES = ("sensor_msgs/msg/Temperature", "sensor_msgs/Temperature")
-#: How a message's rate relates to the interval it closes (module docstring).
-RATE_MEANINGS = ("averaged", "instantaneous")
 # doubles of sensor_msgs/Imu after the header: orientation (4), its covariance (9), angular_velocity at 13,
 # its covariance (9), linear_acceleration at 25
 _OMEGA_AT, _F_AT, _N_DOUBLES = 13, 25, 37
@@ -159,23 +156,6 @@ def _temperature(reader, conns, raws):
     return stamps[order], values[order]
 
 
-def _gap_segments(t, rate_hz):
-    """Segment numbers cut where a gap exceeds the format's limit (messages missing)."""
-    cut = np.zeros(t.shape[0], dtype=np.int32)
-    cut[1:] = np.diff(t) > MAX_GAP_PERIODS / rate_hz
-    return np.cumsum(cut, dtype=np.int32)
-
-
-def _increments(signal, dt, segment, rates):
-    if rates == "averaged":
-        return signal * dt[:, None]
-    inc = signal * dt[:, None]
-    trapezoid = 0.5 * (signal[1:] + signal[:-1]) * dt[1:, None]
-    keep = np.ones(signal.shape[0] - 1, dtype=bool) if segment is None else np.diff(segment) == 0
-    inc[1:][keep] = trapezoid[keep]
-    return inc
-
-
 def import_rosbag(path, *, latitude_rad, imu_topic=None, temperature_topic=None, gravity_mps2=None,
                   temperature_degC=None, rates="averaged", rate_hz=None, imu_id="", description=None):
     """Import the IMU messages of a ROS 1 or ROS 2 bag (module docstring).
@@ -237,18 +217,12 @@ def import_rosbag(path, *, latitude_rad, imu_topic=None, temperature_topic=None,
         raise InputError(f"messages {k - 1} and {k} (in stamp order) have the same header stamp "
                          f"{stamps[k] / 1e9:.9f} s", path=path, dataset=topic)
     t = t_stamp = (stamps - stamps[0]) * 1e-9
-    given_rate = rate_hz is not None
-    rate_hz = positive(rate_hz, "rate_hz") if given_rate else float(f"{1.0 / float(np.median(np.diff(t))):.6g}")
-    segment, timing = None, ""
-    try:
-        t, rate_hz, timing = regular_times(t, rate_hz, source=topic, given_rate=given_rate)
-    except InputError:
-        segment = _gap_segments(t, rate_hz)
-        timing = (f"messages missing: cut into {int(segment[-1]) + 1} segments where the stamps leave gaps of more "
-                  f"than {MAX_GAP_PERIODS:g} periods")
+    if rate_hz is not None:
+        rate_hz = positive(rate_hz, "rate_hz")
+    t, rate_hz, segment, timing = message_times(t, rate_hz, source=topic)
     dt = intervals(t, rate_hz, segment)
-    dtheta = _increments(omega, dt, segment, rates)
-    dv = _increments(f, dt, segment, rates)
+    dtheta = increments(omega, dt, segment, rates)
+    dv = increments(f, dt, segment, rates)
 
     if temp is not None:
         if temperature_degC is not None:

@@ -28,6 +28,30 @@ JITTER_TOLERANCE_PERIODS = 4.0
 JITTER_RATE_TOLERANCE = 0.01
 
 
+#: What a logged rate is: the mean over the interval its stamp closes, or a sample at the stamp.
+RATE_MEANINGS = ("averaged", "instantaneous")
+
+
+def gap_segments(t, rate_hz):
+    """Segment numbers cut where a gap exceeds the format's limit (messages missing)."""
+    cut = np.zeros(t.shape[0], dtype=np.int32)
+    cut[1:] = np.diff(t) > MAX_GAP_PERIODS / rate_hz
+    return np.cumsum(cut, dtype=np.int32)
+
+
+def increments(signal, dt, segment, rates):
+    """Increments of rates over the interval each sample closes: ``averaged`` (rate x interval) or ``instantaneous``
+    (the trapezoid of the rates at both ends; a segment's first sample its own rate x the nominal period)."""
+    if rates == "averaged":
+        return signal * dt[:, None]
+    inc = signal * dt[:, None]
+    trapezoid = 0.5 * (signal[1:] + signal[:-1]) * dt[1:, None]
+    keep = np.ones(signal.shape[0] - 1, dtype=bool) if segment is None else np.diff(segment) == 0
+    inc[1:][keep] = trapezoid[keep]
+    return inc
+
+
+
 def label_segments(labels):
     """Segment numbers from a label column: each run of equal labels one segment, numbered 0, 1, ... in order.
 
@@ -121,5 +145,31 @@ def regular_times(t, rate_hz, *, segment=None, source="the log", given_rate=Fals
         path=path, dataset="t", index=first + 1)
 
 
-__all__ = ["label_segments", "rebase_segments", "within_segment_order", "regular_times",
+def message_times(t, rate_hz, *, source):
+    """Times of logged messages (rosbag, ulog): jitter regularised, or segments where messages are missing.
+
+    Parameters
+    ----------
+    t : ndarray
+        Stamps, s, from the first; increasing.
+    rate_hz : float or None
+        Nominal rate given by the user; None: ``1 / median`` spacing.
+
+    Returns
+    -------
+    t, rate_hz, segment (ndarray or None), note (str)
+    """
+    given = rate_hz is not None
+    rate = float(rate_hz) if given else float(f"{1.0 / float(np.median(np.diff(t))):.6g}")
+    try:
+        t, rate, note = regular_times(t, rate, source=source, given_rate=given)
+        return t, rate, None, note
+    except InputError:
+        segment = gap_segments(t, rate)
+        note = (f"messages missing: cut into {int(segment[-1]) + 1} segments where the stamps leave gaps of more "
+                f"than {MAX_GAP_PERIODS:g} periods")
+        return t, rate, segment, note
+
+
+__all__ = ["message_times", "RATE_MEANINGS", "gap_segments", "increments", "label_segments", "rebase_segments", "within_segment_order", "regular_times",
            "JITTER_TOLERANCE_PERIODS", "JITTER_RATE_TOLERANCE"]
