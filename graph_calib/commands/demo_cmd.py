@@ -47,7 +47,7 @@ DIAGNOSIS_MIN_HOURS = 0.2
 
 
 def add_arguments(p):
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--hours", type=float, default=DEMO_HOURS,
                    help=f"length of each of the six subrange experiments, h (default {DEMO_HOURS})")
     p.add_argument("--seed", type=int, default=1, help="random seed of the simulation (default 1)")
