@@ -43,6 +43,8 @@ ACCEL_UNITS = {"m/s^2": (1.0, True), "g": (c.G0, True), "m/s": (1.0, False)}
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "samples": None}
 CSV_SENSOR_COLUMNS = ("gx", "gy", "gz", "ax", "ay", "az")
 _INT32 = np.iinfo(np.int32)
+#: Integers from here on are not all exact as float64.
+_EXACT_FLOAT_INTEGER = 2.0**53
 
 
 def _resolve_columns(columns, *, path, delimiter, header_lines):
@@ -268,6 +270,18 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
                                usecols=[index[k] for k in keys], column_names={i: k for k, i in index.items()})
     col = {k: table[:, j] for j, k in enumerate(keys)}
     n = table.shape[0]
+    stamp_note = ""
+    if "t" in index and np.max(np.abs(col["t"])) >= _EXACT_FLOAT_INTEGER:
+        # integer stamps beyond 2^53 (nanoseconds since 1970) are not exact as floats: read them as integers and
+        # keep their exact differences from the first
+        try:
+            exact = np.loadtxt(path, delimiter=delimiter, skiprows=header_lines, comments="#", ndmin=1,
+                               dtype=np.int64, encoding="utf-8", quotechar='"', usecols=[index["t"]])
+        except ValueError:
+            exact = None
+        if exact is not None and exact.shape == col["t"].shape:
+            col["t"] = (exact - exact[0]).astype(np.float64)
+            stamp_note = f"time from the first stamp {int(exact[0])} {time_units or 's'}"
     segment = None
     if label_col is not None:
         segment = label_segments(_text_column(path, delimiter=delimiter, skip_lines=header_lines, j=label_col))
@@ -347,7 +361,7 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
             + (f" (t = index / {rate_hz:g} Hz)" if time_units == "samples" else "")
             + (f"; {1 + int(np.count_nonzero(np.diff(segment)))} segment(s) from the segment column"
                if segment is not None else "")
-            + (f"; {timing_note}" if timing_note else "")
+            + (f"; {timing_note}" if timing_note else "") + (f"; {stamp_note}" if stamp_note else "")
             + f"; {temp_text}."
         )
     if gravity_text:  # provenance of a computed constant: kept next to a description given too

@@ -144,7 +144,9 @@ def test_jittered_stamps_with_no_message_missing_become_the_index(record, tmp_pa
     exp = _short(record, 600)
     # a wireless link delivering samples in bursts every 35 ms: stamps are arrival times, gaps of 3.5 periods
     k = np.arange(exp.n_samples)
-    arrival = np.ceil(np.round(exp.t / 0.035, 9)) * 0.035 + (k % 4) * 1e-4
+    burst = np.ceil(np.round(exp.t / 0.035, 9)) * 0.035
+    rank = k - np.searchsorted(burst, burst)          # position inside its burst
+    arrival = burst + rank * 1e-4
     path = write_bag(exp, tmp_path / "bag", t=arrival)
     got = import_rosbag(path, rate_hz=100.0, **KW)
     assert got.segment is None and "no sample is missing" in got.description
