@@ -245,7 +245,7 @@ def import_rosbag(path, *, latitude_rad, imu_topic=None, temperature_topic=None,
                       f"{math.degrees(latitude_rad):.4f} deg, at sea level")
     if description is None:
         description = (f"Imported from the ROS bag {path.name}: {t.shape[0]} sensor_msgs/Imu messages of {topic} "
-                       f"(header stamps; orientation ignored), rates read as {rates} over the sample interval; "
+                       f"(header stamps, orientation ignored), rates read as {rates} over the sample interval; "
                        f"{temp_text}" + (f"; {timing}" if timing else "") + ".")
     return build_experiment(t=t, dtheta=dtheta, dv=dv, temperature=temperature, names=names,
                             temperature_map=np.zeros(6), rate_hz=rate_hz, latitude_rad=latitude_rad,
