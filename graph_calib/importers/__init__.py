@@ -73,6 +73,8 @@ from graph_calib.importers.mpu6050 import (
     import_mpu6050,
     mpu6050_reference_calibration,
 )
+from graph_calib.importers.rosbag import import_rosbag
+from graph_calib.importers.ulog import import_ulog
 from graph_calib.importers.xsens import (
     XSENS_ACCEL_COUNTS_PER_MPS2,
     XSENS_GRAVITY_MPS2,
@@ -85,7 +87,7 @@ from graph_calib.importers.xsens import (
 )
 
 __all__ = [
-    "import_xsens", "import_mpu6050", "import_csv", "mpu6050_reference_calibration", "read_numeric_table",
+    "import_xsens", "import_mpu6050", "import_csv", "import_rosbag", "import_ulog", "mpu6050_reference_calibration", "read_numeric_table",
     "normal_gravity",
     "ASSUMED_TEMPERATURE_NAME", "GYRO_UNITS", "ACCEL_UNITS", "TIME_UNITS", "CSV_SENSOR_COLUMNS",
     "XSENS_LATITUDE_RAD", "XSENS_GRAVITY_MPS2", "XSENS_ACCEL_COUNTS_PER_MPS2", "XSENS_GYRO_COUNTS_PER_RADS",
