@@ -50,7 +50,7 @@ def add_arguments(parser):
                            "mpu6050)")
     site.add_argument("--imu-id", help="IMU model and serial number")
     site.add_argument("--description", help="free text (default: provenance and conversion)")
-    own = parser.add_argument_group("options of some formats (the format named first)")
+    own = parser.add_argument_group("options of some formats (each says which)")
     for flag, (opt, names) in _format_options().items():
         helps = {}
         for n in names:

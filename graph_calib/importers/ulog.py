@@ -176,7 +176,7 @@ FORMAT = ImportFormat(
     notes=lambda experiment, options: [p.strip() for p in experiment.description.rstrip(".").split("; ")
                                        if "jitter" in p or "missing" in p or "rates read" in p],
     options=(
-        Option("--instance", "ulog: the IMU instance of sensor_gyro/sensor_accel (default 0)",
+        Option("--instance", "the IMU instance of sensor_gyro/sensor_accel (default 0)",
                {"type": int, "metavar": "N"}),
         Option("--rates", "a message's rate is the mean over the interval its stamp closes (averaged, the default) "
                "or a sample at the stamp (instantaneous: trapezoid increments)", {"choices": RATE_MEANINGS}),
