@@ -1,5 +1,10 @@
 """The ``graph-calib`` command line: a thin layer over the public Python API.
 
+A bare ``graph-calib`` and ``graph-calib --help`` print :func:`overview`: the commands
+with an example each and the exit codes.  Every command's ``--out`` is checked before
+any work starts (:data:`OUTPUTS`), and a reader closing the pipe (``graph-calib ... |
+head``) drops the rest of the output without stopping the work.
+
 Each command lives in its own module under :mod:`graph_calib.commands` with two
 functions, ``add_arguments(parser)`` and ``run(args) -> int``.  Exit codes
 (``cli.md``): 0 success, 2 bad input or arguments (one line, no traceback),
@@ -30,9 +35,48 @@ COMMANDS = {
     "diagnose": "the closed loop: residuals, the effect they point to, before and after",
     "crossval": "calibrate without each fold of a record's poses and judge on the held-out ones",
     "apply": "correct a raw record with a result, a compensation table or a campaign's stitched calibration",
-    "export": "write a campaign's stitched calibration as a compensation table (JSON, CSV, C header)",
+    "export": "write a calibration for a navigation system: a compensation table (JSON, CSV, C header) or the "
+              "ecosystem's files (PX4, ArduPilot, Kalibr, OpenVINS)",
     "demo": "simulate a navigation-grade campaign and run campaign and diagnose on it",
 }
+
+#: One example per command, shown by a bare ``graph-calib`` and ``graph-calib --help``.
+EXAMPLES = {
+    "simulate": "graph-calib simulate nav-subrange-short --out sim --seed 1",
+    "import": "graph-calib import rosbag my_bag --latitude-deg 48.1 --out session.h5",
+    "calibrate": "graph-calib calibrate sim/sub1_20_25.h5 --out cal",
+    "predict": "graph-calib predict sim/sub1_20_25.h5 --out prediction.json",
+    "design": "graph-calib design --out design",
+    "campaign": "graph-calib campaign sim/campaign.toml --out camp",
+    "diagnose": "graph-calib diagnose session.h5 --out diag",
+    "apply": "graph-calib apply cal/factor-graph.json session.h5 --out corrected.h5",
+    "export": "graph-calib export camp --format px4 --out thermal.params",
+    "demo": "graph-calib demo --out demo",
+}
+
+#: What each command's ``--out`` names: checked before any work starts (exit 2), in every command.
+OUTPUTS = {"simulate": "folder", "import": "file", "calibrate": "folder", "predict": "file", "design": "folder",
+           "campaign": "folder", "diagnose": "folder", "apply": "file", "export": "file", "demo": "folder"}
+
+EXIT_CODES = {0: "success", 2: "bad input or arguments (one line naming the file, dataset or option)",
+              3: "the work finished but its verdict failed (not converged, solvers disagree, residuals inconsistent; "
+                 "every file is still written)",
+              1: "internal failure (GRAPH_CALIB_DEBUG=1 shows the traceback)", 130: "interrupted"}
+
+
+def overview():
+    """The text of a bare ``graph-calib`` and of ``graph-calib --help``: the commands, an example each, exit codes."""
+    from graph_calib import __version__
+    from graph_calib.importers.registry import formats
+
+    lines = [f"graph-calib {__version__}: thermal calibration of IMUs (one model; a GTSAM factor graph and a "
+             "square-root Kalman filter)", "",
+             "usage: graph-calib COMMAND [options]   (graph-calib COMMAND --help: its options)", "", "commands:"]
+    for name, text in COMMANDS.items():
+        lines += [f"  {name:<10} {text}", f"  {'':<10}   e.g. {EXAMPLES[name]}"]
+    lines += ["", f"import formats: {', '.join(formats())}", "", "exit codes:"]
+    lines += [f"  {code:<4} {text}" for code, text in EXIT_CODES.items()]
+    return "\n".join(lines) + "\n"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -88,20 +132,74 @@ def main(argv=None):
     at every exit of ``calibrate`` (docs/performance.md).  Files are written and closed explicitly before;
     nothing waits for the collector.  Called with ``argv`` (the tests, other Python code), nothing is frozen.
     """
+    if argv is None:
+        sys.stdout = _PipeSafe(sys.stdout)
     code = _main(sys.argv[1:] if argv is None else list(argv))
     if argv is None:
         gc.freeze()
     return code
 
 
+class _PipeSafe:
+    """stdout that survives a reader closing the pipe (``graph-calib ... | head``): the work goes on, the files are
+    written, the rest of the output is dropped (fd 1 is pointed at /dev/null so that no later flush fails)."""
+
+    def __init__(self, stream):
+        self._stream = stream
+        self.lost = False
+
+    def _lose(self):
+        self.lost = True
+        try:
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, self._stream.fileno())
+        except (OSError, ValueError):
+            pass
+
+    def write(self, text):
+        if not self.lost:
+            try:
+                return self._stream.write(text)
+            except BrokenPipeError:
+                self._lose()
+        return len(text)
+
+    def flush(self):
+        if not self.lost:
+            try:
+                self._stream.flush()
+            except BrokenPipeError:
+                self._lose()
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+def _check_output(command, args):
+    """The command's ``--out`` checked before any work (commands/paths.py): exit 2 rather than a failure after it."""
+    from graph_calib.commands.paths import output_file, output_folder
+
+    out = getattr(args, "out", None)
+    kind = OUTPUTS.get(command)
+    if out is None or kind is None:
+        return
+    (output_folder if kind == "folder" else output_file)(out)
+
+
 def _main(argv):
+    if not argv or argv[0] in ("-h", "--help"):
+        print(overview(), end="")
+        return 0 if argv else 2
     parser = build_parser(only=_command_named(argv))
     args = parser.parse_args(argv)
     try:
+        _check_output(args.command, args)
         return int(_module(args.command).run(args) or 0)
     except InputError as exc:
         print(f"graph-calib {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except BrokenPipeError:      # a reader closed the pipe before stdout was made safe: not an internal error
+        return 141
     except KeyboardInterrupt:
         print(f"graph-calib {args.command}: interrupted; finished work is kept", file=sys.stderr)
         return 130

@@ -263,7 +263,8 @@ def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, p
 
 
 def _progress_bar(total, enabled):
-    if not enabled or total == 0:
+    """A tqdm bar on a terminal only: in a CI log or a file its redraws break the lines (the task lines stay)."""
+    if not enabled or total == 0 or not sys.stderr.isatty():
         return None
     return tqdm(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
 

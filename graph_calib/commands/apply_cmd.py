@@ -1,6 +1,8 @@
 """``graph-calib apply CALIBRATION EXPERIMENT.h5 --out CORRECTED.h5``: a raw record corrected by a calibration.
 
-CALIBRATION is a result file (one experiment's calibration), a compensation table
+A result or campaign whose verdict failed is refused (exit 2, naming the verdict) unless
+``--force``; a result's directions marked ``unresolved`` are never applied (their component is
+left out and the terminal says so).  CALIBRATION is a result file (one experiment's calibration), a compensation table
 written by ``graph-calib export`` (JSON or CSV), or a campaign folder (its stitched
 calibration applied directly).  The output is a valid experiment file whose
 ``dtheta``/``dv`` are the corrected increments, with the provenance in its description
@@ -13,8 +15,11 @@ import sys
 from pathlib import Path
 
 from graph_calib import io
+from graph_calib.commands.paths import output_file
 from graph_calib.compensation import PROVENANCE_ATTRIBUTE, STITCH_MODELS, apply, correction_of, read_compensation
 from graph_calib.compensation import write_corrected
+from graph_calib.compensation.apply import verdict_failed
+from graph_calib.constants import RAD_TO_DEG
 from graph_calib.errors import InputError
 
 
@@ -29,6 +34,8 @@ def add_arguments(p):
                    help="a campaign folder only: the stitched model (default: the campaign's)")
     p.add_argument("--again", action="store_true",
                    help="correct a record that is already corrected (subtracts the sensor errors a second time)")
+    p.add_argument("--force", action="store_true",
+                   help="apply a result or campaign whose verdict failed (refused otherwise, exit 2)")
 
 
 def run(args):
@@ -36,9 +43,12 @@ def run(args):
     out = Path(args.out)
     if out.exists() and src.exists() and out.resolve() == src.resolve():
         raise InputError("is the input record; write the corrected record to another file", dataset="--out")
-    if out.is_dir():
-        raise InputError("is a folder; --out names the corrected experiment file", path=out)
+    output_file(out)
     compensation, provenance = read_compensation(args.calibration, solver=args.solver, model=args.model)
+    failed = verdict_failed(provenance)
+    if failed and not args.force:
+        raise InputError(f"its verdict failed ({failed}); a calibration that failed its own checks is not applied "
+                         "without --force", path=args.calibration, dataset="verdict")
     experiment = io.read_experiment(src)
     before = correction_of(src)
     if before is not None and not args.again:
@@ -59,5 +69,13 @@ def run(args):
         held = "held at the table's end values" if provenance["kind"] == "table" else "extrapolated"
         print(f"  {provenance['outside']} sample(s) with a sensor temperature outside the calibrated range ({held})",
               file=sys.stderr)
+    if failed:
+        print(f"  warning: applied with --force although its verdict failed ({failed})", file=sys.stderr)
+    for name, r in provenance.get("unresolved_not_applied", {}).items():
+        gs = {k: v for k, v in r["elements"].items() if k.startswith("gyro.g_sensitivity")}
+        size = max((abs(v) for v in gs.values()), default=0.0)
+        print(f"  not applied: the result marks the direction '{name}' unresolved; its component "
+              f"{r['component']:.3g} is left out" + (f" (gyro g-sensitivity up to {size * RAD_TO_DEG * 3600:.3g} "
+                                                     "deg/h per m/s^2)" if gs else ""))
     print(f"  -> {out}")
     return 0

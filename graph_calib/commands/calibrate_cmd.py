@@ -9,6 +9,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
+from graph_calib.commands.model_options import add_sway, sway_of
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
@@ -20,8 +21,9 @@ from graph_calib.solvers.results import comparison_text
 
 def add_arguments(p):
     p.add_argument("experiment", help="experiment file (HDF5, data-format.md)")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default="both")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default="both",
+                   help="which solver(s) (default both, compared)")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals' noise and "
                         "offsets, printed with the reason)")
@@ -30,6 +32,7 @@ def add_arguments(p):
                    help="model a further effect of model.md (repeatable)")
     p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
+    add_sway(p)
     p.add_argument("--residuals", action="store_true",
                    help="also write each solver's residual time series, SOLVER.residuals.h5 (docs/data-format.md)")
 
@@ -42,7 +45,7 @@ def options_from_args(args, *, grade=None):
     if args.keyframe <= 0:
         raise InputError("must be positive", dataset="--keyframe")
     model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade or "navigation",
-                         extra_effects=tuple(args.effect))
+                         extra_effects=tuple(args.effect), sway_sigma=sway_of(args))
     return CalibrationOptions(model=model, graph=GraphOptions(robust=args.robust), t_ref_degC=args.t_ref)
 
 

@@ -11,7 +11,7 @@ from graph_calib.evaluation.validation import validation_text
 
 def add_arguments(p):
     p.add_argument("manifest", help="campaign manifest (TOML, data-format.md)")
-    p.add_argument("--out", required=True, help="output folder (one sub-folder per experiment)")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder (one sub-folder per experiment)")
     p.add_argument("--workers", type=int, default=None,
                    help="Dask worker processes of the local cluster, one thread each (default: one per CPU core; "
                         "never more than one per experiment); 0: no Dask, one task after the other in this "

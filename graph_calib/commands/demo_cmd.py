@@ -8,6 +8,9 @@ Writes
   (``validation.h5`` with its truth);
 - ``DIR/campaign/``: what ``graph-calib campaign`` writes (``report.html``,
   ``campaign.json``, one folder per experiment);
+- ``DIR/campaign/thermal.params``: the campaign's calibration as PX4 thermal-compensation
+  parameters (``graph-calib export --format px4``), with what they leave out and its size
+  printed;
 - ``DIR/data/with_<effect>/``: one experiment of the campaign (default the one
   around 20..30 degC) simulated again, same IMU, programme and noise, with a
   further effect the declared model lacks (``--effect``, default
@@ -47,7 +50,7 @@ DIAGNOSIS_MIN_HOURS = 0.2
 
 
 def add_arguments(p):
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--hours", type=float, default=DEMO_HOURS,
                    help=f"length of each of the six subrange experiments, h (default {DEMO_HOURS})")
     p.add_argument("--seed", type=int, default=1, help="random seed of the simulation (default 1)")
@@ -196,6 +199,11 @@ def run(args):
     options = CampaignOptions(workers=args.workers, validate=(str(out / "data" / "validation.h5"),))
     result = run_campaign(manifest, out / "campaign", options=options)
     print_summary(result)
+    if not result.failed:
+        # the campaign as PX4 thermal-compensation parameters: what they leave out, and its size, printed
+        from graph_calib.cli import main
+
+        main(["export", str(out / "campaign"), "--format", "px4", "--out", str(out / "campaign" / "thermal.params")])
     t_diag = time.monotonic()
     # cli.md: 1 an internal failure, 3 a failed verdict (of the campaign or the diagnosis), 0 otherwise
     rc = 1 if result.failed else (3 if result.verdict_failed else 0)

@@ -23,7 +23,7 @@ from graph_calib.simulation.program import program_text, read_program, scenario_
 
 
 def add_arguments(p):
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     p.add_argument("--spec", default=None, metavar="SPEC.toml",
                    help="targets and bench limits (docs/design.md; default: navigation grade, 0.01 deg/h and "
                         "2e-4 m/s^2 at 2 sigma over an 8 degC subrange)")

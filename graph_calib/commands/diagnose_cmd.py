@@ -14,6 +14,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
+from graph_calib.commands.model_options import add_sway, sway_of
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
@@ -23,7 +24,8 @@ from graph_calib.solvers.verdict import verdict_of
 
 def add_arguments(p):
     p.add_argument("experiment", help="experiment file (HDF5, data-format.md)")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    add_sway(p)
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals, printed with "
                         "the reason)")
@@ -65,7 +67,8 @@ def _options(args, *, grade="navigation"):
             raise InputError("must be at least 1", dataset="--max-iterations")
         graph = GraphOptions(max_iterations=args.max_iterations)
     calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade,
-                                                 extra_effects=tuple(args.effect)), graph=graph, t_ref_degC=args.t_ref)
+                                                 extra_effects=tuple(args.effect), sway_sigma=sway_of(args)),
+                                             graph=graph, t_ref_degC=args.t_ref)
     solvers = ("factor-graph", "sqrt-kf") if args.solver == "both" else ("factor-graph",)
     diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers)
     return calibration_options, diagnosis_options

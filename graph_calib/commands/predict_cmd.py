@@ -25,7 +25,7 @@ from graph_calib.simulation.program import nominal_experiment, read_program
 
 def add_arguments(p):
     p.add_argument("input", help="experiment file (HDF5, data-format.md) or bench program (TOML, docs/programs.md)")
-    p.add_argument("--out", required=True, help="prediction file to write (JSON, the result layout)")
+    p.add_argument("--out", required=True, metavar="FILE.json", help="prediction file to write (JSON, the result layout)")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals, as calibrate)")
     p.add_argument("--gyro-noise", type=float, default=None, metavar="RAD_PER_SQRT_S",

@@ -9,6 +9,10 @@ folder or its ``campaign.json`` (the stitched calibration applied directly:
 ``correct(experiment) -> (omega_ib_b, f_b)`` through the one sensor model and
 ``corrected(experiment)``, the experiment with corrected increments.
 
+:func:`verdict_failed` says whether the result or campaign read has a failed verdict (``graph-calib apply``
+refuses it without ``--force``); a result's directions marked ``unresolved`` are never applied
+(:func:`without_unresolved`: the calibration's component along each is removed, and the provenance says so).
+
 :func:`apply` corrects an experiment and says how; :func:`write_corrected` writes
 the corrected experiment atomically, a valid experiment file whose root attribute
 :data:`PROVENANCE_ATTRIBUTE` holds the provenance (JSON) and whose description
@@ -91,6 +95,11 @@ def read_compensation(path, *, solver=None, model=None):
                 if isinstance(result.extra.get("joint"), dict) else Calibration.from_result(result))
         prov.update(solver=result.solver, source=result.source, t_ref_degC=result.t_ref_degC,
                     temperature_range_degC=list(result.temperature_range_degC))
+        if isinstance(result.extra.get("verdict"), dict):
+            prov["verdict"] = result.extra["verdict"]
+        if result.extra.get("unresolved") and isinstance(comp, Calibration):
+            comp, removed = without_unresolved(comp, result.extra["unresolved"])
+            prov["unresolved_not_applied"] = removed
     elif kind == "calibration":
         try:
             comp = Calibration.from_dict(json.loads(path.read_text(encoding="utf-8")))
@@ -108,7 +117,52 @@ def read_compensation(path, *, solver=None, model=None):
     else:
         comp = StitchedCalibration.from_campaign(path, solver=solver, model=model)
         prov.update({k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model", "subranges")})
+    if kind == "stitched":
+        verdict = json.loads(path.read_text(encoding="utf-8")).get("verdict")
+        if isinstance(verdict, dict):
+            prov["verdict"] = verdict
     return comp, prov
+
+
+def verdict_failed(provenance):
+    """The failed verdict's words (str) of what :func:`read_compensation` read, or None when it passed or has none."""
+    verdict = provenance.get("verdict")
+    if not isinstance(verdict, dict) or verdict.get("passed", True):
+        return None
+    text = verdict.get("text") or "; ".join(str(p) for p in verdict.get("problems", ())) or "failed"
+    return str(text).splitlines()[0]
+
+
+def without_unresolved(calibration, unresolved):
+    """The calibration with its component along each unresolved direction removed (left at the prior's zero).
+
+    A direction the record cannot resolve (``unresolved`` of a result, data-format.md: ``{name: {element:
+    component}}``, a unit direction) carries the prior and whatever the data's noise put there, not a sensor
+    error: applying it would add an error (a gyro g-sensitivity along a heading drift turns a still unit).
+
+    Returns
+    -------
+    Calibration
+        ``x - u (u . x)`` for each direction ``u``.
+    removed : dict
+        ``{name: {"component": u . x, "elements": {element: change}}}`` for the provenance and the terminal.
+    """
+    names = calibration.layout.element_names()
+    x = np.array(calibration.x, dtype=float)
+    removed = {}
+    for name, direction in unresolved.items():
+        u = np.array([float(direction.get(n, 0.0)) for n in names])
+        norm = float(np.linalg.norm(u))
+        if norm == 0.0:
+            continue
+        u /= norm
+        a = float(u @ x)
+        change = -a * u
+        x = x + change
+        removed[name] = {"component": a, "elements": {n: float(c) for n, c in zip(names, change) if c != 0.0}}
+    cal = Calibration(layout=calibration.layout, x=x, t_ref_degC=calibration.t_ref_degC, sigma=calibration.sigma,
+                      source=calibration.source)
+    return cal, removed
 
 
 def _kind(path):
@@ -221,4 +275,4 @@ def correction_of(path):
         return {"text": str(value)}
 
 
-__all__ = ["PROVENANCE_ATTRIBUTE", "read_compensation", "apply", "note_of", "write_corrected", "correction_of"]
+__all__ = ["PROVENANCE_ATTRIBUTE", "read_compensation", "verdict_failed", "without_unresolved", "apply", "note_of", "write_corrected", "correction_of"]

@@ -148,7 +148,7 @@ class JointCalibration(ElementCompensation):
         """The compensation table on a grid of ``step_degC`` over the calibrated range (as the stitched one's)."""
         step = float(step_degC)
         if not (math.isfinite(step) and step > 0):
-            raise InputError(f"must be a positive number of degC, got {step_degC!r}", dataset="--step-degC")
+            raise InputError(f"must be a positive number of degC, got {step_degC!r}", dataset="--step-degc")
         lo = min(c.t_span[0] for c in self.curves.values())
         hi = max(c.t_span[1] for c in self.curves.values())
         k0 = math.floor(lo / step + 1e-9)

@@ -128,7 +128,7 @@ class StitchedCalibration(ElementCompensation):
         above the highest (at least two points), degC."""
         step = float(step_degC)
         if not (math.isfinite(step) and step > 0):
-            raise InputError(f"must be a positive number of degC, got {step_degC!r}", dataset="--step-degC")
+            raise InputError(f"must be a positive number of degC, got {step_degC!r}", dataset="--step-degc")
         spans = [self.valid_range(n) for n in self.curve_elements()]
         if not spans:
             spans = [p.t_range for cv in self.stitched.curves.values() for p in cv.points]

@@ -22,19 +22,31 @@ description says so.  Defaults and their provenance are in
 
 Modules
 -------
-:mod:`~graph_calib.importers.text`
-    Reading delimited text (:func:`read_numeric_table`) and the checks of counts,
-    time columns and options, naming the file and the line.
-:mod:`~graph_calib.importers.build`
-    Rates to increments, the assumed temperature channel, WGS-84 normal gravity
-    (:func:`normal_gravity`), assembling and validating the experiment.
+:mod:`~graph_calib.importers.registry`
+    The formats by name: each format module defines ``FORMAT`` (its inputs, its
+    own options, an example, its ``read``); ``graph-calib import`` is built from it.
+:mod:`~graph_calib.importers.common`
+    The parsing helpers every importer shares, public: reading delimited text
+    (:func:`read_numeric_table`), the checks of counts, time columns and options
+    naming the file and the line, rates to increments, the assumed temperature
+    channel, WGS-84 normal gravity (:func:`normal_gravity`), assembling and
+    validating the experiment (``build_experiment``).
+:mod:`~graph_calib.importers.timing`
+    Groups restarting their clock, jittered stamps (shared by the importers).
 :mod:`~graph_calib.importers.xsens`
     :func:`import_xsens` and the nominal constants of the IMU-TK data.
 :mod:`~graph_calib.importers.mpu6050`
     :func:`import_mpu6050`, :func:`mpu6050_reference_calibration` and the
     nominal constants of the UNCuyo data.
 :mod:`~graph_calib.importers.csv`
-    :func:`import_csv` and its units.
+    :func:`import_csv` and its units; a header naming its columns in a common way is
+    read without ``--columns`` (:mod:`~graph_calib.importers.csv_header`).
+:mod:`~graph_calib.importers.rosbag`
+    :func:`import_rosbag`: ``sensor_msgs/Imu`` (and ``sensor_msgs/Temperature``) of a
+    ROS 2 bag (sqlite3 or MCAP) or a ROS 1 bag, with the ``rosbags`` library.
+:mod:`~graph_calib.importers.ulog`
+    :func:`import_ulog`: a PX4 ULog's ``sensor_gyro``/``sensor_accel`` (or
+    ``sensor_combined``) with their temperatures, with ``pyulog``.
 
 Errors in the input (missing file, wrong column count, non-numeric cell,
 rows out of time order, mismatched time stamps, values that cannot be raw
@@ -43,7 +55,7 @@ line, and the column where one is at fault, counted from 0 as ``--columns``
 counts.
 """
 
-from graph_calib.importers.build import ASSUMED_TEMPERATURE_NAME, normal_gravity
+from graph_calib.importers.common import ASSUMED_TEMPERATURE_NAME, normal_gravity, read_numeric_table
 from graph_calib.importers.csv import (
     ACCEL_UNITS,
     CSV_SENSOR_COLUMNS,
@@ -61,7 +73,8 @@ from graph_calib.importers.mpu6050 import (
     import_mpu6050,
     mpu6050_reference_calibration,
 )
-from graph_calib.importers.text import read_numeric_table
+from graph_calib.importers.rosbag import import_rosbag
+from graph_calib.importers.ulog import import_ulog
 from graph_calib.importers.xsens import (
     XSENS_ACCEL_COUNTS_PER_MPS2,
     XSENS_GRAVITY_MPS2,
@@ -74,7 +87,7 @@ from graph_calib.importers.xsens import (
 )
 
 __all__ = [
-    "import_xsens", "import_mpu6050", "import_csv", "mpu6050_reference_calibration", "read_numeric_table",
+    "import_xsens", "import_mpu6050", "import_csv", "import_rosbag", "import_ulog", "mpu6050_reference_calibration", "read_numeric_table",
     "normal_gravity",
     "ASSUMED_TEMPERATURE_NAME", "GYRO_UNITS", "ACCEL_UNITS", "TIME_UNITS", "CSV_SENSOR_COLUMNS",
     "XSENS_LATITUDE_RAD", "XSENS_GRAVITY_MPS2", "XSENS_ACCEL_COUNTS_PER_MPS2", "XSENS_GYRO_COUNTS_PER_RADS",

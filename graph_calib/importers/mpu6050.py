@@ -12,18 +12,17 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib.errors import InputError
-from graph_calib.importers.build import (
+from graph_calib.importers.registry import ImportFormat, Option
+from graph_calib.importers.common import (
     ASSUMED_TEMPERATURE_NAME,
-    _build,
-    _constant_temperature,
-)
-from graph_calib.importers.text import (
-    _check_counts,
-    _positive,
-    _require_file,
-    _show,
-    _split,
+    build_experiment,
+    check_counts,
+    constant_temperature,
+    positive,
     read_numeric_table,
+    require_file,
+    show,
+    split_cells,
 )
 
 # UNCuyo ImuCalibration sample data (MPU-6050).
@@ -44,9 +43,9 @@ def _read_mpu6050_header(path):
         lines = [fh.readline() for _ in range(5)]
     header = {}
     for no, line in enumerate(lines[:4], start=1):
-        cells = _split(line.strip(), ",")
+        cells = split_cells(line.strip(), ",")
         if len(cells) != 2 or not cells[0]:
-            raise InputError(f"expected a 'key,value' header line, got {_show(line.strip())}", path=path,
+            raise InputError(f"expected a 'key,value' header line, got {show(line.strip())}", path=path,
                              dataset=f"line {no}")
         header[cells[0]] = cells[1]
     key, value = next(iter(header.items()))
@@ -55,11 +54,11 @@ def _read_mpu6050_header(path):
     except ValueError:
         fs = float("nan")
     if key != "Fs" or not (math.isfinite(fs) and fs > 0):
-        raise InputError(f"expected 'Fs,<sample rate in Hz>', got {_show(lines[0].strip())}", path=path,
+        raise InputError(f"expected 'Fs,<sample rate in Hz>', got {show(lines[0].strip())}", path=path,
                          dataset="line 1")
-    cols = tuple(_split(lines[4].strip().lower(), ","))
+    cols = tuple(split_cells(lines[4].strip().lower(), ","))
     if cols != MPU6050_COLUMNS:
-        raise InputError(f"expected the column line {_show(','.join(MPU6050_COLUMNS))}, got {_show(lines[4].strip())}",
+        raise InputError(f"expected the column line {show(','.join(MPU6050_COLUMNS))}, got {show(lines[4].strip())}",
                          path=path, dataset="line 5")
     return fs, header
 
@@ -105,21 +104,21 @@ def import_mpu6050(csv_path, *, latitude_rad=MPU6050_LATITUDE_RAD, gravity_mps2=
         Missing file, a malformed header (with line), a wrong column count, a
         non-numeric cell, a value that is not an int16 count.
     """
-    path = _require_file(csv_path)
-    sa = _positive(accel_counts_per_g, "accel_counts_per_g")
-    sg = _positive(gyro_counts_per_dps, "gyro_counts_per_dps")
+    path = require_file(csv_path)
+    sa = positive(accel_counts_per_g, "accel_counts_per_g")
+    sg = positive(gyro_counts_per_dps, "gyro_counts_per_dps")
     try:
         fs, header = _read_mpu6050_header(path)
     except UnicodeDecodeError:
         raise InputError("not a UTF-8 text file", path=path) from None
     data = read_numeric_table(path, delimiter=",", skip_lines=5, n_columns=6,
                               column_names=dict(enumerate(MPU6050_COLUMNS)))
-    n_sat = _check_counts(data, path=path, skip_lines=5, lo=-32768, hi=32767, what="int16")
+    n_sat = check_counts(data, path=path, skip_lines=5, lo=-32768, hi=32767, what="int16")
     n = data.shape[0]
     t = np.arange(n, dtype=np.float64) / fs
     f_b = data[:, :3] / sa * c.G0
     omega_b = data[:, 3:] / sg * c.DEG_TO_RAD
-    temperature, names = _constant_temperature(n, temperature_degC)
+    temperature, names = constant_temperature(n, temperature_degC)
     if description is None:
         head = "; ".join(f"{k} = {v}" for k, v in header.items())
         description = (
@@ -132,7 +131,7 @@ def import_mpu6050(csv_path, *, latitude_rad=MPU6050_LATITUDE_RAD, gravity_mps2=
             f"{MPU6050_GRAVITY_MPS2} m/s^2). {MPU6050_NOTICE}"
         )
     dt = 1.0 / fs
-    return _build(t=t, dtheta=omega_b * dt, dv=f_b * dt, temperature=temperature, names=names,
+    return build_experiment(t=t, dtheta=omega_b * dt, dv=f_b * dt, temperature=temperature, names=names,
                   temperature_map=np.zeros(6), rate_hz=fs, latitude_rad=latitude_rad,
                   gravity_mps2=gravity_mps2, imu_id=imu_id, description=description, source=path,
                   skip_lines=5)
@@ -173,7 +172,27 @@ def mpu6050_reference_calibration(params_path):
     return out
 
 
+def _read(inputs, options):
+    """``graph-calib import mpu6050 CSV_FILE``: :func:`import_mpu6050` with the options given."""
+    keys = {"latitude_rad": "latitude_rad", "gravity_mps2": "gravity_mps2", "temperature_degC": "temperature_degC",
+            "accel_scale": "accel_counts_per_g", "gyro_scale": "gyro_counts_per_dps", "imu_id": "imu_id",
+            "description": "description"}
+    return import_mpu6050(inputs[0], **{k: options[o] for o, k in keys.items() if o in options})
+
+
+FORMAT = ImportFormat(
+    name="mpu6050", inputs=("CSV_FILE",),
+    summary="an MPU-6050 log of UNCuyo's ImuCalibration (CSV of int16 counts)",
+    example="graph-calib import mpu6050 mpu6050_static.csv --out mpu.h5",
+    read=_read,
+    options=(
+        Option("--accel-scale", "nominal accelerometer scale, counts per g (16384)", {"type": float, "metavar": "COUNTS"}),
+        Option("--gyro-scale", "nominal gyro scale, counts per deg/s (131)", {"type": float, "metavar": "COUNTS"}),
+    ),
+)
+
 __all__ = [
+    "FORMAT",
     "import_mpu6050", "mpu6050_reference_calibration", "MPU6050_LATITUDE_RAD", "MPU6050_GRAVITY_MPS2",
     "MPU6050_ACCEL_COUNTS_PER_G", "MPU6050_GYRO_COUNTS_PER_DPS", "MPU6050_COLUMNS", "MPU6050_NOTICE",
 ]

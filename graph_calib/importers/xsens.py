@@ -8,19 +8,18 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib.errors import InputError
-from graph_calib.importers.build import (
+from graph_calib.importers.registry import ImportFormat, Option
+from graph_calib.importers.common import (
     ASSUMED_TEMPERATURE_NAME,
-    _build,
-    _constant_temperature,
-    _intervals,
-)
-from graph_calib.importers.text import (
-    _check_counts,
-    _check_time_column,
-    _data_line_numbers,
-    _positive,
-    _show,
+    build_experiment,
+    check_counts,
+    check_time_column,
+    constant_temperature,
+    data_line_numbers,
+    intervals,
+    positive,
     read_numeric_table,
+    show,
 )
 
 # IMU-TK sample data (Tedaldi, Pretto, Menegatti, ICRA 2014).
@@ -82,9 +81,9 @@ def import_xsens(acc_path, gyro_path, *, latitude_rad=XSENS_LATITUDE_RAD, gravit
         a rule of the experiment format.
     """
     acc_path, gyro_path = Path(acc_path), Path(gyro_path)
-    sa = _positive(accel_scale_counts_per_mps2, "accel_scale_counts_per_mps2")
-    sg = _positive(gyro_scale_counts_per_rads, "gyro_scale_counts_per_rads")
-    rate_hz = _positive(rate_hz, "rate_hz")
+    sa = positive(accel_scale_counts_per_mps2, "accel_scale_counts_per_mps2")
+    sg = positive(gyro_scale_counts_per_rads, "gyro_scale_counts_per_rads")
+    rate_hz = positive(rate_hz, "rate_hz")
     names = dict(enumerate(("t", "x", "y", "z")))
     acc = read_numeric_table(acc_path, n_columns=4, column_names=names)
     gyro = read_numeric_table(gyro_path, n_columns=4, column_names=names)
@@ -94,15 +93,15 @@ def import_xsens(acc_path, gyro_path, *, latitude_rad=XSENS_LATITUDE_RAD, gravit
     differ = acc[:, 0] != gyro[:, 0]
     if differ.any():
         row = int(np.flatnonzero(differ)[0])
-        line = _data_line_numbers(gyro_path, 0)[row]
-        raise InputError(f"time stamp {_show(gyro[row, 0])} s differs from {_show(acc[row, 0])} s in {acc_path}; "
+        line = data_line_numbers(gyro_path, 0)[row]
+        raise InputError(f"time stamp {show(gyro[row, 0])} s differs from {show(acc[row, 0])} s in {acc_path}; "
                          "the two files must hold the same time stamps", path=gyro_path, dataset=f"line {line}")
     t = acc[:, 0]
-    _check_time_column(t, path=acc_path, skip_lines=0)
-    sat_a = _check_counts(acc[:, 1:], path=acc_path, skip_lines=0, lo=0, hi=65535, what="16-bit unsigned")
-    sat_g = _check_counts(gyro[:, 1:], path=gyro_path, skip_lines=0, lo=0, hi=65535, what="16-bit unsigned")
-    temperature, names = _constant_temperature(t.shape[0], temperature_degC)
-    dt = _intervals(t, rate_hz)[:, None]
+    check_time_column(t, path=acc_path, skip_lines=0)
+    sat_a = check_counts(acc[:, 1:], path=acc_path, skip_lines=0, lo=0, hi=65535, what="16-bit unsigned")
+    sat_g = check_counts(gyro[:, 1:], path=gyro_path, skip_lines=0, lo=0, hi=65535, what="16-bit unsigned")
+    temperature, names = constant_temperature(t.shape[0], temperature_degC)
+    dt = intervals(t, rate_hz)[:, None]
     f_b = (acc[:, 1:] - offset_counts) / sa
     omega_b = (gyro[:, 1:] - offset_counts) / sg
     if description is None:
@@ -115,13 +114,35 @@ def import_xsens(acc_path, gyro_path, *, latitude_rad=XSENS_LATITUDE_RAD, gravit
             f"Latitude {math.degrees(latitude_rad):.4f} deg and gravity {gravity_mps2:g} m/s^2 are assumed "
             f"(the importer's defaults are Padova, 45.41 deg, and the authors' 9.81744 m/s^2). {XSENS_NOTICE}"
         )
-    return _build(t=t, dtheta=omega_b * dt, dv=f_b * dt, temperature=temperature, names=names,
+    return build_experiment(t=t, dtheta=omega_b * dt, dv=f_b * dt, temperature=temperature, names=names,
                   temperature_map=np.zeros(6), rate_hz=rate_hz, latitude_rad=latitude_rad,
                   gravity_mps2=gravity_mps2, imu_id=imu_id, description=description, source=acc_path,
                   skip_lines=0)
 
 
+def _read(inputs, options):
+    """``graph-calib import xsens ACC_FILE GYRO_FILE``: :func:`import_xsens` with the options given."""
+    keys = {"latitude_rad": "latitude_rad", "gravity_mps2": "gravity_mps2", "temperature_degC": "temperature_degC",
+            "accel_scale": "accel_scale_counts_per_mps2", "gyro_scale": "gyro_scale_counts_per_rads",
+            "offset": "offset_counts", "rate_hz": "rate_hz", "imu_id": "imu_id", "description": "description"}
+    return import_xsens(inputs[0], inputs[1], **{k: options[o] for o, k in keys.items() if o in options})
+
+
+FORMAT = ImportFormat(
+    name="xsens", inputs=("ACC_FILE", "GYRO_FILE"),
+    summary="the Xsens MTi sample data of IMU-TK (two text files of raw counts)",
+    example="graph-calib import xsens xsens_acc.mat xsens_gyro.mat --out xsens.h5",
+    read=_read,
+    options=(
+        Option("--accel-scale", "nominal accelerometer scale, counts per m/s^2 (415)",
+               {"type": float, "metavar": "COUNTS"}),
+        Option("--gyro-scale", "nominal gyro scale, counts per rad/s (4770)", {"type": float, "metavar": "COUNTS"}),
+        Option("--offset", "zero of both triads, counts (32768)", {"type": float, "metavar": "COUNTS"}),
+        Option("--rate-hz", "nominal sample rate, Hz (100)", {"type": float, "metavar": "HZ"}),
+    ),
+)
+
 __all__ = [
-    "import_xsens", "XSENS_LATITUDE_RAD", "XSENS_GRAVITY_MPS2", "XSENS_ACCEL_COUNTS_PER_MPS2",
+    "FORMAT", "import_xsens", "XSENS_LATITUDE_RAD", "XSENS_GRAVITY_MPS2", "XSENS_ACCEL_COUNTS_PER_MPS2",
     "XSENS_GYRO_COUNTS_PER_RADS", "XSENS_OFFSET_COUNTS", "XSENS_RATE_HZ", "XSENS_NOTICE",
 ]

@@ -30,7 +30,7 @@ def test_help_lists_every_command():
                           text=True, timeout=120)
     assert proc.returncode == 0, proc.stderr
     for name in SPEC_COMMANDS + FURTHER_COMMANDS:
-        assert f"    {name} " in proc.stdout, name
+        assert f"\n  {name} " in proc.stdout, name
 
 
 @pytest.mark.parametrize("name", SPEC_COMMANDS + FURTHER_COMMANDS)
@@ -93,7 +93,6 @@ def test_keyboard_interrupt_is_exit_130(failing_simulate, capsys):
 
 
 @pytest.mark.parametrize("argv", [
-    [],                                                      # no command
     ["frobnicate"],                                          # unknown command
     ["calibrate", "x.h5"],                                   # missing --out
     ["calibrate", "x.h5", "--out", "o", "--solver", "magic"],  # bad choice

@@ -24,33 +24,12 @@ from graph_calib.compensation import (
 from graph_calib.constants import DH_TO_RS
 from graph_calib.sensors.params import Layout
 
-EFFECTS = ("gyro.g_sensitivity", "time_lag.accel")
 
 
 def _cli(argv, capsys):
     code = cli.main([str(a) for a in argv])
     out, err = capsys.readouterr()
     return code, out, err
-
-
-@pytest.fixture(scope="module")
-def campaign(tmp_path_factory):
-    """``(simulation folder, campaign folder)`` of a short campaign, factor graph only, run through the CLI."""
-    root = tmp_path_factory.mktemp("compensation")
-    sim, camp = root / "sim", root / "camp"
-    argv = ["simulate", "nav-campaign", "--hours", "0.02", "--seed", "5", "--out", sim]
-    for e in EFFECTS:
-        argv += ["--effect", e]
-    assert cli.main([str(a) for a in argv]) == 0
-    manifest = sim / "campaign.toml"
-    manifest.write_text(manifest.read_text() + f"\n[model]\neffects = {json.dumps(list(EFFECTS))}\n")
-    # the declared model and the two effects, without the closed loop: the loop is not this file's subject
-    # (tests/campaign/test_campaign_loop.py, tests/campaign/test_campaign_pooled.py), and on these 72 s subranges the campaign's
-    # pooled test adopts accel.nonlinearity (common value 15.6 > 13.4, 2 dof), whose second-order terms the
-    # bounds and the apply-twice check below do not cover
-    assert cli.main(["campaign", str(manifest), "--out", str(camp), "--workers", "0", "--solver", "factor-graph",
-                     "--no-report", "--quiet", "--no-diagnose"]) == 0
-    return sim, camp
 
 
 @pytest.fixture(scope="module")
@@ -378,7 +357,7 @@ def test_the_exported_table_reproduces_the_campaigns_validation_figures(validate
     diffs = {}
     for step in (1.0, 10.0):
         out = tmp_path / f"table-{step:g}.json"
-        assert _cli(["export", validated["camp"], "--out", out, "--step-degC", step], capsys)[0] == 0
+        assert _cli(["export", validated["camp"], "--out", out, "--step-degc", step], capsys)[0] == 0
         table = read_table(out)
         v = validate(record, table, reference, model=model, windows=w, record_name=validated["record"].name)
         s = v.summary()
@@ -558,7 +537,7 @@ def test_apply_bad_input(case, pattern, campaign, tables, tmp_path, capsys):
     ("newer campaign", r"campaign\.json: version: version 2 is not one this graph-calib reads"),
     ("changed result", r"campaign\.json: stitching\.factor-graph\.elements\.gyro\.bias\.x: the \w+ fit recomputed"),
     ("missing result", r"factor-graph\.json: file not found"),
-    ("step", r"--step-degC: must be a positive number of degC"),
+    ("step", r"--step-degc: must be a positive number of degC"),
     ("solver", r"stitching: no stitching of solver 'sqrt-kf'; the campaign stitched factor-graph"),
 ])
 def test_export_bad_input(case, pattern, campaign, tmp_path, capsys):
@@ -579,7 +558,7 @@ def test_export_bad_input(case, pattern, campaign, tmp_path, capsys):
     elif case == "missing result":
         (camp / "sub3_10_20" / "factor-graph.json").unlink()
     elif case == "step":
-        extra = ["--step-degC", "0"]
+        extra = ["--step-degc", "0"]
     elif case == "solver":
         extra = ["--solver", "sqrt-kf"]
     out = tmp_path / "tables" / "t.json"

@@ -1,0 +1,51 @@
+"""Output paths checked before any work starts (exit 2 with one line naming the option), in every command.
+
+A command that finds out only after an hour of work that ``--out`` names a file
+where it writes a folder (or the reverse) wastes the hour; each command calls
+:func:`output_file` or :func:`output_folder` first.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from graph_calib.errors import InputError
+
+
+def _parent_ok(path, option):
+    """The nearest existing ancestor of ``path`` is a folder (so the missing ones can be created)."""
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise InputError(f"cannot be created: {parent} is a file, not a folder", path=path, dataset=option)
+            return
+
+
+def output_file(path, *, option="--out", suffixes=None):
+    """``path`` as a Path where a file can be written: not a folder, its parents creatable, a known suffix.
+
+    Parameters
+    ----------
+    suffixes : sequence of str, optional
+        Suffixes accepted (``(".yaml", ".yml")``); another one is refused naming them.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise InputError("is a folder; it names the file to write", path=path, dataset=option)
+    if suffixes and path.suffix.lower() not in suffixes:
+        raise InputError(f"ends in {path.suffix or 'no suffix'!r}; this file is written as "
+                         f"{' or '.join(suffixes)}", path=path, dataset=option)
+    _parent_ok(path, option)
+    return path
+
+
+def output_folder(path, *, option="--out"):
+    """``path`` as a Path where a folder can be written: not an existing file, its parents creatable."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise InputError("is a file; it names the folder to write into", path=path, dataset=option)
+    _parent_ok(path, option)
+    return path
+
+
+__all__ = ["output_file", "output_folder"]

@@ -1,0 +1,112 @@
+r"""A CSV header that names its columns in a common way, read without ``--columns`` (:func:`detect_layout`).
+
+Recognised names (case, spaces, ``#``, ``field.`` prefixes and units in brackets
+ignored): time ``t``, ``time``, ``timestamp``, ``stamp``, ``%time``, ``header.stamp``;
+gyro ``gx``, ``gyro_x``, ``gyr_x``, ``omega_x``, ``wx``, ``w_x``, ``angular_velocity.x``,
+EuRoC's ``w_RS_S_x``; accelerometer ``ax``, ``acc_x``, ``accel_x``, ``a_x``, ``alpha_x``
+(Kalibr's ``imu0.csv``), ``linear_acceleration.x``, EuRoC's ``a_RS_S_x``;
+temperature ``temp``, ``temperature``, ``temp_c``, ``temperature_degc``; ``segment``.
+Units in brackets set the units (``[ns]``, ``[rad s^-1]``, ``[deg/s]``, ``[m s^-2]``,
+``[g]``); a time column of whole numbers above 1e12 without a unit is read as
+nanoseconds (Kalibr's and ROS's stamps), and the note says so.
+"""
+
+from __future__ import annotations
+
+import re
+
+from graph_calib.errors import InputError
+from graph_calib.importers.common import data_rows, require_file, split_cells
+
+_AXES = "xyz"
+_NAMES = {"t": ("t", "time", "timestamp", "stamp", "%time", "header.stamp", "time_s", "timestamp_s")}
+for _i, _a in enumerate(_AXES):
+    _NAMES[f"g{_a}"] = (f"g{_a}", f"gyro_{_a}", f"gyr_{_a}", f"gyro{_a}", f"omega_{_a}", f"w{_a}", f"w_{_a}",
+                        f"angular_velocity.{_a}", f"w_rs_s_{_a}", f"gyroscope_{_a}")
+    _NAMES[f"a{_a}"] = (f"a{_a}", f"acc_{_a}", f"accel_{_a}", f"acc{_a}", f"accel{_a}", f"a_{_a}", f"alpha_{_a}",
+                        f"linear_acceleration.{_a}", f"a_rs_s_{_a}", f"accelerometer_{_a}")
+_NAMES["temp"] = ("temp", "temperature", "temp_c", "temperature_degc", "temp_degc", "imu_temp")
+_NAMES["segment"] = ("segment",)
+_LOOKUP = {alias: key for key, aliases in _NAMES.items() for alias in aliases}
+_UNITS = {"ns": ("time", "ns"), "us": ("time", "us"), "ms": ("time", "ms"), "s": ("time", "s"),
+          "rad s^-1": ("gyro", "rad/s"), "rad/s": ("gyro", "rad/s"), "deg/s": ("gyro", "deg/s"),
+          "dps": ("gyro", "deg/s"), "m s^-2": ("accel", "m/s^2"), "m/s^2": ("accel", "m/s^2"),
+          "m/s2": ("accel", "m/s^2"), "g": ("accel", "g")}
+#: Whole-number stamps above this without a unit are nanoseconds (1e12 ns is 17 minutes; 1e12 s is 31,700 years).
+NANOSECOND_STAMPS_ABOVE = 1e12
+
+
+def _normal(cell):
+    """``'#timestamp [ns]'`` -> ``('timestamp', 'ns')``; ``'field.angular_velocity.x'`` -> ``('angular_velocity.x', None)``."""
+    text = cell.strip().lstrip("#").strip()
+    unit = None
+    m = re.search(r"[\[(]([^\])]*)[\])]\s*$", text)
+    if m:
+        unit = m.group(1).strip()
+        text = text[:m.start()].strip()
+    text = text.lower().replace(" ", "_")
+    if text.startswith("field."):
+        text = text[len("field."):]
+    return text, unit
+
+
+def detect_layout(path, *, delimiter):
+    """The column mapping of a file whose first line names its columns.
+
+    Returns
+    -------
+    columns : dict or None
+        ``{key: index}`` for ``--columns``; None when the first line holds numbers (no header).
+    units : dict
+        ``{"time"|"gyro"|"accel": units}`` read from the header (or inferred for the time).
+    notes : list of str
+        What was read, to print.
+
+    Raises
+    ------
+    InputError
+        A header that names no gyro or accelerometer triad in a known way (naming what it found).
+    """
+    path = require_file(path)
+    with open(path, encoding="utf-8", errors="replace") as fh:
+        first = fh.readline().strip()
+    cells = split_cells(first, delimiter)
+    try:
+        [float(c) for c in cells]
+        return None, {}, []
+    except ValueError:
+        pass
+    columns, units = {}, {}
+    for j, cell in enumerate(cells):
+        name, unit = _normal(cell)
+        key = _LOOKUP.get(name)
+        if key is None or key in columns:
+            continue
+        columns[key] = j
+        kind = {"t": "time"}.get(key, "gyro" if key[0] == "g" and len(key) == 2 else
+                                 "accel" if key[0] == "a" and len(key) == 2 else None)
+        if unit is not None and kind is not None and unit.lower() in _UNITS:
+            ukind, uname = _UNITS[unit.lower()]
+            if ukind == kind:
+                units[kind] = uname
+    missing = [k for k in ("gx", "gy", "gz", "ax", "ay", "az") if k not in columns]
+    if missing:
+        raise InputError(f"the header line names its columns ({', '.join(cells)}) but none is a known name for "
+                         f"{', '.join(missing)}: give --columns (e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6)",
+                         path=path, dataset="line 1")
+    notes = ["columns from the header line: " + ", ".join(f"{k}={cells[j].strip()}" for k, j in columns.items())]
+    if "t" in columns and "time" not in units:
+        for _, text in data_rows(path, 1):
+            try:
+                stamp = float(split_cells(text, delimiter)[columns["t"]])
+            except (ValueError, IndexError):
+                break
+            if stamp >= NANOSECOND_STAMPS_ABOVE and stamp == round(stamp):
+                units["time"] = "ns"
+                notes.append(f"time column read as nanoseconds (whole numbers from {stamp:.0f}); "
+                             "--time-units says otherwise")
+            break
+    return columns, units, notes
+
+
+__all__ = ["detect_layout", "NANOSECOND_STAMPS_ABOVE"]

@@ -1,0 +1,86 @@
+"""The command line's conventions: an overview with examples and exit codes, help on every option, output paths
+checked before the work, a closed pipe that is not an internal error."""
+
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from graph_calib import cli
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_bare_and_help_show_every_command_with_an_example_and_the_exit_codes(capsys):
+    assert cli.main([]) == 2
+    bare = capsys.readouterr().out
+    assert cli.main(["--help"]) == 0
+    assert capsys.readouterr().out == bare
+    for name in cli.COMMANDS:
+        assert f"  {name} " in bare and f"e.g. graph-calib {name} " in bare
+    assert "exit codes:\n  0    success\n  2    bad input or arguments" in bare
+    assert "  3    the work finished but its verdict failed" in bare
+    assert "import formats: xsens, mpu6050, csv, rosbag, ulog" in bare
+
+
+def test_every_option_of_every_command_has_help():
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    missing = [f"{name} {a.option_strings or a.dest}" for name, p in sub.choices.items() for a in p._actions
+               if not isinstance(a, argparse._HelpAction) and not a.help]
+    assert missing == []
+
+
+def test_option_names_are_lower_case():
+    parser = cli.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    odd = [o for p in sub.choices.values() for a in p._actions for o in a.option_strings if o != o.lower()]
+    assert odd == []
+
+
+@pytest.mark.parametrize("argv, kind", [
+    (["calibrate", "x.h5"], "folder"), (["diagnose", "x.h5"], "folder"), (["campaign", "m.toml"], "folder"),
+    (["design"], "folder"), (["demo"], "folder"), (["simulate", "nav-subrange"], "folder"),
+    (["import", "csv", "a.csv"], "file"), (["predict", "x.h5"], "file"), (["apply", "r.json", "x.h5"], "file"),
+    (["export", "camp"], "file"),
+])
+def test_an_output_path_of_the_wrong_kind_is_refused_before_any_work(tmp_path, capsys, argv, kind):
+    out = tmp_path / "out"
+    if kind == "folder":
+        out.write_text("a file where a folder is written")
+        expected = "is a file; it names the folder to write into"
+    else:
+        out.mkdir()
+        expected = "is a folder; it names the file to write"
+    assert cli.main(argv + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out}: --out: {expected}" in err and "internal error" not in err
+
+
+def test_a_closed_pipe_is_not_an_internal_error():
+    """``graph-calib ... | head``: the reader closes the pipe before the command writes."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "graph_calib.cli", "simulate", "--list"], stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, env=env)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait() == 0, err
+    assert "internal error" not in err and "BrokenPipeError" not in err
+
+
+def test_the_sway_term_is_reachable_from_the_command_line():
+    from graph_calib.commands import calibrate_cmd
+    p = cli.build_parser(only="calibrate")
+    args = p.parse_args(["calibrate", "x.h5", "--out", "o", "--sway-sigma", "estimate"])
+    assert calibrate_cmd.options_from_args(args).model.sway_sigma == "estimate"
+    args = p.parse_args(["calibrate", "x.h5", "--out", "o", "--sway-sigma", "0.02"])
+    assert calibrate_cmd.options_from_args(args).model.sway_sigma == 0.02
+    args = p.parse_args(["calibrate", "x.h5", "--out", "o", "--sway-sigma", "lots"])
+    from graph_calib.errors import InputError
+    with pytest.raises(InputError, match="--sway-sigma: must be 'estimate' or a non-negative number of m/s"):
+        calibrate_cmd.options_from_args(args)

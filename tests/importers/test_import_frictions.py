@@ -1,0 +1,143 @@
+"""The frictions a lab user met importing hand-held records, each with its message (or its remedy applied)."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+from graph_calib import cli, io
+from graph_calib.errors import InputError
+from graph_calib.importers import import_csv
+
+RATE = 100.0
+LAT = 0.8
+
+
+def _signals(n, seed=0):
+    rng = np.random.default_rng(seed)
+    omega = rng.normal(0.0, 0.01, (n, 3))
+    f = np.array([0.0, 0.0, 9.81]) + rng.normal(0.0, 0.01, (n, 3))
+    return omega, f
+
+
+def _write(path, header, rows):
+    path.write_text((header + "\n" if header else "") + "\n".join(",".join(map(str, r)) for r in rows) + "\n")
+    return path
+
+
+def _rows(t, omega, f, *extra):
+    return [[repr(float(t[k])), *omega[k], *f[k], *(e[k] for e in extra)] for k in range(t.shape[0])]
+
+
+@pytest.mark.parametrize("header, t_scale", [
+    ("t,gx,gy,gz,ax,ay,az,temp", 1.0),
+    ("time,gyro_x,gyro_y,gyro_z,acc_x,acc_y,acc_z,temperature", 1.0),
+    ("timestamp,omega_x,omega_y,omega_z,alpha_x,alpha_y,alpha_z,temp", 1e9),          # Kalibr's imu0.csv, ns
+    ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],"
+     "a_RS_S_y [m s^-2],a_RS_S_z [m s^-2],temp", 1e9),                                  # EuRoC's
+])
+def test_a_header_naming_its_columns_is_read_without_columns(tmp_path, capsys, header, t_scale):
+    n = 200
+    omega, f = _signals(n)
+    if t_scale != 1.0:    # nanoseconds since 1970, exact integers beyond 2^53
+        stamps = 1_400_000_000 * 10**9 + np.arange(n, dtype=np.int64) * (10**9 // int(RATE))
+    else:
+        stamps = np.arange(n) / RATE
+    rows = [[int(stamps[k]) if t_scale != 1.0 else repr(float(stamps[k])), *omega[k], *f[k], 21.5]
+            for k in range(n)]
+    path = _write(tmp_path / "imu.csv", header, rows)
+    out = tmp_path / "x.h5"
+    assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "note: columns from the header line" in printed
+    exp = io.read_experiment(out)
+    assert exp.n_samples == n and exp.rate_hz == RATE
+    np.testing.assert_allclose(exp.dv[1:], f[1:] / RATE, rtol=1e-6)
+
+
+def test_a_header_without_known_names_asks_for_columns(tmp_path):
+    path = _write(tmp_path / "a.csv", "when,p,q,r,u,v,w", [[0.0] * 7])
+    from graph_calib.importers.csv import FORMAT
+    with pytest.raises(InputError, match=re.escape("line 1: the header line names its columns (when, p, q, r, u, v, w) "
+                                                   "but none is a known name for gx, gy, gz, ax, ay, az: give "
+                                                   "--columns")):
+        FORMAT.read([path], {"latitude_rad": LAT})
+
+
+COLS = {"t": 0, "gx": 1, "gy": 2, "gz": 3, "ax": 4, "ay": 5, "az": 6, "temp": 7}
+
+
+def _grouped(tmp_path):
+    """Three faces, each group of rows restarting its clock at 0, labelled in column 8."""
+    rows = []
+    for face, label in enumerate(("face_a", "face_b", "face_c")):
+        omega, f = _signals(100, seed=face)
+        t = np.arange(100) / RATE
+        rows += [[*r, label] for r in _rows(t, omega, f, np.full(100, 20.0))]
+    return _write(tmp_path / "grouped.csv", None, rows)
+
+
+def test_rows_grouped_by_a_label_name_the_remedy(tmp_path):
+    path = _grouped(tmp_path)
+    with pytest.raises(InputError, match=re.escape("line 101: time 0.0 s is not after the previous row's 0.99 s: rows "
+                                                   "must be in time order. If the rows are grouped (each group "
+                                                   "restarting its clock, e.g. one group per face), map the group's "
+                                                   "label column as the segment (segment=COLUMN in --columns)")):
+        import_csv(path, columns=COLS, latitude_rad=LAT)
+
+
+def test_a_label_column_becomes_the_segments_placed_one_after_the_other(tmp_path):
+    exp = import_csv(_grouped(tmp_path), columns={**COLS, "segment": 8}, latitude_rad=LAT)
+    assert exp.n_segments == 3 and np.array_equal(exp.segment, np.repeat([0, 1, 2], 100))
+    assert np.all(np.diff(exp.t) > 0)
+    np.testing.assert_allclose(np.diff(exp.t), 1.0 / RATE, rtol=1e-9)   # each group one period after the last
+
+
+def test_sort_puts_shuffled_rows_in_time_order(tmp_path):
+    omega, f = _signals(100)
+    rows = _rows(np.arange(100) / RATE, omega, f, np.full(100, 20.0))
+    order = np.random.default_rng(3).permutation(100)
+    path = _write(tmp_path / "s.csv", None, [rows[k] for k in order])
+    with pytest.raises(InputError, match="if the rows are only shuffled, --sort sorts them by time"):
+        import_csv(path, columns=COLS, latitude_rad=LAT)
+    exp = import_csv(path, columns=COLS, latitude_rad=LAT, sort=True)
+    np.testing.assert_allclose(exp.dv[1:], f[1:] / RATE, rtol=1e-9)
+
+
+def _jittered(tmp_path, *, missing=()):
+    """Wireless stamps: samples arrive in bursts every 35 ms (gaps of 3.5 periods), stamped on arrival."""
+    n = 400
+    omega, f = _signals(n)
+    k = np.arange(n)
+    burst = np.ceil(np.round(k / RATE / 0.035, 9)) * 0.035
+    rank = k - np.searchsorted(burst, burst)          # position inside its burst
+    arrival = burst + rank * 1e-4
+    keep = np.setdiff1d(k, missing)
+    return _write(tmp_path / "j.csv", None, _rows(arrival[keep], omega[keep], f[keep], np.full(keep.size, 20.0)))
+
+
+def test_jittered_stamps_with_no_sample_missing_become_the_sample_index(tmp_path):
+    exp = import_csv(_jittered(tmp_path), columns=COLS, latitude_rad=LAT, rate_hz=RATE)
+    np.testing.assert_allclose(np.diff(exp.t), 1.0 / RATE, rtol=1e-9)
+    assert "follow the sample index" in exp.description and "no sample is missing" in exp.description
+
+
+def test_jittered_stamps_with_samples_missing_propose_the_sample_index(tmp_path):
+    path = _jittered(tmp_path, missing=range(100, 140))
+    with pytest.raises(InputError, match=r"samples are missing, or the clock is not the sample clock\. If every sample "
+                                         r"is there and only the stamps are late \(a wireless link\), use the sample "
+                                         r"index at the nominal rate \(csv: leave t= out of --columns and give "
+                                         r"--rate-hz"):
+        import_csv(path, columns=COLS, latitude_rad=LAT, rate_hz=RATE)
+
+
+def test_a_missing_temperature_names_the_option(tmp_path, capsys):
+    omega, f = _signals(50)
+    path = _write(tmp_path / "t.csv", "t,gx,gy,gz,ax,ay,az", _rows(np.arange(50) / RATE, omega, f))
+    assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--out", str(tmp_path / "x.h5")]) == 2
+    assert ("no temperature column: map one (temp=COLUMN in --columns) or give an assumed constant temperature "
+            "(--temperature DEGC)") in capsys.readouterr().err
+    assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--temperature", "21",
+                     "--out", str(tmp_path / "x.h5")]) == 0
