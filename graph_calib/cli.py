@@ -49,6 +49,7 @@ EXAMPLES = {
     "design": "graph-calib design --out design",
     "campaign": "graph-calib campaign sim/campaign.toml --out camp",
     "diagnose": "graph-calib diagnose session.h5 --out diag",
+    "crossval": "graph-calib crossval session.h5 --out cv --by transitions",
     "apply": "graph-calib apply cal/factor-graph.json session.h5 --out corrected.h5",
     "export": "graph-calib export camp --format px4 --out thermal.params",
     "demo": "graph-calib demo --out demo",
@@ -56,7 +57,7 @@ EXAMPLES = {
 
 #: What each command's ``--out`` names: checked before any work starts (exit 2), in every command.
 OUTPUTS = {"simulate": "folder", "import": "file", "calibrate": "folder", "predict": "file", "design": "folder",
-           "campaign": "folder", "diagnose": "folder", "apply": "file", "export": "file", "demo": "folder"}
+           "campaign": "folder", "diagnose": "folder", "crossval": "folder", "apply": "file", "export": "file", "demo": "folder"}
 
 EXIT_CODES = {0: "success", 2: "bad input or arguments (one line naming the file, dataset or option)",
               3: "the work finished but its verdict failed (not converged, solvers disagree, residuals inconsistent; "
