@@ -26,6 +26,7 @@ COMMANDS = {
     "calibrate": "calibrate one experiment with one or both solvers",
     "predict": "predicted accuracy of an experiment's calibration (Fisher information, no solver run)",
     "design": "the shortest bench program whose predicted accuracy meets the targets (CasADi)",
+    "compare": "campaign procedures (steps, ramps, programs) on predicted accuracy against duration; HTML report",
     "campaign": "calibrate every experiment of a campaign and stitch over temperature",
     "diagnose": "the closed loop: residuals, the effect they point to, before and after",
     "apply": "correct a raw record with a result, a compensation table or a campaign's stitched calibration",

@@ -107,4 +107,69 @@ def simulated_ratios(reference, candidate, ref_metrics, cand_metrics, *, soak_s,
     return out
 
 
-__all__ = ["shifted_program", "calibrate_realisation", "simulated_metrics", "simulated_ratios"]
+
+
+
+def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=None, progress=None,
+                    metrics=("largest_sigma", "rms_sigma")):
+    """The comparison's noise part against ``realisations`` simulated campaigns per (procedure, length).
+
+    Parameters
+    ----------
+    comparison : graph_calib.design.comparison.Comparison
+    lengths : dict
+        ``{procedure name: [recorded seconds per experiment]}``: the campaigns to simulate (each must be one
+        of the comparison's).
+    realisations : int
+    work : str or Path
+        Cache of the calibrations (resumable).
+    soak_s : float, optional
+        Soak of the reference's durations (default the comparison's first).
+
+    Returns
+    -------
+    dict
+        JSON-ready: per campaign the simulated and predicted metrics, and the equal-accuracy ratios of the
+        reference (first procedure) against the second, simulated and predicted over the same campaigns.
+    """
+    procs = {p.name: p for p in comparison.procedures}
+    for name, Ls in lengths.items():
+        if name not in procs:
+            raise ValueError(f"no procedure {name!r} in the comparison; known: {', '.join(procs)}")
+        known = [pt.length_s for pt in comparison.points[name]]
+        for L in Ls:
+            if not any(abs(L - k) < 1e-6 for k in known):
+                raise ValueError(f"{name}: {L:g} s is not one of its campaigns ({', '.join(f'{k:g}' for k in known)})")
+    sims, pred = {}, {}
+    for name, Ls in lengths.items():
+        sims[name], pred[name] = {}, {}
+        for L in Ls:
+            if progress:
+                progress(f"  simulated {name}, {L / 3600:g} h per experiment, {realisations} realisations")
+            sims[name][L] = simulated_metrics(procs[name], L, realisations=realisations,
+                                              grid_degC=comparison.grid_degC, work=work, seed=seed, progress=progress)
+            pred[name][L] = next(pt.metrics for pt in comparison.points[name] if abs(pt.length_s - L) < 1e-6)
+    w = comparison.soaks_s[0] if soak_s is None else float(soak_s)
+    ref, cand = comparison.procedures[0], comparison.procedures[1]
+    ratios = {}
+    if ref.name in sims and cand.name in sims:
+        for f in FAMILIES:
+            ratios[f] = {}
+            for m in metrics:
+                s = simulated_ratios(ref, cand, sims[ref.name], sims[cand.name], soak_s=w, metric=m)[f]
+                p = simulated_ratios(ref, cand, pred[ref.name], pred[cand.name], soak_s=w, metric=m)[f]
+                ratios[f][m] = [{"reference_length_s": a["reference_length_s"], "predicted": b["ratio"],
+                                 "simulated": a["ratio"],
+                                 "agreement": None if a["ratio"] is None or b["ratio"] is None
+                                 else a["ratio"] / b["ratio"],
+                                 "status": f"{b['status']} / {a['status']}"} for a, b in zip(s, p)]
+    camp = {name: {f"{L:g}": {f: {**sims[name][L][f], "predicted_largest_sigma": pred[name][L][f]["largest_sigma"],
+                                  "predicted_rms_sigma": pred[name][L][f]["rms_sigma"]} for f in FAMILIES}
+                   for L in sims[name]} for name in sims}
+    what = (f"{realisations} simulated campaigns per point (noise, an ideal IMU: the stitched curve is its own "
+            f"error), every experiment calibrated by the factor graph and stitched as the campaign does; campaigns: "
+            + "; ".join(f"{n} at {', '.join(f'{L / 3600:g}' for L in Ls)} h per experiment" for n, Ls in lengths.items())
+            + f". Ratios over these campaigns only, soak {w / 3600:g} h.")
+    return {"what": what, "realisations": int(realisations), "soak_s": w, "campaigns": camp, "ratios": ratios}
+
+__all__ = ["shifted_program", "calibrate_realisation", "simulated_metrics", "simulated_ratios", "simulated_check"]

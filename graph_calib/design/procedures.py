@@ -140,15 +140,20 @@ class Procedure:
             return n * float(length_s) + (n - 1) * w
         return n * float(length_s)
 
-    def base_program(self, length_s):
-        """The bench program of one experiment of ``length_s`` seconds before its temperature shift."""
+    def base_program(self, length_s, *, rate_hz=None):
+        """The bench program of one experiment of ``length_s`` seconds before its temperature shift.
+
+        ``rate_hz``: the IMU sample rate (default: 100 Hz, a ``program`` its own).
+        """
         if self.kind == "program":
-            return self.program
-        tp = rotation_program(100.0, float(length_s), rng=np.random.default_rng(self.seed), design=NAV_DESIGN)
+            return self.program if rate_hz is None else replace(self.program, rate_hz=float(rate_hz))
+        rate_hz = 100.0 if rate_hz is None else rate_hz
+        tp = rotation_program(float(rate_hz), float(length_s), rng=np.random.default_rng(self.seed),
+                              design=NAV_DESIGN)
         steps = steps_of(tp)
         if self.kind == "steps":
             return BenchProgram(name=f"{self.name}-{length_s:g}s", steps=steps, chamber_start_degC=0.0,
-                                description=f"{self.name}: one constant-temperature step")
+                                rate_hz=float(rate_hz), description=f"{self.name}: one constant-temperature step")
         names = tuple(ch[0] for ch in NAV_CHANNELS)
         tau = np.array([ch[1] for ch in NAV_CHANNELS]) * 60.0
         offset = np.array([ch[2] for ch in NAV_CHANNELS])
@@ -159,7 +164,7 @@ class Procedure:
                              ramp_degC_per_s=max(abs(float(Tb[i + 1] - Tb[i])) / float(tb[i + 1] - tb[i]), 1e-12))
                     for i in range(tb.size - 1))
         return BenchProgram(name=f"{self.name}-{length_s:g}s", steps=steps, chamber_start_degC=float(Tb[0]),
-                            setpoints=sps, description=f"{self.name}: one ramped subrange")
+                            setpoints=sps, rate_hz=float(rate_hz), description=f"{self.name}: one ramped subrange")
 
     def experiments(self, base_sensor_mid_degC):
         """The experiments, each a shift of the base program's temperatures.
