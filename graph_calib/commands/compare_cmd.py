@@ -18,6 +18,7 @@ from graph_calib.design.comparison_check import simulated_check
 from graph_calib.design.procedures import read_procedure
 from graph_calib.errors import InputError
 from graph_calib.reports.comparison_report import comparison_report_html
+from graph_calib.reports.comparison_study import comparison_markdown
 
 
 def add_arguments(p):
@@ -35,6 +36,10 @@ def add_arguments(p):
                    help="also simulate and calibrate N realisations of the campaigns named by --simulate-at")
     p.add_argument("--simulate-at", nargs="+", default=[], metavar="NAME:HOURS",
                    help="campaigns to simulate, e.g. steps:0.25 ramp:0.25 ramp:0.5 (hours recorded per experiment)")
+    p.add_argument("--markdown", default=None, metavar="PAGE.md",
+                   help="also write the study page (Markdown; its figures in figures/ beside it), e.g. docs/study.md")
+    p.add_argument("--notes", default=None, metavar="NOTES.md",
+                   help="Markdown appended to the study page (the reading of the numbers)")
     p.add_argument("--work", default=None, help="cache of the simulated calibrations (default OUT/simulated)")
 
 
@@ -46,6 +51,10 @@ def _check(args):
     lo, hi = args.range_degC
     if not (math.isfinite(lo) and math.isfinite(hi) and hi > lo):
         raise InputError(f"must be LOW HIGH with LOW < HIGH, got {lo:g} {hi:g}", dataset="--range-degC")
+    if args.notes is not None and not Path(args.notes).is_file():
+        raise InputError("no such file", path=args.notes, dataset="--notes")
+    if args.notes is not None and args.markdown is None:
+        raise InputError("notes go on the study page: give --markdown too", dataset="--notes")
     if args.draws < 1:
         raise InputError(f"must be at least 1, got {args.draws}", dataset="--draws")
     if args.simulate < 0:
@@ -98,9 +107,31 @@ def run(args):
                                                  progress=progress)
     io.atomic_write_json(out / "comparison.json", doc)
     io.atomic_write_text(out / "report.html", comparison_report_html(doc, comparison))
+    if args.markdown:
+        comparison_markdown(doc, comparison, path=args.markdown, command=_command_line(args),
+                            closing=Path(args.notes).read_text() if args.notes else "")
     print(comparison_text(doc))
     print(f"  -> {out / 'comparison.json'}, {out / 'report.html'}")
     return 0
+
+
+def _command_line(args):
+    """The command line that reproduces this comparison (quoted on the study page)."""
+    parts = ["graph-calib compare", *args.procedures]
+    if args.soak_h is not None:
+        parts += ["--soak-h", *(f"{w:g}" for w in args.soak_h)]
+    if tuple(args.range_degC) != (-10.0, 50.0):
+        parts += ["--range-degC", *(f"{v:g}" for v in args.range_degC)]
+    if args.draws != 40:
+        parts += ["--draws", str(args.draws)]
+    if args.seed != 1:
+        parts += ["--seed", str(args.seed)]
+    if args.simulate:
+        parts += ["--simulate", str(args.simulate), "--simulate-at", *args.simulate_at]
+    parts += ["--out", str(args.out), "--markdown", str(args.markdown)]
+    if args.notes:
+        parts += ["--notes", str(args.notes)]
+    return " ".join(parts)
 
 
 def comparison_text(doc):
