@@ -427,5 +427,6 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
                       truth=truth, draws=int(draws), ratios=ratios, seconds=time.perf_counter() - t0)
 
 
-__all__ = ["PREDICTION_RATE_HZ", "FAMILIES", "METRICS", "DISPLAY", "TruthFamily", "CampaignPoint", "Comparison", "campaign_point",
+__all__ = ["PREDICTION_RATE_HZ", "FAMILIES", "METRICS", "DISPLAY", "TruthFamily", "CampaignPoint", "Comparison",
+           "campaign_point",
            "equal_accuracy_duration", "equal_accuracy", "compare"]

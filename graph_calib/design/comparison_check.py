@@ -107,9 +107,6 @@ def simulated_ratios(reference, candidate, ref_metrics, cand_metrics, *, soak_s,
     return out
 
 
-
-
-
 def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=None, progress=None,
                     metrics=("largest_sigma", "rms_sigma")):
     """The comparison's noise part against ``realisations`` simulated campaigns per (procedure, length).
@@ -168,8 +165,10 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
                    for L in sims[name]} for name in sims}
     what = (f"{realisations} simulated campaigns per point (noise, an ideal IMU: the stitched curve is its own "
             f"error), every experiment calibrated by the factor graph and stitched as the campaign does; campaigns: "
-            + "; ".join(f"{n} at {', '.join(f'{L / 3600:g}' for L in Ls)} h per experiment" for n, Ls in lengths.items())
+            + "; ".join(f"{n} at {', '.join(f'{L / 3600:g}' for L in Ls)} h per experiment"
+                        for n, Ls in lengths.items())
             + f". Ratios over these campaigns only, soak {w / 3600:g} h.")
     return {"what": what, "realisations": int(realisations), "soak_s": w, "campaigns": camp, "ratios": ratios}
+
 
 __all__ = ["shifted_program", "calibrate_realisation", "simulated_metrics", "simulated_ratios", "simulated_check"]
