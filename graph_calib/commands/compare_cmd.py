@@ -138,7 +138,10 @@ def comparison_text(doc):
     """The equal-accuracy ratios on the largest 1-sigma, a few lines."""
     ref = doc["procedures"][0]["name"]
     lines = [f"predicted part: {doc['seconds']:.0f} s; reference {ref}"]
+    several = {p["name"] for p in doc["procedures"] if len(p["lengths_s"]) >= 2}
     for cand, by_soak in doc["equal_accuracy"].items():
+        if cand not in several:
+            continue
         for soak, fams in by_soak.items():
             for f in ("gyro.bias", "accel.bias"):
                 rows = fams[f]["largest_sigma"]

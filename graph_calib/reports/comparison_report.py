@@ -134,7 +134,10 @@ def comparison_report_html(doc, comparison):
         "duration of the candidate campaign with the reference campaign's accuracy, divided by the reference "
         "campaign's duration; below the dashed line the candidate needs at most half"))))
     rrows = []
+    several = {p["name"] for p in doc["procedures"] if len(p["lengths_s"]) >= 2}
     for cand, by_soak in doc["equal_accuracy"].items():
+        if cand not in several:
+            continue                # one campaign: no curve to read a duration from
         for soak, fams in by_soak.items():
             for f in ("gyro.bias", "accel.bias"):
                 for m in ("largest_sigma", "rms_sigma", "largest_total", "expected_largest"):

@@ -32,7 +32,10 @@ def _ratio_cell(r):
 def half_statements(doc, *, metric="largest_sigma", families=("gyro.bias", "accel.bias")):
     """Lines saying, per candidate, soak and family, for which reference lengths the ratio is at most half."""
     lines = []
+    several = {p["name"] for p in doc["procedures"] if len(p["lengths_s"]) >= 2}
     for cand, by_soak in doc["equal_accuracy"].items():
+        if cand not in several:
+            continue            # one campaign: no curve to read a duration from (its point is in the figures)
         for soak, fams in by_soak.items():
             for f in families:
                 rows = fams[f][metric]
@@ -150,7 +153,10 @@ def comparison_markdown(doc, comparison, *, path, command, intro="", closing="")
         doc["equal_accuracy"].values())).values()))["gyro.bias"]["largest_sigma"]]
     out += ["| candidate | soak, h | family | metric | " + " | ".join(lengths) + " |",
             "| --- " * (4 + len(lengths)) + "|"]
+    several = {p["name"] for p in doc["procedures"] if len(p["lengths_s"]) >= 2}
     for cand, by_soak in doc["equal_accuracy"].items():
+        if cand not in several:
+            continue
         for soak, fams in by_soak.items():
             for f in ("gyro.bias", "accel.bias"):
                 for m in ("largest_sigma", "rms_sigma", "largest_total", "expected_largest"):

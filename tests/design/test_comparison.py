@@ -160,3 +160,19 @@ def test_compare_command_refuses_bad_input(tmp_path, capsys, argv, key, words):
     assert main(["compare", *args, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert key in err and words in err and not out.exists()
+
+
+def test_report_and_study_page(small, tmp_path):
+    from graph_calib.reports.comparison_report import comparison_report_html
+    from graph_calib.reports.comparison_study import comparison_markdown
+
+    doc = small.to_dict()
+    html = comparison_report_html(doc, small)
+    assert html.count("<img") == 4 and "Equal-accuracy ratios" in html
+    page = tmp_path / "study.md"
+    text = comparison_markdown(doc, small, path=page, command="graph-calib compare st.toml rp.toml", closing="## Notes")
+    assert page.read_text() == text and text.rstrip().endswith("## Notes")
+    for name in ("study_accuracy.png", "study_accuracy_total.png", "study_ratios.png", "study_curves.png"):
+        assert (tmp_path / "figures" / name).stat().st_size > 1000
+    # every soak and family says where the candidate needs at most half and where not
+    assert sum("rp, soak 1 h, gyro.bias:" in line for line in text.splitlines()) == 2
