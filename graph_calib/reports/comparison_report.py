@@ -94,7 +94,7 @@ def curves_figure(comparison, *, families=("gyro.bias", "accel.bias"), length_s=
             pt = min(pts, key=lambda p: abs(np.log(p.length_s / length_s)))
             line, = ax.plot(T, pt.sigma_curve[f] * k, label=f"{proc.name} {pt.length_s / 3600:.3g} h: 1 sigma")
             ax.plot(T, pt.model_error_curve[f] * k, ls="--", color=line.get_color(), label=f"{proc.name}: model error")
-        ax.set_yscale("log")
+        ax.set_ylim(bottom=0.0)
         ax.set_xlabel("sensor temperature, degC")
         ax.set_ylabel(unit)
         ax.set_title(f"{f}: largest over the axes", fontsize=9)
