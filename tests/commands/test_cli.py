@@ -14,8 +14,8 @@ from graph_calib.errors import InputError
 ROOT = Path(__file__).resolve().parents[2]
 #: The commands of cli.md.
 SPEC_COMMANDS = ("simulate", "import", "calibrate", "campaign", "diagnose", "demo")
-#: The project's commands beyond cli.md's (docs/compensation.md; predict and design: docs/design.md).
-FURTHER_COMMANDS = ("apply", "export", "predict", "design")
+#: The project's commands beyond cli.md's (docs/compensation.md; predict, design and compare: docs/design.md).
+FURTHER_COMMANDS = ("apply", "export", "predict", "design", "compare")
 
 
 def test_every_command_of_cli_md_has_a_module():
