@@ -112,6 +112,10 @@ def run(args):
                             closing=Path(args.notes).read_text() if args.notes else "")
     print(comparison_text(doc))
     print(f"  -> {out / 'comparison.json'}, {out / 'report.html'}")
+    if doc.get("simulated_check"):
+        v = doc["simulated_check"]["verdict"]
+        print(f"simulated check {v['text']}")
+        return 0 if v["passed"] else 3
     return 0
 
 

@@ -31,6 +31,10 @@ from graph_calib.records.problem import build_problem
 from graph_calib.simulation.program import nominal_experiment, program_simulation
 from graph_calib.stitching import stitch
 
+#: Largest relative difference of a simulated from the predicted equal-accuracy ratio (bias families) that
+#: the check passes.
+AGREEMENT_TOLERANCE = 0.15
+
 
 def shifted_program(program, shift_degC):
     """``program`` with its chamber (and so every sensor temperature) shifted by ``shift_degC``."""
@@ -73,11 +77,17 @@ def calibrate_realisation(procedure, length_s, r, *, work, seed=1, progress=None
 
 
 def simulated_metrics(procedure, length_s, *, realisations, grid_degC, work, seed=1, progress=None):
-    """Empirical ``largest_sigma`` and ``rms_sigma`` per family over ``realisations`` simulated campaigns."""
+    """Empirical ``largest_sigma`` and ``rms_sigma`` per family over ``realisations`` simulated campaigns.
+
+    ``out["failed"]``: the calibrations whose verdict failed (not converged, residuals inconsistent).
+    """
     errs = {f: [] for f in FAMILIES}
+    failed = []
     for r in range(int(realisations)):
         results, ranges, labels = calibrate_realisation(procedure, length_s, r, work=work, seed=seed,
                                                         progress=progress)
+        failed += [f"{procedure.name} {length_s / 3600:g} h r{r} {lab}: {res.extra['verdict']['text']}"
+                   for res, lab in zip(results, labels) if not res.extra.get("verdict", {}).get("passed", False)]
         st = stitch(results, names=labels, sensor_ranges=ranges)
         for f in FAMILIES:
             errs[f].append(np.stack([st.curves[f"{f}.{ax}"].evaluate(grid_degC)[0] for ax in AXES]))
@@ -87,6 +97,7 @@ def simulated_metrics(procedure, length_s, *, realisations, grid_degC, work, see
         s = np.sqrt(np.mean(e**2, axis=0))
         out[f] = {"largest_sigma": float(s.max()), "rms_sigma": float(np.sqrt(np.mean(s**2))),
                   "realisations": int(e.shape[0])}
+    out["failed"] = failed
     return out
 
 
@@ -160,6 +171,18 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
                                  "agreement": None if a["ratio"] is None or b["ratio"] is None
                                  else a["ratio"] / b["ratio"],
                                  "status": f"{b['status']} / {a['status']}"} for a, b in zip(s, p)]
+    failed = [x for name in sims for L in sims[name] for x in sims[name][L]["failed"]]
+    problems = [f"{len(failed)} simulated calibrations failed their verdict (first: {failed[0]})"] if failed else []
+    for f in ("gyro.bias", "accel.bias"):
+        for m, rows in ratios.get(f, {}).items():
+            for r in rows:
+                if r["agreement"] is not None and abs(r["agreement"] - 1.0) > AGREEMENT_TOLERANCE:
+                    problems.append(f"{f} {m} at {r['reference_length_s'] / 3600:g} h: simulated ratio "
+                                    f"{r['simulated']:.3f} against predicted {r['predicted']:.3f}")
+    verdict = {"passed": not problems, "tolerance": AGREEMENT_TOLERANCE, "problems": problems,
+               "text": ("verdict: pass: every simulated calibration passed and the simulated equal-accuracy ratios "
+                        f"agree with the predicted within {AGREEMENT_TOLERANCE:.0%}") if not problems else
+                       "verdict: FAIL: " + "; ".join(problems)}
     camp = {name: {f"{L:g}": {f: {**sims[name][L][f], "predicted_largest_sigma": pred[name][L][f]["largest_sigma"],
                                   "predicted_rms_sigma": pred[name][L][f]["rms_sigma"]} for f in FAMILIES}
                    for L in sims[name]} for name in sims}
@@ -168,7 +191,9 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
             + "; ".join(f"{n} at {', '.join(f'{L / 3600:g}' for L in Ls)} h per experiment"
                         for n, Ls in lengths.items())
             + f". Ratios over these campaigns only, soak {w / 3600:g} h.")
-    return {"what": what, "realisations": int(realisations), "soak_s": w, "campaigns": camp, "ratios": ratios}
+    return {"what": what, "realisations": int(realisations), "soak_s": w, "campaigns": camp, "ratios": ratios,
+            "verdict": verdict}
 
 
-__all__ = ["shifted_program", "calibrate_realisation", "simulated_metrics", "simulated_ratios", "simulated_check"]
+__all__ = ["AGREEMENT_TOLERANCE", "shifted_program", "calibrate_realisation", "simulated_metrics", "simulated_ratios",
+           "simulated_check"]

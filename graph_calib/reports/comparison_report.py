@@ -193,7 +193,7 @@ def comparison_report_html(doc, comparison):
                                  "-" if r["predicted"] is None else f"{r['predicted']:.3f}",
                                  "-" if r["simulated"] is None else f"{r['simulated']:.3f}",
                                  "-" if r["agreement"] is None else f"{r['agreement']:.3f}", r["status"]])
-        parts.append(section("Simulated check", paragraph(sc["what"]),
+        parts.append(section("Simulated check", paragraph(sc["what"]), paragraph(sc["verdict"]["text"]),
                              table(["procedure", "h per experiment", "family", "realisations", "predicted largest",
                                     "simulated largest", "ratio", "predicted RMS", "simulated RMS", "ratio"], srows),
                              table(["family", "metric", "reference h", "predicted ratio", "simulated ratio",

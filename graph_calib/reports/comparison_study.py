@@ -170,7 +170,7 @@ def comparison_markdown(doc, comparison, *, path, command, intro="", closing="")
     out += ["## Why, in the numbers", ""] + why_lines(doc, comparison) + [""]
     sc = doc.get("simulated_check")
     if sc:
-        out += ["## Simulated check", "", sc["what"], "",
+        out += ["## Simulated check", "", sc["what"], "", f"**{sc['verdict']['text']}**", "",
                 "| procedure | h per experiment | family | realisations | predicted largest | simulated largest | "
                 "simulated / predicted | predicted RMS | simulated RMS | simulated / predicted |",
                 "| --- " * 10 + "|"]

@@ -176,3 +176,26 @@ def test_report_and_study_page(small, tmp_path):
         assert (tmp_path / "figures" / name).stat().st_size > 1000
     # every soak and family says where the candidate needs at most half and where not
     assert sum("rp, soak 1 h, gyro.bias:" in line for line in text.splitlines()) == 2
+
+
+def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tmp_path):
+    from graph_calib.design import comparison_check as cc
+
+    def fake(procedure, length_s, **kw):
+        pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
+        scale = 1.0 if procedure.name == "st" else 1.6            # the candidate's simulated sigma far off
+        out = {f: {"largest_sigma": pt.metrics[f]["largest_sigma"] * scale,
+                   "rms_sigma": pt.metrics[f]["rms_sigma"] * scale, "realisations": 10} for f in pt.metrics}
+        out["failed"] = []
+        return out
+
+    monkeypatch.setattr(cc, "simulated_metrics", fake)
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
+    assert not sc["verdict"]["passed"] and sc["verdict"]["text"].startswith("verdict: FAIL: ")
+    assert "simulated ratio" in sc["verdict"]["text"]
+    monkeypatch.setattr(cc, "simulated_metrics", lambda procedure, length_s, **kw: {
+        **{f: {"largest_sigma": v["largest_sigma"], "rms_sigma": v["rms_sigma"], "realisations": 10}
+           for f, v in next(p for p in small.points[procedure.name] if p.length_s == length_s).metrics.items()},
+        "failed": []})
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
+    assert sc["verdict"]["passed"], sc["verdict"]["text"]
