@@ -125,7 +125,8 @@ class CampaignPoint:
     """One campaign of one procedure: a recorded length per experiment, its predicted stitched accuracy.
 
     ``metrics``: ``{family: {metric: value}}``, SI; ``sigma_curve`` / ``model_error_curve``:
-    ``{family: ndarray (G,)}`` the largest over the axes at each temperature of the grid.
+    ``{family: ndarray (G,)}`` the largest over the axes at each temperature of the grid; ``sigma_axes``:
+    ``{family: ndarray (3, G)}`` per axis.
     """
 
     procedure: str
@@ -134,6 +135,7 @@ class CampaignPoint:
     sigma_curve: dict
     model_error_curve: dict
     t_ref_degC: tuple
+    sigma_axes: dict
     seconds: float
 
 
@@ -303,7 +305,7 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
         sig_curve[f] = s.max(axis=0)
         me_curve[f] = me_rms.max(axis=0)
     pt = CampaignPoint(procedure=procedure.name, length_s=float(length_s), metrics=metrics, sigma_curve=sig_curve,
-                       model_error_curve=me_curve, t_ref_degC=tuple(r.t_ref_degC for r in results),
+                       model_error_curve=me_curve, t_ref_degC=tuple(r.t_ref_degC for r in results), sigma_axes=sigma,
                        seconds=time.perf_counter() - t0)
     if progress:
         progress(f"  {procedure.name}, {length_s / 3600:g} h per experiment: gyro bias largest sigma "

@@ -96,7 +96,7 @@ def simulated_metrics(procedure, length_s, *, realisations, grid_degC, work, see
         e = np.stack(errs[f])                      # (R, 3, G), the truth is zero
         s = np.sqrt(np.mean(e**2, axis=0))
         out[f] = {"largest_sigma": float(s.max()), "rms_sigma": float(np.sqrt(np.mean(s**2))),
-                  "realisations": int(e.shape[0])}
+                  "realisations": int(e.shape[0]), "sigma_axes": s}
     out["failed"] = failed
     return out
 
@@ -119,7 +119,7 @@ def simulated_ratios(reference, candidate, ref_metrics, cand_metrics, *, soak_s,
 
 
 def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=None, progress=None,
-                    metrics=("largest_sigma", "rms_sigma")):
+                    metrics=("largest_sigma", "worst_point_sigma", "rms_sigma")):
     """The comparison's noise part against ``realisations`` simulated campaigns per (procedure, length).
 
     Parameters
@@ -156,7 +156,12 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
                 progress(f"  simulated {name}, {L / 3600:g} h per experiment, {realisations} realisations")
             sims[name][L] = simulated_metrics(procs[name], L, realisations=realisations,
                                               grid_degC=comparison.grid_degC, work=work, seed=seed, progress=progress)
-            pred[name][L] = next(pt.metrics for pt in comparison.points[name] if abs(pt.length_s - L) < 1e-6)
+            pt = next(pt for pt in comparison.points[name] if abs(pt.length_s - L) < 1e-6)
+            pred[name][L] = {f: {**pt.metrics[f], "worst_point_sigma": pt.metrics[f]["largest_sigma"]}
+                             for f in FAMILIES}
+            for f in FAMILIES:   # the simulated sigma where the predicted one is largest (no max over noise)
+                i, g = np.unravel_index(int(np.argmax(pt.sigma_axes[f])), pt.sigma_axes[f].shape)
+                sims[name][L][f]["worst_point_sigma"] = float(sims[name][L][f]["sigma_axes"][i, g])
     w = comparison.soaks_s[0] if soak_s is None else float(soak_s)
     ref, cand = comparison.procedures[0], comparison.procedures[1]
     ratios = {}
@@ -179,11 +184,18 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
                 if r["agreement"] is not None and abs(r["agreement"] - 1.0) > AGREEMENT_TOLERANCE:
                     problems.append(f"{f} {m} at {r['reference_length_s'] / 3600:g} h: simulated ratio "
                                     f"{r['simulated']:.3f} against predicted {r['predicted']:.3f}")
+    unformed = [f"{f} {m} at {r['reference_length_s'] / 3600:g} h ({r['status']})"
+                for f in ("gyro.bias", "accel.bias") for m, rows in ratios.get(f, {}).items() for r in rows
+                if r["agreement"] is None]
     verdict = {"passed": not problems, "tolerance": AGREEMENT_TOLERANCE, "problems": problems,
+               "not_formed": unformed,
                "text": ("verdict: pass: every simulated calibration passed and the simulated equal-accuracy ratios "
                         f"agree with the predicted within {AGREEMENT_TOLERANCE:.0%}") if not problems else
                        "verdict: FAIL: " + "; ".join(problems)}
-    camp = {name: {f"{L:g}": {f: {**sims[name][L][f], "predicted_largest_sigma": pred[name][L][f]["largest_sigma"],
+    if unformed:
+        verdict["text"] += "; ratios not formed (interpolation failed on one side): " + "; ".join(unformed)
+    camp = {name: {f"{L:g}": {f: {**{k: v for k, v in sims[name][L][f].items() if k != "sigma_axes"},
+                                  "predicted_largest_sigma": pred[name][L][f]["largest_sigma"],
                                   "predicted_rms_sigma": pred[name][L][f]["rms_sigma"]} for f in FAMILIES}
                    for L in sims[name]} for name in sims}
     what = (f"{realisations} simulated campaigns per point (noise, an ideal IMU: the stitched curve is its own "

@@ -172,8 +172,9 @@ def comparison_markdown(doc, comparison, *, path, command, intro="", closing="")
     if sc:
         out += ["## Simulated check", "", sc["what"], "", f"**{sc['verdict']['text']}**", "",
                 "| procedure | h per experiment | family | realisations | predicted largest | simulated largest | "
-                "simulated / predicted | predicted RMS | simulated RMS | simulated / predicted |",
-                "| --- " * 10 + "|"]
+                "simulated / predicted | simulated where predicted largest | simulated / predicted | predicted RMS | "
+                "simulated RMS | simulated / predicted |",
+                "| --- " * 12 + "|"]
         for name, per in sc["campaigns"].items():
             for L, v in per.items():
                 for f in ("gyro.bias", "accel.bias"):
@@ -182,6 +183,8 @@ def comparison_markdown(doc, comparison, *, path, command, intro="", closing="")
                     out.append(f"| {name} | {float(L) / 3600:g} | {f} | {x['realisations']} | "
                                f"{x['predicted_largest_sigma'] * k:.3g} | {x['largest_sigma'] * k:.3g} | "
                                f"{x['largest_sigma'] / x['predicted_largest_sigma']:.3f} | "
+                               f"{x['worst_point_sigma'] * k:.3g} | "
+                               f"{x['worst_point_sigma'] / x['predicted_largest_sigma']:.3f} | "
                                f"{x['predicted_rms_sigma'] * k:.3g} | {x['rms_sigma'] * k:.3g} | "
                                f"{x['rms_sigma'] / x['predicted_rms_sigma']:.3f} |")
         out += ["", "| family | metric | reference h per step | predicted ratio | simulated ratio | "

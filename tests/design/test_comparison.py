@@ -184,7 +184,7 @@ def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tm
     def fake(procedure, length_s, **kw):
         pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
         scale = 1.0 if procedure.name == "st" else 1.6            # the candidate's simulated sigma far off
-        out = {f: {"largest_sigma": pt.metrics[f]["largest_sigma"] * scale,
+        out = {f: {"largest_sigma": pt.metrics[f]["largest_sigma"] * scale, "sigma_axes": pt.sigma_axes[f] * scale,
                    "rms_sigma": pt.metrics[f]["rms_sigma"] * scale, "realisations": 10} for f in pt.metrics}
         out["failed"] = []
         return out
@@ -193,9 +193,13 @@ def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tm
     sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
     assert not sc["verdict"]["passed"] and sc["verdict"]["text"].startswith("verdict: FAIL: ")
     assert "simulated ratio" in sc["verdict"]["text"]
-    monkeypatch.setattr(cc, "simulated_metrics", lambda procedure, length_s, **kw: {
-        **{f: {"largest_sigma": v["largest_sigma"], "rms_sigma": v["rms_sigma"], "realisations": 10}
-           for f, v in next(p for p in small.points[procedure.name] if p.length_s == length_s).metrics.items()},
-        "failed": []})
+    def same(procedure, length_s, **kw):
+        pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
+        return {**{f: {"largest_sigma": v["largest_sigma"], "rms_sigma": v["rms_sigma"], "realisations": 10,
+                       "sigma_axes": pt.sigma_axes[f]} for f, v in pt.metrics.items()}, "failed": []}
+
+    monkeypatch.setattr(cc, "simulated_metrics", same)
     sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
     assert sc["verdict"]["passed"], sc["verdict"]["text"]
+    assert all(abs(r["agreement"] - 1.0) < 1e-9 for f in ("gyro.bias", "accel.bias")
+               for rows in sc["ratios"][f].values() for r in rows if r["agreement"] is not None)
