@@ -31,6 +31,7 @@ COMMANDS = {
     "calibrate": "calibrate one experiment with one or both solvers",
     "predict": "predicted accuracy of an experiment's calibration (Fisher information, no solver run)",
     "design": "the shortest bench program whose predicted accuracy meets the targets (CasADi)",
+    "compare": "campaign procedures (steps, ramps, programs) on predicted accuracy against duration; HTML report",
     "campaign": "calibrate every experiment of a campaign and stitch over temperature",
     "diagnose": "the closed loop: residuals, the effect they point to, before and after",
     "crossval": "calibrate without each fold of a record's poses and judge on the held-out ones",
@@ -50,6 +51,7 @@ EXAMPLES = {
     "campaign": "graph-calib campaign sim/campaign.toml --out camp",
     "diagnose": "graph-calib diagnose session.h5 --out diag",
     "crossval": "graph-calib crossval session.h5 --out cv --by transitions",
+    "compare": "graph-calib compare data/programs/procedure-steps.toml data/programs/procedure-ramp.toml --out cmp",
     "apply": "graph-calib apply cal/factor-graph.json session.h5 --out corrected.h5",
     "export": "graph-calib export camp --format px4 --out thermal.params",
     "demo": "graph-calib demo --out demo",
@@ -57,7 +59,7 @@ EXAMPLES = {
 
 #: What each command's ``--out`` names: checked before any work starts (exit 2), in every command.
 OUTPUTS = {"simulate": "folder", "import": "file", "calibrate": "folder", "predict": "file", "design": "folder",
-           "campaign": "folder", "diagnose": "folder", "crossval": "folder", "apply": "file", "export": "file", "demo": "folder"}
+           "campaign": "folder", "diagnose": "folder", "crossval": "folder", "compare": "folder", "apply": "file", "export": "file", "demo": "folder"}
 
 EXIT_CODES = {0: "success", 2: "bad input or arguments (one line naming the file, dataset or option)",
               3: "the work finished but its verdict failed (not converged, solvers disagree, residuals inconsistent; "

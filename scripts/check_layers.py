@@ -26,6 +26,7 @@ LAYERS = {
     "graph_calib.solvers.factor_graph": 7, "graph_calib.solvers.joint": 7, "kf_reference": 7,
     "graph_calib.calibrate": 8, "graph_calib.diagnosis": 8, "graph_calib.stitching": 8, "graph_calib.evaluation": 8,
     "graph_calib.design.prediction": 8, "graph_calib.design.program_search": 8,
+    "graph_calib.design.procedures": 8, "graph_calib.design.comparison": 8, "graph_calib.design.comparison_check": 8,
     "graph_calib.simulation": 8, "graph_calib.importers": 8, "graph_calib.compensation": 8,
     "graph_calib.campaign.warmup": 8, "graph_calib.evaluation.imu_tk": 8,
     "graph_calib.reports": 9,

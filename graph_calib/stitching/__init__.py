@@ -19,7 +19,11 @@ derivatives of the unknown curve ``f`` at ``T_ref,i``,
     \qquad e_i \sim N(0, \Sigma_i),
 
 (``Sigma_i`` the marginal block of the subrange's covariance; subranges are
-independent experiments).  Every stitched model is the generalised
+independent experiments).  A result that holds a temperature-dependent element
+without its coefficients (a calibration at constant temperature) measured
+``f`` at its own sensor's temperature, not at ``T_ref`` (the mean of all six
+sensors, which self-heating puts tenths of a degree away): given the sensor
+ranges, its point sits at the middle of that sensor's range.  Every stitched model is the generalised
 least-squares fit of a curve family to all these measurements together:
 
 ``linear``

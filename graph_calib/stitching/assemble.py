@@ -32,7 +32,11 @@ def result_points(result, *, name=None, sensor_ranges=None, values=None):
     name : str, optional
         Label of the points (default: the result's source).
     sensor_ranges : array_like (6, 2), optional
-        Temperature range of each sensor (default: the result's range for all).
+        Temperature range of each sensor (default: the result's range for all).  With them, an element of
+        a temperature-dependent parameter that the result holds without its temperature coefficients (a
+        calibration at constant temperature) is placed at the middle of its own sensor's range, where its
+        value was measured, not at the result's ``T_ref`` (the mean of all six sensors, which a sensor's
+        self-heating puts tenths of a degree away).
     values : dict, optional
         Values to use instead of ``result.values`` (e.g. with a truth's curvature remainder added).
         Coefficients are taken in order (value, ``_tc``, ``_tc2``) up to the first one absent; the
@@ -59,7 +63,12 @@ def result_points(result, *, name=None, sensor_ranges=None, values=None):
         cov = _cov_block(result, coef_names) if result.sigmas is not None else np.zeros((coef.size, coef.size))
         s = sensor_of(flat)
         t_range = tuple(float(v) for v in (rg[s] if s is not None else rg.mean(axis=0)))
-        out[flat] = SubrangePoint(name or result.source, float(result.t_ref_degC), coef, cov, t_range)
+        t_at = float(result.t_ref_degC)
+        if coef.size == 1 and family(parameter)[1] and s is not None and sensor_ranges is not None:
+            # a value without its temperature coefficients (a constant-temperature step) is the element at its
+            # own sensor's temperature, which sits away from the experiment's T_ref (the mean of all six)
+            t_at = 0.5 * (t_range[0] + t_range[1])
+        out[flat] = SubrangePoint(name or result.source, t_at, coef, cov, t_range)
     return out
 
 
@@ -93,7 +102,7 @@ def stitch(results, *, names=None, sensor_ranges=None, solver=None):
         if sensor_ranges is not None and sensor_ranges[i] is not None:
             ranges.append(np.asarray(sensor_ranges[i], dtype=float).reshape(6, 2))
         else:
-            ranges.append(np.tile(np.asarray(r.temperature_range_degC, dtype=float), (6, 1)))
+            ranges.append(None)
     points = {}
     for r, nm, rg in zip(results, names, ranges):
         if r.sigmas is None:

@@ -14,8 +14,9 @@ from graph_calib.errors import InputError
 ROOT = Path(__file__).resolve().parents[2]
 #: The commands of cli.md.
 SPEC_COMMANDS = ("simulate", "import", "calibrate", "campaign", "diagnose", "demo")
-#: The project's commands beyond cli.md's (docs/compensation.md; predict and design: docs/design.md; crossval: docs/crossval.md).
-FURTHER_COMMANDS = ("apply", "export", "predict", "design", "crossval")
+#: The project's commands beyond cli.md's (docs/compensation.md; predict, design and compare: docs/design.md;
+#: crossval: docs/crossval.md).
+FURTHER_COMMANDS = ("apply", "export", "predict", "design", "compare", "crossval")
 
 
 def test_every_command_of_cli_md_has_a_module():

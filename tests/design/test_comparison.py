@@ -1,0 +1,205 @@
+"""Campaign procedures and their comparison: files, durations, the equal-accuracy interpolation, a small
+predicted comparison (noise falls with length, the model error of each temperature model), the command's
+refusals."""
+
+import json
+
+import numpy as np
+import pytest
+
+from graph_calib.cli import main
+from graph_calib.design.comparison import TruthFamily, compare, equal_accuracy_duration
+from graph_calib.design.procedures import parse_procedure, read_procedure
+from graph_calib.errors import InputError
+
+STEPS = """format = "graph-calib-procedure"
+version = 1
+name = "st"
+kind = "steps"
+temperatures_degC = [0.0, 13.333333333333334, 26.666666666666668, 40.0]
+soak_s = 3600.0
+lengths_s = [600.0, 1200.0]
+"""
+RAMP = """format = "graph-calib-procedure"
+version = 1
+name = "rp"
+kind = "ramp"
+subranges_degC = [[0.0, 20.0], [20.0, 40.0]]
+span_degC = 16.0
+lengths_s = [600.0, 1200.0]
+"""
+
+
+def _write(tmp_path, name, text):
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def test_shipped_procedures_read():
+    for n in ("steps", "ramp", "ramp-full", "designed"):
+        p = read_procedure(f"data/programs/procedure-{n}.toml")
+        assert p.n_experiments in (6, 7)
+    st = read_procedure("data/programs/procedure-steps.toml")
+    assert st.duration_s(3600.0) == 7 * 3600.0 + 6 * 9000.0
+    assert st.duration_s(3600.0, soak_s=3600.0) == 13 * 3600.0
+    rp = read_procedure("data/programs/procedure-ramp.toml")
+    assert rp.duration_s(3600.0) == 6 * 3600.0 and rp.exclude == ()
+    assert "accel.bias_tc" in st.exclude
+
+
+@pytest.mark.parametrize("edit, key, words", [
+    (("graph-calib-procedure", "graph-calib-program"), "format", "not a procedure"),
+    (("version = 1", "version = 2"), "version", "not supported"),
+    (('kind = "steps"', 'kind = "stairs"'), "kind", "must be one of"),
+    (("soak_s = 3600.0", "soak_s = -1.0"), "soak_s", "non-negative"),
+    (("soak_s = 3600.0", "soak = 3600.0"), "soak", "unknown key"),
+    (("lengths_s = [600.0, 1200.0]", "lengths_s = [100.0]"), "lengths_s", "at least 300 s"),
+    (("lengths_s = [600.0, 1200.0]", "lengths_s = [600.0, -1.0]"), "lengths_s[1]", "positive"),
+    (("temperatures_degC = [0.0, 13.333333333333334, 26.666666666666668, 40.0]", "temperatures_degC = [0.0]"),
+     "temperatures_degC", "at least two"),
+])
+def test_bad_step_procedure_refused(tmp_path, edit, key, words):
+    path = _write(tmp_path, "p.toml", STEPS.replace(*edit))
+    with pytest.raises(InputError) as info:
+        read_procedure(path)
+    msg = str(info.value)
+    assert words in msg and key in msg and "p.toml" in msg
+
+
+@pytest.mark.parametrize("edit, key, words", [
+    (("[[0.0, 20.0], [20.0, 40.0]]", "[[0.0, 20.0], [30.0, 20.0]]"), "subranges_degC[1]", "low < high"),
+    (("span_degC = 16.0", "span_degC = 25.0"), "span_degC", "narrowest subrange"),
+    (('kind = "ramp"', 'kind = "program"'), "lengths_s", "unknown key"),
+])
+def test_bad_ramp_procedure_refused(tmp_path, edit, key, words):
+    path = _write(tmp_path, "r.toml", RAMP.replace(*edit))
+    with pytest.raises(InputError) as info:
+        read_procedure(path)
+    msg = str(info.value)
+    assert words in msg and key in msg and "r.toml" in msg
+
+
+def test_program_procedure_needs_its_program(tmp_path):
+    doc = {"format": "graph-calib-procedure", "version": 1, "kind": "program", "subranges_degC": [[0.0, 10.0]]}
+    with pytest.raises(InputError, match="program: must name a bench program"):
+        parse_procedure(doc, path=tmp_path / "x.toml")
+    doc["program"] = "missing.toml"
+    with pytest.raises(InputError, match="missing.toml: no such file"):
+        parse_procedure(doc, path=tmp_path / "x.toml")
+
+
+def test_equal_accuracy_duration_on_a_power_law():
+    d = np.array([1.0, 2.0, 4.0, 8.0])
+    v = 3.0 / np.sqrt(d)
+    dur, status = equal_accuracy_duration(3.0 / np.sqrt(3.0), d, v)
+    assert status == "interpolated" and abs(dur - 3.0) < 1e-12
+    assert equal_accuracy_duration(5.0, d, v) == (1.0, "below")
+    dur, status = equal_accuracy_duration(3.0 / np.sqrt(20.0), d, v)
+    assert status == "extrapolated" and abs(dur - 20.0) < 1e-9
+    assert equal_accuracy_duration(3.0 / np.sqrt(100.0), d, v) == (None, "not reached")
+
+
+def test_truth_family_sizes():
+    t = TruthFamily().draw(np.random.default_rng(0), 200, center_degC=20.0, half_width_degC=30.0)
+    c = t["accel.scale.x"]
+    end = np.abs(c[:, 1] * 30.0**2) + 0.0
+    assert 1e-6 <= end.min() and end.max() <= 4e-6            # the quadratic term's size at the range's end
+    assert set(np.sign(t["gyro.bias.y"][:, 2])) == {-1.0, 1.0}
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory):
+    d = tmp_path_factory.mktemp("cmp")
+    procs = [read_procedure(_write(d, "st.toml", STEPS)), read_procedure(_write(d, "rp.toml", RAMP))]
+    return compare(procs, range_degC=(0.0, 40.0), draws=6, seed=3)
+
+
+def test_predicted_noise_falls_with_length(small):
+    for name in ("st", "rp"):
+        a, b = small.points[name]
+        for f in ("gyro.bias", "accel.bias"):
+            assert b.metrics[f]["largest_sigma"] < 0.85 * a.metrics[f]["largest_sigma"]
+
+
+def test_model_error_of_each_temperature_model(small):
+    # four steps fix the cubic exactly: no model error; a linear model per 20 degC subrange leaves one
+    for pt in small.points["st"]:
+        for f in ("gyro.bias", "accel.bias", "gyro.scale", "accel.scale"):
+            assert pt.metrics[f]["model_error_largest"] < 1e-6 * pt.metrics[f]["largest_sigma"] + 1e-15
+    rp = small.points["rp"][0].metrics["accel.bias"]
+    assert rp["model_error_largest"] > 0.5e-6                    # m/s^2: curvature inside 20 degC subranges
+    assert rp["largest_total"] >= rp["largest_sigma"]
+
+
+def test_ratios_follow_the_durations(small):
+    rows = small.ratios["rp"]["3600"]["gyro.bias"]["rms_sigma"]
+    for r in rows:
+        if r["ratio"] is not None:
+            assert abs(r["ratio"] - r["duration_s"] / r["reference_duration_s"]) < 1e-12
+    doc = small.to_dict()
+    json.dumps(doc)
+    assert doc["campaigns"]["st"][0]["duration_s"]["3600"] == 4 * 600.0 + 3 * 3600.0
+
+
+@pytest.mark.parametrize("argv, key, words", [
+    (["P1"], "PROCEDURE.toml", "at least two procedures"),
+    (["P1", "P2", "--soak-h", "-1"], "--soak-h", "non-negative"),
+    (["P1", "P2", "--range-degc", "50", "-10"], "--range-degc", "LOW < HIGH"),
+    (["P1", "P2", "--draws", "0"], "--draws", "at least 1"),
+    (["P1", "P2", "--simulate", "3"], "--simulate-at", "name the campaigns"),
+    (["P1", "P2", "--simulate", "3", "--simulate-at", "st"], "--simulate-at", "NAME:HOURS"),
+    (["P1", "P2", "--simulate", "3", "--simulate-at", "xx:0.25"], "--simulate-at", "no procedure named 'xx'"),
+    (["P1", "P2", "--simulate", "3", "--simulate-at", "st:0.3"], "--simulate-at", "not one of its lengths"),
+    (["P1", "P1"], "PROCEDURE.toml", "names must be unique"),
+])
+def test_compare_command_refuses_bad_input(tmp_path, capsys, argv, key, words):
+    p1, p2 = _write(tmp_path, "st.toml", STEPS), _write(tmp_path, "rp.toml", RAMP)
+    out = tmp_path / "out"
+    args = [{"P1": str(p1), "P2": str(p2)}.get(a, a) for a in argv]
+    assert main(["compare", *args, "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert key in err and words in err and not out.exists()
+
+
+def test_report_and_study_page(small, tmp_path):
+    from graph_calib.reports.comparison_report import comparison_report_html
+    from graph_calib.reports.comparison_study import comparison_markdown
+
+    doc = small.to_dict()
+    html = comparison_report_html(doc, small)
+    assert html.count("<img") == 4 and "Equal-accuracy ratios" in html
+    page = tmp_path / "study.md"
+    text = comparison_markdown(doc, small, path=page, command="graph-calib compare st.toml rp.toml", closing="## Notes")
+    assert page.read_text() == text and text.rstrip().endswith("## Notes")
+    for name in ("study_accuracy.png", "study_accuracy_total.png", "study_ratios.png", "study_curves.png"):
+        assert (tmp_path / "figures" / name).stat().st_size > 1000
+    # every soak and family says where the candidate needs at most half and where not
+    assert sum("rp, soak 1 h, gyro.bias:" in line for line in text.splitlines()) == 2
+
+
+def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tmp_path):
+    from graph_calib.design import comparison_check as cc
+
+    def fake(procedure, length_s, **kw):
+        pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
+        scale = 1.0 if procedure.name == "st" else 1.6            # the candidate's simulated sigma far off
+        out = {f: {"largest_sigma": pt.metrics[f]["largest_sigma"] * scale, "sigma_axes": pt.sigma_axes[f] * scale,
+                   "rms_sigma": pt.metrics[f]["rms_sigma"] * scale, "realisations": 10} for f in pt.metrics}
+        out["failed"] = []
+        return out
+
+    monkeypatch.setattr(cc, "simulated_metrics", fake)
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
+    assert not sc["verdict"]["passed"] and sc["verdict"]["text"].startswith("verdict: FAIL: ")
+    assert "simulated ratio" in sc["verdict"]["text"]
+    def same(procedure, length_s, **kw):
+        pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
+        return {**{f: {"largest_sigma": v["largest_sigma"], "rms_sigma": v["rms_sigma"], "realisations": 10,
+                       "sigma_axes": pt.sigma_axes[f]} for f, v in pt.metrics.items()}, "failed": []}
+
+    monkeypatch.setattr(cc, "simulated_metrics", same)
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
+    assert sc["verdict"]["passed"], sc["verdict"]["text"]
+    assert all(abs(r["agreement"] - 1.0) < 1e-9 for f in ("gyro.bias", "accel.bias")
+               for rows in sc["ratios"][f].values() for r in rows if r["agreement"] is not None)
