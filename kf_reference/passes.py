@@ -34,7 +34,7 @@ from graph_calib.sensors.params import Layout
 from graph_calib.navigation.rotations import exp_so3, log_so3
 from graph_calib.solvers.acceleration import Anderson
 from graph_calib.solvers.heading import search_heading
-from graph_calib.solvers.reduced import cost_by_key
+from graph_calib.model.normal_equations import cost_by_key
 from graph_calib.solvers.interface import ProgressEvent
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT

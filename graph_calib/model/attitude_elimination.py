@@ -20,9 +20,8 @@ attitudes' share of any step ``dx`` is ``da = -(H_aa + lam I)^-1 (g_a + H_ax dx)
   be positive definite in floating point, a sparse LU does the same;
 - :class:`AttitudeSolve` keeps what the back-substitution needs.
 
-Users: the factor graph's and the joint campaign solver's iterations (:mod:`graph_calib.solvers.reduced`: one
-reduced factor per experiment, damped by ``lam``) and the closed loop's score tests and grown-model steps
-(:mod:`graph_calib.diagnosis.reduced_system`, undamped, with driver columns appended).
+Users: every solve, score test and prediction, through the one builder of the normal equations
+(:mod:`graph_calib.model.normal_equations`).
 """
 
 from __future__ import annotations

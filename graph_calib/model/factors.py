@@ -390,7 +390,8 @@ def attitude_prior(R0, *, R_prior, sigma):
 def calibration_prior(x, *, mean, sigma):
     """The prior of the calibration vector: ``(x - mean) / sigma``, Jacobian ``diag(1 / sigma)``."""
     sigma = np.asarray(sigma, dtype=float)
-    return PriorResidual(r=(np.asarray(x, dtype=float) - mean) / sigma, H=np.diag(1.0 / sigma), sigma=sigma)
+    inv = 1.0 / sigma                         # as GTSAM's diagonal noise model whitens: by 1 / sigma
+    return PriorResidual(r=(np.asarray(x, dtype=float) - mean) * inv, H=np.diag(inv), sigma=sigma)
 
 
 def sum_by_key(target, key, vals):
