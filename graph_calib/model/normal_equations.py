@@ -92,6 +92,18 @@ class LinearSystem:
         return att.step(np.zeros(0))
 
 
+def add_prior(H, g, prior, cols):
+    """Add a diagonal prior residual (:class:`graph_calib.model.factors.PriorResidual`) on the columns ``cols``
+    to an information ``H`` and a gradient ``g`` (None: information only), in place: ``H^T H`` and
+    ``H^T r`` of its rows ``cols``.  Returns its cost there."""
+    cols = np.asarray(cols, dtype=np.int64)
+    h = np.diag(prior.H)[cols]
+    H[cols, cols] += h**2
+    if g is not None:
+        g[cols] += h * prior.r[cols]
+    return 0.5 * float(np.sum(prior.r[cols] ** 2))
+
+
 def retract(R, dR):
     """``R_k Exp(dR_k)`` for every keyframe (GTSAM's ``Rot3`` retraction), (K+1, 3, 3)."""
     return R @ exp_so3(dR)
@@ -157,11 +169,7 @@ def linearise(model, preint, R, x, *, R_prior, M=None, n_extra=0, robust=None, r
                 on_kind(kind, res, sl, r, A, B, X, np.arange(P) if cols is None else cols, ne)
         del res
     if prior is not None:
-        pr, pcols = prior
-        h = np.diag(pr.H)[pcols]
-        ne.H_xx[pcols, pcols] += h**2
-        ne.g_x[pcols] += h * pr.r[pcols]
-        cost += 0.5 * float(np.sum(pr.r[pcols] ** 2))
+        cost += add_prior(ne.H_xx, ne.g_x, *prior)
     n = R.shape[0]
     H_ax, H_xx, g_x = ne.H_ax.reshape(3 * n, -1), ne.H_xx, ne.g_x
     if M is not None:
@@ -205,4 +213,4 @@ def cost_by_key(model, preint, R, x, *, R_prior, robust=None, robust_k=3.0):
     return out
 
 
-__all__ = ["LinearSystem", "linearise", "cost", "cost_by_key", "retract", "CHUNK"]
+__all__ = ["LinearSystem", "linearise", "add_prior", "cost", "cost_by_key", "retract", "CHUNK"]

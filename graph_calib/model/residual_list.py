@@ -95,8 +95,8 @@ def whiten(kind, res, *, robust=None, robust_k=3.0):
     rows in the normal equations: ``1 / sigma`` times the square root of the robust weight of its group;
     ``cost`` is half the squared whitened norm, or the sum of the groups' robust losses.
     """
-    inv_sigma = 1.0 / res.sigma
-    w = res.r / res.sigma
+    inv_sigma = 1.0 / res.sigma               # the one place a kind's noise enters (a variance factor: here)
+    w = res.whitened()
     group, k = kind.robust_groups(res, robust=robust, robust_k=robust_k)
     if k is None:
         return 0.5 * float(np.sum(w * w)), w, inv_sigma
@@ -109,7 +109,7 @@ def whiten(kind, res, *, robust=None, robust_k=3.0):
 def cost_by_key(kind, res, n_keys, *, robust=None, robust_k=3.0):
     """A kind's cost split by keyframe, (n_keys,): each factor's (a robust group's loss) on its first keyframe."""
     out = np.zeros(n_keys)
-    w = res.r / res.sigma
+    w = res.whitened()
     squares = np.sum(w * w, axis=1)
     group, k = kind.robust_groups(res, robust=robust, robust_k=robust_k)
     if k is None:
