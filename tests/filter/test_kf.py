@@ -355,3 +355,35 @@ def test_linearisation_cost_is_the_batch_cost():
     ref = _batch_cost(model, R, x, preint=preint, R_prior=R_prior, x_prior=x0, x_sigma=sig)
     assert ref > 10.0
     assert lin.cost == pytest.approx(ref, rel=1e-10)
+
+
+def test_the_filter_solves_a_turntable_record_with_the_batch_solvers_unusable(monkeypatch):
+    """The filter is the independent reference: with the factor graph, the joint solver and the least-squares
+    driver they share made to raise, the registry's ``sqrt-kf`` still calibrates a turntable record from
+    its own start (the prior calibration, its own attitude initialisation), not from a batch solution."""
+    from graph_calib.options import CalibrationOptions
+    from graph_calib.records.problem import build_problem
+    from graph_calib.solvers import factor_graph, least_squares
+    from graph_calib.solvers.joint import solver as joint_solver
+    from graph_calib.solvers.registry import solve
+
+    def unusable(*args, **kwargs):
+        raise AssertionError("a batch solver was used")
+
+    for owner, name in ((least_squares.LeastSquares, "solve"), (factor_graph, "solve"),
+                        (factor_graph.FactorGraphSolver, "solve"), (joint_solver, "solve_joint"),
+                        (joint_solver.JointSolver, "solve"), (joint_solver.JointSolver, "solve_campaign")):
+        monkeypatch.setattr(owner, name, unusable)
+    with pytest.raises(AssertionError, match="batch solver"):
+        solve("factor-graph", build_problem(turntable_experiment(layout=DECL, x=np.zeros(DECL.size))[0]),
+              options=CalibrationOptions())
+    rng = np.random.default_rng(41)
+    x_true = _truth(rng, NAV, 0.3)
+    exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, noise=(NAV.gyro_noise, NAV.accel_noise,
+                                                                           NAV.encoder_noise))
+    costs = []
+    out = solve("sqrt-kf", build_problem(exp), options=CalibrationOptions(), progress=lambda ev: costs.append(ev.cost))
+    assert out.converged and out.iterations >= 2
+    assert costs[0] > 10.0 * costs[-1]          # from the prior calibration, not from a solution
+    z = (out.x - out.layout.embed(DECL, x_true)) / np.sqrt(np.diag(out.covariance))
+    assert np.abs(z).max() < 4.0
