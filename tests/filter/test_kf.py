@@ -387,3 +387,26 @@ def test_the_filter_solves_a_turntable_record_with_the_batch_solvers_unusable(mo
     assert costs[0] > 10.0 * costs[-1]          # from the prior calibration, not from a solution
     z = (out.x - out.layout.embed(DECL, x_true)) / np.sqrt(np.diag(out.covariance))
     assert np.abs(z).max() < 4.0
+
+
+def test_the_filter_is_converged_only_at_the_batch_cost(monkeypatch):
+    """On the measured MPU-6050 session (consumer grade) the step rule alone (every element moved by less
+    than 1e-3 sigma) stops the filter above the batch minimum's cost; judged by the cost as the factor graph
+    is, the filter goes on to the graph's cost before it says converged."""
+    from conftest import REAL_DATA, require_real
+
+    from graph_calib.importers.mpu6050 import import_mpu6050
+    from graph_calib.options import CalibrationOptions
+    from graph_calib.records.problem import build_problem
+    from graph_calib.solvers import factor_graph
+    from kf_reference import passes
+
+    exp = import_mpu6050(require_real(REAL_DATA / "mpu6050_uncuyo" / "example_data_calibration.csv"))
+    problem = build_problem(exp, options=CalibrationOptions(model=ModelOptions(grade="consumer")))
+    graph_cost = factor_graph.solve(problem.model, q_nb0=problem.q_nb0).cost_history[-1]
+    fr = kf_reference.calibrate(problem.model, q_nb0=problem.q_nb0)
+    assert fr.converged and fr.passes[-1].cost <= graph_cost * (1.0 + 1e-9), (fr.passes[-1].cost, graph_cost)
+    monkeypatch.setattr(passes, "COST_REL_TOL", np.inf)          # the step rule alone
+    step_only = kf_reference.calibrate(problem.model, q_nb0=problem.q_nb0)
+    assert step_only.converged and step_only.passes[-1].cost > graph_cost * (1.0 + 1e-8)
+    assert step_only.n_passes < fr.n_passes
