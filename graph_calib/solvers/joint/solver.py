@@ -325,7 +325,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
         heading = ws is None and m.record.reading_t.size == 0 and m.segment_keys.size == 1
         exps.append(Experiment(model=m, R=R, R_prior=R_prior, preint=preint, keys=keys, M=M_u, search_heading=heading))
     lsq = LeastSquares(exps, theta_keys=theta_keys, prior_mean=np.zeros(sig_theta.size),
-                       prior_sigma=np.ones(sig_theta.size), options=options, solver=JOINT)
+                       prior_sigma=np.ones(sig_theta.size), options=options, solver=JOINT, exact_at_solution=False)
     # attitudes dead-reckoned with a warm calibration (every experiment's own solution) stay within the
     # alignment's error of the truth: no pre-fit needed there
     sol = lsq.solve(u0, prefit=not have_attitudes and not all(s is not None for s in starts), progress=progress)
