@@ -30,11 +30,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from graph_calib.options import GraphOptions
 from graph_calib.sensors.params import Layout
 from graph_calib.navigation.rotations import exp_so3, log_so3
 from graph_calib.solvers.acceleration import Anderson
 from graph_calib.solvers.heading import search_heading
-from graph_calib.solvers.reduced import cost_by_key
+from graph_calib.model.normal_equations import cost_by_key
+from graph_calib.model.residual_list import FACTOR_KINDS, MEASUREMENT_KINDS, residual_list, whiten
 from graph_calib.solvers.interface import ProgressEvent
 from kf_reference import sqrt_kf
 from kf_reference.sqrt_kf import ATT
@@ -42,9 +44,12 @@ from kf_reference.sqrt_kf import ATT
 #: The name the filter is registered under (:mod:`graph_calib.solvers.registry`).
 SOLVER_NAME = "sqrt-kf"
 
-#: Kind codes of the innovation series.
-GRAVITY, ENCODER = 0, 1
-KIND_NAMES = ("gravity", "encoder")
+#: The process (the factors that tie consecutive attitudes: the time update) and the measurement kinds of
+#: the model's residual list (the filter's updates), their index the kind code of the innovation series.
+PROCESS = next(k for k in FACTOR_KINDS if k.name not in MEASUREMENT_KINDS)
+MEASUREMENTS = tuple(k for k in FACTOR_KINDS if k.name in MEASUREMENT_KINDS)
+KIND_NAMES = tuple(k.name for k in MEASUREMENTS)
+GRAVITY, ENCODER = KIND_NAMES.index("gravity"), KIND_NAMES.index("encoder")
 
 
 @dataclass(frozen=True)
@@ -182,10 +187,7 @@ def _transition(rot, *, K, restarts=()):
     P = rot.H_x.shape[2]
     B, A, G, c = np.zeros((K, 3, 3)), np.zeros((K, 3, P)), np.zeros((K, 3, 3)), np.zeros((K, 3))
     k = rot.key
-    if rot.sigma.ndim == 2:
-        G[k] = N_inv * rot.sigma[:, None, :]
-    else:
-        G[k] = N_inv @ np.linalg.cholesky(rot.sigma)
+    G[k] = N_inv * rot.sigma[:, None, :]
     B[k] = -N_inv @ rot.H_R
     A[k] = -N_inv @ rot.H_x
     c[k] = -np.einsum("kij,kj->ki", N_inv, rot.r)
@@ -195,29 +197,30 @@ def _transition(rot, *, K, restarts=()):
     return B, A, G, c
 
 
-def _measurements(model, grav, enc):
+def _measurements(model, factors):
     """Scalar measurement rows sorted by keyframe: ``key, H, z, sigma, t, kind, axis``.
 
-    Within a keyframe the gravity rows come first, then the encoder rows in time order.
+    The measurement kinds of the model's residual list (every kind but the process, the rotation
+    factors), whitened once (:func:`graph_calib.model.residual_list.whiten`); within a keyframe in the
+    list's order (gravity, then the encoder readings in time order).
     """
-    parts = ((grav, GRAVITY, model.t_key[grav.key]), (enc, ENCODER, model.record.reading_t))
-    key = np.concatenate([np.repeat(res.key, 3) for res, _, _ in parts])
+    parts = [(factors[k.name], code, k.times(model), k) for code, k in enumerate(MEASUREMENTS)]
+    key = np.concatenate([np.repeat(res.key, 3) for res, _, _, _ in parts])
     dest = np.empty(key.size, dtype=np.int64)
     dest[np.argsort(key, kind="stable")] = np.arange(key.size)        # row of each factor component
-    m, n = key.size, 3 + grav.H_x.shape[2]
+    m, n = key.size, 3 + parts[0][0].H_x.shape[2]
     H, z, sig, t_out = np.empty((m, n)), np.empty(m), np.empty(m), np.empty(m)
     kind_out, axis = np.empty(m, dtype=np.int64), np.empty(m, dtype=np.int64)
     start = 0
-    for res, kind, t in parts:
-        r, H_R, _, H_x = res.whitened_system()
-        sg = np.ones(r.shape)
-        F3 = 3 * r.shape[0]
+    for res, kind, t, k in parts:
+        _, _, s = whiten(k, res)
+        F3 = 3 * res.r.shape[0]
         d = dest[start:start + F3]
         start += F3
-        H[d, :3] = H_R.reshape(F3, 3)
-        H[d, 3:] = H_x.reshape(F3, n - 3)
-        z[d] = -r.reshape(-1)
-        sig[d] = sg.reshape(-1)
+        H[d, :3] = (res.H_R * s[:, :, None]).reshape(F3, 3)
+        H[d, 3:] = (res.H_x * s[:, :, None]).reshape(F3, n - 3)
+        z[d] = -(res.r * s).reshape(-1)
+        sig[d] = 1.0
         t_out[d] = np.repeat(t, 3)
         kind_out[d] = kind
         axis[d] = np.tile(np.arange(3), F3 // 3)
@@ -262,13 +265,12 @@ def _linearise(model, preint, R_lin, x_lin, *, R_prior):
 
     ``R_prior`` (S, 3, 3): the segments' alignments (:meth:`CalibrationModel.segment_priors`).
     """
-    rot = model.rotation_factors(R_lin, preint, x_lin)
-    grav = model.gravity_factors(R_lin, preint, x_lin)
-    enc = model.encoder_factors(R_lin, preint, x_lin)
+    factors = residual_list(model, R_lin, preint, x_lin)
+    rot = factors[PROCESS.name]
     att_priors = model.attitude_priors(R_lin, R_priors=R_prior)
     restarts = [(k - 1, *_prior_state(pr)) for k, pr in att_priors[1:]]
     B, A, G, c = _transition(rot, K=model.n_keyframes, restarts=restarts)
-    key, H, z, sig, t, kind, axis = _measurements(model, grav, enc)
+    key, H, z, sig, t, kind, axis = _measurements(model, factors)
     lo = np.searchsorted(key, np.arange(model.n_keyframes + 2)).astype(np.int64)
     CAL = sqrt_kf.cal_slice(x_lin.size)
     att_prior = att_priors[0][1]
@@ -277,7 +279,7 @@ def _linearise(model, preint, R_lin, x_lin, *, R_prior):
     Ut0 = np.zeros((s0.size, s0.size))
     s0[ATT], Ut0[ATT, ATT] = _prior_state(att_prior)
     s0[CAL], Ut0[CAL, CAL] = _prior_state(cal_prior)
-    cost = (float(np.sum(rot.whitened() ** 2)) + float(np.sum((z / sig) ** 2))
+    cost = (2.0 * whiten(PROCESS, rot)[0] + float(np.sum((z / sig) ** 2))
             + 2.0 * (cal_prior.cost + sum(pr.cost for _, pr in att_priors)))
     return _Linearised(B=B, A=A, G=G, c=c, H=H, z=z, sigma=sig, lo=lo, t=t, kind=kind, axis=axis, s0=s0, Ut0=Ut0,
                        cost=cost)
@@ -409,6 +411,11 @@ def initial_attitudes(model, *, q_nb0, preint=None, max_iterations=10, tol_rad=1
 # ---------------------------------------------------------------------------
 
 
+#: A pass converges only when the step that led to its point lowered the batch cost (the factor graph's
+#: objective) by less than this fraction of it: the factor graph's own stopping rule
+#: (:attr:`graph_calib.options.GraphOptions.rel_tol`), so that a filter stopped above the graph's cost is
+#: not called converged.
+COST_REL_TOL = GraphOptions().rel_tol
 #: Halvings of a pass's step before it is taken as it is.
 MAX_HALVINGS = 8
 #: The passes are mixed (Anderson, :mod:`graph_calib.solvers.acceleration`) once a pass moves every
@@ -499,6 +506,7 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
     tau = 1.0
     mixing = _Mixing()
     mixed = False        # whether the current linearisation point is a mixed (or turned) one
+    prev_cost = None     # the batch cost at the previous pass's linearisation point
     # no table readings: the heading is held by the Earth rate alone; searched once the calibration settles
     # (one segment only: graph_calib.solvers.heading)
     heading_pending = initial is None and model.record.reading_t.size == 0 and model.segment_keys.size == 1
@@ -548,7 +556,11 @@ def calibrate(model, *, q_nb0, max_passes=500, x_tol=1e-3, attitude_tol=1e-2, pr
         tau = 1.0
         x_gn = x_lin + p.dx
         R_gn = R_lin @ exp_so3(p.delta_smoothed)
-        if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol:
+        # converged as the factor graph judges it: the step is small, and the step that led here lowered
+        # the batch cost by less than COST_REL_TOL of it (a point above the minimum's cost is not one)
+        settled = prev_cost is not None and prev_cost - info.cost < COST_REL_TOL * prev_cost
+        prev_cost = info.cost
+        if info.max_dx_sigma < x_tol and info.max_attitude_correction_sigma < attitude_tol and settled:
             x_lin, R_lin = x_gn, R_gn        # the plain step from a point it certifies
             converged = True
             break

@@ -25,6 +25,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from graph_calib.calibrate import CalibrationOptions, build_problem
+from graph_calib.model.residual_list import residual_list
 from graph_calib.navigation.rotations import quat_to_dcm
 from graph_calib.simulation import simulate
 
@@ -35,9 +36,10 @@ def _system(model, R, x, q_nb0):
     na = 3 * (K + 1)
     pre = model.preintegrate(x)
     rows, cols, vals, nrow, enc = [], [], [], 0, None
-    for kind, res in (("rotation", model.rotation_factors(R, pre, x)), ("gravity", model.gravity_factors(R, pre, x)),
-                      ("encoder", model.encoder_factors(R, pre, x))):
-        _, HR, HRn, Hx = res.whitened_system()
+    for kind, res in residual_list(model, R, pre, x).items():
+        s = 1.0 / res.sigma[:, :, None]
+        HR, Hx = res.H_R * s, res.H_x * s
+        HRn = None if res.H_R_next is None else res.H_R_next * s
         F = HR.shape[0]
         rr = nrow + np.arange(3 * F).reshape(F, 3)
         kc = 3 * res.key[:, None] + np.arange(3)[None, :]

@@ -8,9 +8,9 @@ predicted from the *motion*, the temperatures and the valid table readings alone
 2. The factors are linearised at the **nominal calibration** ``x = 0`` and the keyframe attitudes
    dead-reckoned from the alignment with it (:meth:`CalibrationModel.propagate`).  Nothing is
    estimated: no noise is simulated and no solver runs.
-3. :func:`graph_calib.diagnosis.reduced_system.linearise` (the score tests' linearisation, the one copy
-   of the Gauss-Newton system) forms ``H = J^T J + priors`` of every factor kind and eliminates the
-   attitudes by their Schur complement, as the factor graph's marginal covariance does.  The reduced
+3. :func:`graph_calib.model.normal_equations.linearise` (the one builder of the Gauss-Newton system, the
+   solvers' and the score tests') forms ``H = J^T J + priors`` of every factor kind and eliminates the
+   attitudes by their Schur complement, as the solvers' covariance does.  The reduced
    information ``A`` in the calibration columns gives the predicted covariance ``Sigma = A^{-1}``.
 
 Only the Jacobians enter ``A``.  They depend on the calibration and the attitudes only to first order
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.compensation.calibration import triad_errors
-from graph_calib.diagnosis.reduced_system import linearise
+from graph_calib.model.normal_equations import linearise
 from graph_calib.records.experiment import Result
 from graph_calib.sensors.params import split_element_name
 from graph_calib.navigation.rotations import quat_to_dcm
@@ -147,8 +147,9 @@ def reduced_information(problem):
     x0 = model.layout.zeros()
     pre = model.preintegrate(x0)
     R = model.propagate(quat_to_dcm(problem.q_nb0), pre, x0)
-    rs, _ = linearise(model, R, x0, q_nb0=problem.q_nb0, null_names=model.layout.names, drivers=False, pre=pre)
-    return rs.A
+    system = linearise(model, pre, R, x0, R_prior=model.segment_priors(problem.q_nb0),
+                       prior=(model.calibration_prior(x0), np.arange(x0.size)), touched_columns=True)
+    return system.reduce(0.0, definite=False)[0]
 
 
 def error_jacobians(layout, windows, t_ref_degC):

@@ -10,20 +10,23 @@ attitudes are eliminated (block-tridiagonal: banded Cholesky,
 the :class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
 driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended; a driver column is
 its bias column times each factor's mean of the series, accumulated without forming it
-(:func:`_driver_blocks`).  The score tests (:mod:`graph_calib.diagnosis.score`) work on
-it; :meth:`ReducedSystem.gauss_newton_step` gives the step of a grown model from it.
+(:func:`_driver_blocks`).  The normal equations are the model's one builder
+(:func:`graph_calib.model.normal_equations.linearise`, the solvers' too).  The score tests
+(:mod:`graph_calib.diagnosis.score`) work on it; :meth:`ReducedSystem.gauss_newton_step` gives the step of a grown model from it.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.linalg as sla
 
 from graph_calib.diagnosis.drivers import SENSOR_AXES, TIME_SEGMENTS, DriverSums
-from graph_calib.model.attitude_elimination import AttitudeSolve, NormalEquations
+from graph_calib.model.attitude_elimination import AttitudeSolve
+from graph_calib.model.factors import PriorResidual
+from graph_calib.model.normal_equations import add_prior, linearise as build
 from graph_calib.sensors.params import Layout
 
 
@@ -56,9 +59,9 @@ class ReducedSystem:
         Wall time of :func:`linearise`.
     driver_means : ndarray (K, D) or None
         Keyframe means of the driver series (None without the drivers).
-    prior_h, prior_r : ndarray (layout.size,) or None
-        Diagonal of the calibration prior's whitening and its whitened residual at the linearisation
-        point, every calibration column (for :meth:`gauss_newton_step`).
+    prior : PriorResidual or None
+        The calibration prior at the linearisation point, every calibration column (for
+        :meth:`gauss_newton_step`).
     attitudes : AttitudeSolve or None
         What the elimination leaves to recover the attitudes' step (for :meth:`gauss_newton_step`).
     factors : dict or None
@@ -77,8 +80,7 @@ class ReducedSystem:
     n_drivers: int
     seconds: float = 0.0
     driver_means: np.ndarray | None = None
-    prior_h: np.ndarray | None = field(default=None, repr=False)
-    prior_r: np.ndarray | None = field(default=None, repr=False)
+    prior: PriorResidual | None = field(default=None, repr=False, compare=False)
     attitudes: AttitudeSolve | None = field(default=None, repr=False, compare=False)
     factors: dict | None = field(default=None, repr=False, compare=False)
 
@@ -107,15 +109,14 @@ class ReducedSystem:
         delta : ndarray (K+1, 3)
             Step of each keyframe attitude, rad (right perturbation: ``C_nb Exp(delta)``).
         """
-        if self.attitudes is None or self.prior_h is None:
+        if self.attitudes is None or self.prior is None:
             raise ValueError("this reduced system keeps no attitude elimination (linearise(..., keep_step=True))")
         cols = np.asarray(columns, dtype=np.int64)
         A = self.A[np.ix_(cols, cols)].copy()
         b = self.b[cols].copy()
         extra = ~np.isin(cols, self.null)
-        h = self.prior_h[cols[extra]]
-        A[np.flatnonzero(extra), np.flatnonzero(extra)] += h**2
-        b[extra] += h * self.prior_r[cols[extra]]
+        sub = PriorResidual(r=self.prior.r[cols], H=np.diag(np.diag(self.prior.H)[cols]), sigma=self.prior.sigma[cols])
+        add_prior(A, b, sub, np.flatnonzero(extra))
         dxc = -sla.cho_solve(sla.cho_factor(A), b)
         dx = np.zeros(self.A.shape[0])
         dx[cols] = dxc
@@ -269,50 +270,29 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     layout = model.layout
     P = layout.size
     K = model.n_keyframes
-    na = 3 * (K + 1)
     if pre is None:
         pre = model.preintegrate(x)
-    kinds = (
-        ("rotation", model.rotation_factors(R, pre, x)),
-        ("gravity", model.gravity_factors(R, pre, x)),
-        ("encoder", model.encoder_factors(R, pre, x)),
-    )
     dlist = []
     if drivers:
         if sums is None:
             sums = DriverSums.of(model, n_segments=n_segments)
         dlist = sums.drivers
         axis_col = {}
-        for i, ax in enumerate(SENSOR_AXES):
+        for ax in SENSOR_AXES:
             triad, el = ax.split(".")
             axis_col[ax] = layout.slice(f"{triad}.bias").start + "xyz".index(el)
         d_bias = np.array([axis_col[d.axis] for d in dlist], dtype=np.int64)
         d_series = np.array([d.series for d in dlist], dtype=np.int64)
     ND = len(dlist)
-    Q = P + ND
-    # block-tridiagonal attitude information and the coupling to the calibration
-    ne = NormalEquations(K + 1, Q)
-    chi2 = 0.0
-    m_data = 0
     k0 = model.record.k0
-    for kind, res in kinds:
-        F = res.r.shape[0]
-        if F == 0:
-            continue
-        # only the columns this kind of factor touches (a rotation or encoder factor sees no accelerometer
-        # parameter, hence none of the accelerometer drivers): the columns left out are exactly zero, before
-        # and after the whitening (which mixes a factor's rows, never its columns), so only these are whitened
-        nzc = np.flatnonzero(np.any(res.H_x != 0.0, axis=(0, 1)))
-        r, A_, B_, Xc = replace(res, H_x=res.H_x[:, :, nzc]).whitened_system()
-        chi2 += float(np.sum(r**2))
-        m_data += r.size
-        key = res.key
-        ne.add_rows(key, r, A_, Xc, B=B_, cols=nzc)
-        dsel = np.flatnonzero(np.isin(d_bias, nzc)) if drivers else np.zeros(0, dtype=np.int64)
-        if dsel.size == 0:
-            continue
+
+    def add_drivers(kind, res, sl, r, A_, B_, Xc, nzc, ne):
         # the drivers on the bias axes this kind touches, from each factor's means of the series
-        hi = model.record.reading_sample + 1 if kind == "encoder" else k0[key + 1]
+        dsel = np.flatnonzero(np.isin(d_bias, nzc))
+        if dsel.size == 0:
+            return
+        key = res.key[sl]
+        hi = model.record.reading_sample[sl] + 1 if kind.name == "encoder" else k0[key + 1]
         M = sums.means(k0[key], hi)                                   # (F, series)
         bcols, bi = np.unique(d_bias[dsel], return_inverse=True)
         Hb = Xc[:, :, np.searchsorted(nzc, bcols)]                    # the bias columns (among nzc)
@@ -323,28 +303,19 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
         ne.H_xx[np.ix_(dcol, nzc)] += CD.T
         ne.g_x[dcol] += gD
         ne.H_ax[:, :, dcol] += Hax_d
-    # priors of the current model's calibration columns
+
+    # only the columns each kind of factor touches (a rotation or encoder factor sees no accelerometer
+    # parameter, hence none of the accelerometer drivers); the priors of the current model's columns
     cal_prior = model.calibration_prior(x)
-    x_sigma = cal_prior.sigma
     null_idx = np.concatenate([np.arange(P)[layout.slice(n)] for n in null_names]).astype(np.int64)
-    h = np.diag(cal_prior.H)[null_idx]
-    ne.H_xx[null_idx, null_idx] += h**2
-    ne.g_x[null_idx] += h * cal_prior.r[null_idx]
-    # attitude prior on the first keyframe (as factor_graph.build_graph)
-    # (the alignment prior: its residual at the solution is part of the current fit)
-    # (one per segment of a record cut together, /imu/segment)
-    for k, att_prior in model.attitude_priors(R, R_priors=model.segment_priors(q_nb0)):
-        ne.add_attitude_prior(k, att_prior.H, att_prior.r)
-    A, b, att = ne.eliminate()
-    dof = m_data - na - null_idx.size
+    system = build(model, pre, R, x, R_prior=model.segment_priors(q_nb0), n_extra=ND, prior=(cal_prior, null_idx),
+                   touched_columns=True, on_kind=add_drivers if drivers else None, keep_factors=keep_factors)
+    A, b, att = system.reduce(0.0, definite=False)
+    dof = system.n_residuals - 3 * (K + 1) - null_idx.size
     names = layout.element_names() + [f"driver:{i}" for i in range(ND)]
     means = sums.means(k0[:-1], k0[1:]) if drivers else None
-    kept = None
-    if keep_factors:
-        kept = {kind: replace(res, H_R=None, H_R_next=None, H_x=None) for kind, res in kinds}
-    rs = ReducedSystem(columns=names, A=A, b=b, null=null_idx, layout=layout, prior_sigma=x_sigma,
-                       chi2=chi2, dof=int(dof), n_drivers=ND, seconds=time.perf_counter() - t0,
-                       driver_means=means, prior_h=np.diag(cal_prior.H).copy(), prior_r=np.asarray(cal_prior.r).copy(),
-                       attitudes=att if keep_step else None, factors=kept)
+    rs = ReducedSystem(columns=names, A=A, b=b, null=null_idx, layout=layout, prior_sigma=cal_prior.sigma,
+                       chi2=system.chi2, dof=int(dof), n_drivers=ND, seconds=time.perf_counter() - t0,
+                       driver_means=means, prior=cal_prior, attitudes=att if keep_step else None,
+                       factors=system.factors)
     return rs, dlist
-

@@ -16,6 +16,7 @@ from scipy import stats
 
 from graph_calib.sensors import effects
 from graph_calib.diagnosis.drivers import keyframe_context
+from graph_calib.model.residual_list import FACTOR_KINDS, residual_list
 
 
 def factor_residuals(model, R, x, *, pre=None, factors=None):
@@ -43,19 +44,16 @@ def factor_residuals(model, R, x, *, pre=None, factors=None):
     if factors is None:
         if pre is None:
             pre = model.preintegrate(x)
-        factors = {"rotation": model.rotation_factors(R, pre, x), "gravity": model.gravity_factors(R, pre, x),
-                   "encoder": model.encoder_factors(R, pre, x)}
+        factors = residual_list(model, R, pre, x)
     out = {}
-    rot = factors["rotation"]
-    for kind, res, t in (("rotation", rot, model.t_key[rot.key + 1]),
-                         ("gravity", factors["gravity"], model.t_key[:-1]),
-                         ("encoder", factors["encoder"], model.record.reading_t)):
+    for k in FACTOR_KINDS:
+        kind, res, t = k.name, factors[k.name], k.times(model)
         w = res.whitened()
         d = {"t": np.asarray(t, dtype=float), "key": res.key.copy(), "r": res.r.copy(), "w": w}
         if kind == "gravity":
             Rk = R[: model.n_keyframes]
             r_b = np.einsum("kji,kj->ki", Rk, res.r)
-            sig_v = res.sigma[:, 2] if res.sigma.ndim == 2 else np.sqrt(res.sigma[:, 2, 2])
+            sig_v = res.sigma[:, 2]
             d["r_body"] = r_b
             d["w_body"] = r_b / sig_v[:, None]
             d["static"] = model.record.static_key.copy()

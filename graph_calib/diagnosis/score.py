@@ -36,6 +36,8 @@ import scipy.linalg as sla
 from scipy import stats
 from scipy.special import gammaln
 
+from graph_calib.model.normal_equations import add_prior
+
 
 @dataclass(frozen=True)
 class Score:
@@ -155,6 +157,6 @@ def with_priors(rs, cols):
     A = rs.A.copy()
     cols = np.asarray([c for c in cols if c < rs.layout.size], dtype=np.int64)
     if cols.size:
-        A[cols, cols] += 1.0 / rs.prior_sigma[cols] ** 2
+        add_prior(A, None, rs.prior, cols)
     return A
 

@@ -20,9 +20,8 @@ attitudes' share of any step ``dx`` is ``da = -(H_aa + lam I)^-1 (g_a + H_ax dx)
   be positive definite in floating point, a sparse LU does the same;
 - :class:`AttitudeSolve` keeps what the back-substitution needs.
 
-Users: the factor graph's and the joint campaign solver's iterations (:mod:`graph_calib.solvers.reduced`: one
-reduced factor per experiment, damped by ``lam``) and the closed loop's score tests and grown-model steps
-(:mod:`graph_calib.diagnosis.reduced_system`, undamped, with driver columns appended).
+Users: every solve, score test and prediction, through the one builder of the normal equations
+(:mod:`graph_calib.model.normal_equations`).
 """
 
 from __future__ import annotations
@@ -50,7 +49,7 @@ def gram(X):
 class NormalEquations:
     """The normal equations of keyframe attitudes and ``n_cols`` columns, summed from whitened rows.
 
-    Attributes (summed in place; read them, or add to them, before :meth:`eliminate`)
+    Attributes (summed in place; :func:`eliminate` takes them)
     ----------
     H_aa_diag : ndarray, shape (K+1, 3, 3)
         Diagonal blocks of ``H_aa``.
@@ -101,12 +100,6 @@ class NormalEquations:
         """A prior on keyframe ``k``'s attitude: whitened Jacobian ``H`` (3, 3) and residual ``r`` (3,)."""
         self.H_aa_diag[k] += H.T @ H
         self.g_a[k] += H.T @ r
-
-    def eliminate(self, *, lam=0.0, definite=False):
-        """:func:`eliminate` of these equations."""
-        n = self.H_ax.shape[0]
-        return eliminate(self.H_aa_diag, self.H_aa_off, self.H_ax.reshape(3 * n, -1), self.g_a.reshape(-1),
-                         self.H_xx, self.g_x, lam=lam, definite=definite)
 
 
 @dataclass(frozen=True)

@@ -104,7 +104,8 @@ class Residuals:
     H_R : (F, 3, 3)      d r / d delta of that keyframe
     H_R_next : (F, 3, 3) or None   d r / d delta of keyframe key+1 (rotation factors)
     H_x : (F, 3, P)      d r / d x
-    sigma : (F, 3) or (F, 3, 3)   one sigma per component, or a full covariance per factor
+    sigma : (F, 3)       one sigma per component (a full noise covariance is turned into its principal axes
+                         by the factor itself, as the encoder factor does)
     """
 
     r: np.ndarray
@@ -115,24 +116,9 @@ class Residuals:
     sigma: np.ndarray
 
     def whitened(self):
-        """Residuals divided by their sigmas (diagonal) or by the Cholesky factor (full)."""
-        if self.sigma.ndim == 2:
-            return self.r / self.sigma
-        L = np.linalg.cholesky(self.sigma)
-        return np.linalg.solve(L, self.r[..., None])[..., 0]
-
-    def whitened_system(self):
-        """``(r, H_R, H_R_next, H_x)`` divided by the sigmas (diagonal) or by the Cholesky factor (full).
-
-        The one whitening every solver and the diagnosis use; ``H_R_next`` is None where absent.
-        """
-        if self.sigma.ndim == 2:
-            s = self.sigma
-            hn = None if self.H_R_next is None else self.H_R_next / s[:, :, None]
-            return self.r / s, self.H_R / s[:, :, None], hn, self.H_x / s[:, :, None]
-        Linv = np.linalg.inv(np.linalg.cholesky(self.sigma))
-        hn = None if self.H_R_next is None else Linv @ self.H_R_next
-        return np.einsum("fij,fj->fi", Linv, self.r), Linv @ self.H_R, hn, Linv @ self.H_x
+        """Residuals divided by their sigmas (no robust weight); the normal equations' rows:
+        :func:`graph_calib.model.residual_list.whiten`."""
+        return self.r / self.sigma
 
 
 def rotation_factors(record, R, preint, x, *, noise):
@@ -390,7 +376,8 @@ def attitude_prior(R0, *, R_prior, sigma):
 def calibration_prior(x, *, mean, sigma):
     """The prior of the calibration vector: ``(x - mean) / sigma``, Jacobian ``diag(1 / sigma)``."""
     sigma = np.asarray(sigma, dtype=float)
-    return PriorResidual(r=(np.asarray(x, dtype=float) - mean) / sigma, H=np.diag(1.0 / sigma), sigma=sigma)
+    inv = 1.0 / sigma                         # as GTSAM's diagonal noise model whitens: by 1 / sigma
+    return PriorResidual(r=(np.asarray(x, dtype=float) - mean) * inv, H=np.diag(inv), sigma=sigma)
 
 
 def sum_by_key(target, key, vals):

@@ -54,7 +54,7 @@ def search_heading(model, costs_by_key, R):
     model : graph_calib.model.CalibrationModel
     costs_by_key : callable
         ``costs_by_key(R)``: the cost per keyframe (K+1,) at attitudes ``R`` and the present calibration
-        (:func:`graph_calib.solvers.reduced.cost_by_key`).
+        (:func:`graph_calib.model.normal_equations.cost_by_key`).
     R : ndarray, shape (K+1, 3, 3)
         Keyframe attitudes ``C_nb``.
 

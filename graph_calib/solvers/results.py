@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from graph_calib.model.residual_list import MEASUREMENT_KINDS
 from graph_calib.records.experiment import Result
 
 
@@ -36,7 +37,7 @@ def residual_block(output):
             continue
         kinds[kind] = {"count": int(v.shape[0]), "rms_axis": np.sqrt(np.mean(v**2, axis=0)).tolist(),
                        "rms": float(np.sqrt(np.mean(v**2))), "chi2_per_dof": float(np.mean(v**2))}
-        if kind != "rotation":
+        if kind in MEASUREMENT_KINDS:
             measured.append(v.ravel())
     all_measured = np.concatenate(measured) if measured else np.zeros(0)
     block = {

@@ -22,6 +22,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Mapping
 
+from graph_calib.model.residual_list import MEASUREMENT_KINDS
+
 #: Largest chi-square per degree of freedom of a fit that passes (sigmas optimistic by at most sqrt(2)).
 RESIDUAL_CHI2_LIMIT = 2.0
 #: Below this the noise model is said to be overstated (sigmas conservative); the verdict still passes.
@@ -31,7 +33,7 @@ RESIDUAL_CHI2_LOW = 0.25
 def fit_chi2_per_dof(block):
     """Chi-square per degree of freedom of a fit from a result's ``residuals`` block (None if unknown)."""
     counts = block.get("counts") or {}
-    dof = 3 * sum(int(counts.get(k, 0)) for k in ("gravity", "encoder"))
+    dof = 3 * sum(int(counts.get(k, 0)) for k in MEASUREMENT_KINDS)
     cost = block.get("final_cost")
     if cost is None or dof <= 0:
         return None

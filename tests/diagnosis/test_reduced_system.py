@@ -57,7 +57,9 @@ def _dense_system(model, R, x, *, q_nb0, null_names, sums):
     rows = []
     for kind in ("rotation", "gravity", "encoder"):
         res = getattr(model, f"{kind}_factors")(R, pre, x)
-        r, HR, HRn, Hx = res.whitened_system()
+        s = 1.0 / res.sigma[:, :, None]
+        r, HR, Hx = res.whitened(), res.H_R * s, res.H_x * s
+        HRn = None if res.H_R_next is None else res.H_R_next * s
         hi = model.record.reading_sample + 1 if kind == "encoder" else k0[res.key + 1]
         M = interval_means(cumulative_sums(driver_series(model)[0]), k0[res.key], hi)
         for f in range(r.shape[0]):

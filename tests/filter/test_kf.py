@@ -209,7 +209,7 @@ def test_iterated_filter_reproduces_batch_solution():
     exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=30.0, dwell_s=3.0,
                                   rate=np.deg2rad(30.0), noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
     model = CalibrationModel(exp, options=ModelOptions())
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged
     R_prior = np.eye(3)
     R0 = model.propagate(R_prior, model.preintegrate(model.prior()[0]), model.prior()[0])
@@ -239,7 +239,7 @@ def test_noise_free_turntable_recovers_truth_to_a_tenth_of_sigma():
     x_true = _truth(rng, NAV, 0.1)
     exp, C_true = turntable_experiment(layout=DECL, x=x_true)
     model = CalibrationModel(exp, options=ModelOptions())
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged and fr.n_passes <= 4
     z = _z(fr, x_true)
     assert np.abs(z).max() < 0.1, _worst(fr, z)
@@ -256,7 +256,7 @@ def test_noisy_turntable_within_a_few_sigma_and_innovations_white():
     exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=60.0, dwell_s=5.0,
                                   noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
     model = CalibrationModel(exp, options=ModelOptions())
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged
     z = _z(fr, x_true)
     informative = fr.sigma < 0.5 * NAV.prior_vector(fr.layout)
@@ -287,7 +287,7 @@ def test_consumer_grade_converges_from_zero_calibration():
     R_true = np.concatenate([np.eye(3)[None], C_true[model.record.k0[1:] - 1]])
     R_dr = model.propagate(np.eye(3), model.preintegrate(x0), x0)
     assert np.abs(log_so3(np.swapaxes(R_true, 1, 2) @ R_dr)).max() > 0.3      # really far from linear
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged and fr.n_passes >= 3
     assert fr.passes[-1].max_dx_sigma < 1e-3
     z = _z(fr, x_true)
@@ -301,7 +301,7 @@ def test_to_result_and_progress():
     exp, _ = turntable_experiment(layout=DECL, x=x_true, static_s=20.0, dwell_s=2.0, rate=np.deg2rad(30.0))
     model = CalibrationModel(exp, options=ModelOptions())
     seen = []
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY, max_passes=2,
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=2,
                                 progress=lambda ev: seen.append((ev.iteration, ev)))
     assert [i for i, _ in seen] == [1, 2] and fr.n_passes == 2
     # one progress-event type for every solver (graph_calib.solvers.interface)
@@ -319,7 +319,7 @@ def test_to_result_and_progress():
     assert res.residuals["iterations"] == 2 and set(res.residuals["counts"]) == {"gravity", "encoder"}
     assert res.extra["priors"] == model.priors_used()
     with pytest.raises(ValueError, match="max_passes"):
-        kf_reference.passes(model, q_nb0=Q_IDENTITY, max_passes=0)
+        kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=0)
 
 
 # The simulator's scenarios (noise-free recovery, Monte Carlo, agreement with the graph, remaining
@@ -355,3 +355,58 @@ def test_linearisation_cost_is_the_batch_cost():
     ref = _batch_cost(model, R, x, preint=preint, R_prior=R_prior, x_prior=x0, x_sigma=sig)
     assert ref > 10.0
     assert lin.cost == pytest.approx(ref, rel=1e-10)
+
+
+def test_the_filter_solves_a_turntable_record_with_the_batch_solvers_unusable(monkeypatch):
+    """The filter is the independent reference: with the factor graph, the joint solver and the least-squares
+    driver they share made to raise, the registry's ``sqrt-kf`` still calibrates a turntable record from
+    its own start (the prior calibration, its own attitude initialisation), not from a batch solution."""
+    from graph_calib.options import CalibrationOptions
+    from graph_calib.records.problem import build_problem
+    from graph_calib.solvers import factor_graph, least_squares
+    from graph_calib.solvers.joint import solver as joint_solver
+    from graph_calib.solvers.registry import solve
+
+    def unusable(*args, **kwargs):
+        raise AssertionError("a batch solver was used")
+
+    for owner, name in ((least_squares.LeastSquares, "solve"), (factor_graph, "solve"),
+                        (factor_graph.FactorGraphSolver, "solve"), (joint_solver, "solve_joint"),
+                        (joint_solver.JointSolver, "solve"), (joint_solver.JointSolver, "solve_campaign")):
+        monkeypatch.setattr(owner, name, unusable)
+    with pytest.raises(AssertionError, match="batch solver"):
+        solve("factor-graph", build_problem(turntable_experiment(layout=DECL, x=np.zeros(DECL.size))[0]),
+              options=CalibrationOptions())
+    rng = np.random.default_rng(41)
+    x_true = _truth(rng, NAV, 0.3)
+    exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, noise=(NAV.gyro_noise, NAV.accel_noise,
+                                                                           NAV.encoder_noise))
+    costs = []
+    out = solve("sqrt-kf", build_problem(exp), options=CalibrationOptions(), progress=lambda ev: costs.append(ev.cost))
+    assert out.converged and out.iterations >= 2
+    assert costs[0] > 10.0 * costs[-1]          # from the prior calibration, not from a solution
+    z = (out.x - out.layout.embed(DECL, x_true)) / np.sqrt(np.diag(out.covariance))
+    assert np.abs(z).max() < 4.0
+
+
+def test_the_filter_is_converged_only_at_the_batch_cost(monkeypatch):
+    """On the measured MPU-6050 session (consumer grade) the step rule alone (every element moved by less
+    than 1e-3 sigma) stops the filter above the batch minimum's cost; judged by the cost as the factor graph
+    is, the filter goes on to the graph's cost before it says converged."""
+    from conftest import REAL_DATA, require_real
+
+    from graph_calib.importers.mpu6050 import import_mpu6050
+    from graph_calib.options import CalibrationOptions
+    from graph_calib.records.problem import build_problem
+    from graph_calib.solvers import factor_graph
+    from kf_reference import passes
+
+    exp = import_mpu6050(require_real(REAL_DATA / "mpu6050_uncuyo" / "example_data_calibration.csv"))
+    problem = build_problem(exp, options=CalibrationOptions(model=ModelOptions(grade="consumer")))
+    graph_cost = factor_graph.solve(problem.model, q_nb0=problem.q_nb0).cost_history[-1]
+    fr = kf_reference.calibrate(problem.model, q_nb0=problem.q_nb0)
+    assert fr.converged and fr.passes[-1].cost <= graph_cost * (1.0 + 1e-9), (fr.passes[-1].cost, graph_cost)
+    monkeypatch.setattr(passes, "COST_REL_TOL", np.inf)          # the step rule alone
+    step_only = kf_reference.calibrate(problem.model, q_nb0=problem.q_nb0)
+    assert step_only.converged and step_only.passes[-1].cost > graph_cost * (1.0 + 1e-8)
+    assert step_only.n_passes < fr.n_passes

@@ -116,12 +116,13 @@ def test_first_attitude_prior_follows_what_the_alignment_could_use():
 
 
 def test_graph_priors_are_the_model_prior_residuals():
-    """GTSAM's native prior factors in the graph whiten exactly as the model's prior residuals do."""
-    import gtsam
-    from gtsam.symbol_shorthand import C, X
+    """GTSAM's native prior factors (the oracle graph's, tests/solvers/_gtsam_oracle.py) whiten exactly as the
+    model's prior residuals do, which the least-squares core adds as they are."""
+    from gtsam.symbol_shorthand import C
 
-    from graph_calib.solvers.factor_graph import _Cache, build_graph
     from graph_calib.navigation.rotations import exp_so3
+    from graph_calib.solvers.least_squares import Experiment
+    from _gtsam_oracle import oracle_graph
 
     rng = np.random.default_rng(21)
     exp, _ = turntable_experiment(layout=DECL, x=_truth(rng))
@@ -131,16 +132,13 @@ def test_graph_priors_are_the_model_prior_residuals():
     preint = model.preintegrate(x)
     R_prior = exp_so3(np.array([0.2, -0.1, 0.4]))
     R = model.propagate(R_prior @ exp_so3(np.array([0.05, 0.3, -0.2])), preint, x)
-    cache = _Cache(model, preint)
-    cache.evaluate(R, x)
-    graph = build_graph(model, cache, R_prior=R_prior)
-    values = gtsam.Values()
-    for k in range(R.shape[0]):
-        values.insert(X(k), gtsam.Rot3(R[k]))
-    values.insert(C(0), x)
+    c = Experiment(model=model, R=R, R_prior=R_prior[None], preint=preint, keys=[C(0)])
+    graph, values, _ = oracle_graph([c], theta_keys=[(C(0), x.size)], theta=x, prior_mean=x_prior, prior_sigma=x_sigma)
+    graph = _Priors(graph)
     att, cal = model.attitude_prior(R[0], R_prior=R_prior), model.calibration_prior(x)
     assert graph.at(0).error(values) == pytest.approx(att.cost, rel=1e-12)
     assert graph.at(1).error(values) == pytest.approx(cal.cost, rel=1e-12)
+    assert att.cost > 1.0 and cal.cost > 1.0
     lin = graph.at(0).linearize(values)
     A, b = lin.jacobian()
     np.testing.assert_allclose(A, att.H, rtol=1e-9, atol=1e-12)
@@ -148,3 +146,13 @@ def test_graph_priors_are_the_model_prior_residuals():
     A, b = graph.at(1).linearize(values).jacobian()
     np.testing.assert_allclose(A, cal.H, rtol=1e-12)
     np.testing.assert_allclose(b, -cal.r, rtol=1e-12)
+
+
+class _Priors:
+    """The oracle graph's two prior factors: ``at(0)`` the first attitude's, ``at(1)`` the calibration's."""
+
+    def __init__(self, graph):
+        self.att, self.cal = graph.at(1), graph.at(0)
+
+    def at(self, i):
+        return (self.att, self.cal)[i]

@@ -1,4 +1,4 @@
-"""The factor graph's trial steps judged to first order (graph_calib.solvers.factor_graph.FIRST_ORDER_JUDGE_TOL).
+"""The factor graph's trial steps judged to first order (graph_calib.solvers.least_squares.FIRST_ORDER_JUDGE_TOL).
 
 On the measured Xsens session (consumer grade, the iterations crawl and many trials are rejected) the
 first-order judgement must leave every iteration as the exact judgement makes it, bit for bit, while
@@ -8,7 +8,7 @@ sparing the preintegrations of the trials it rejects.
 import numpy as np
 import pytest
 
-from graph_calib.solvers import factor_graph
+from graph_calib.solvers import factor_graph, least_squares
 from graph_calib.model import CalibrationModel
 
 
@@ -18,7 +18,7 @@ def problem(xsens_consumer):
 
 
 def _solve(problem, opts, monkeypatch, judge_tol):
-    monkeypatch.setattr(factor_graph, "FIRST_ORDER_JUDGE_TOL", judge_tol)
+    monkeypatch.setattr(least_squares, "FIRST_ORDER_JUDGE_TOL", judge_tol)
     calls = {"n": 0}
     original = CalibrationModel.preintegrate
 
@@ -35,7 +35,7 @@ def _solve(problem, opts, monkeypatch, judge_tol):
 def test_first_order_judging_keeps_every_iteration_and_spares_preintegrations(problem, monkeypatch):
     prob, opts = problem
     exact, n_exact = _solve(prob, opts, monkeypatch, 0.0)        # every far trial preintegrated exactly
-    judged, n_judged = _solve(prob, opts, monkeypatch, factor_graph.FIRST_ORDER_JUDGE_TOL)
+    judged, n_judged = _solve(prob, opts, monkeypatch, least_squares.FIRST_ORDER_JUDGE_TOL)
     assert exact.converged and judged.converged
     assert judged.cost_history == exact.cost_history
     assert np.array_equal(judged.x, exact.x) and np.array_equal(judged.covariance, exact.covariance)

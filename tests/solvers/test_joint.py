@@ -6,14 +6,11 @@ Short simulated subranges (``nav-campaign``, 0.05 h each at 100 Hz: 18,000 sampl
 
 import json
 from dataclasses import replace
-from functools import partial
 import tomllib
 from pathlib import Path
 
-import gtsam
 import numpy as np
 import pytest
-from gtsam.symbol_shorthand import S, X, Z
 
 from graph_calib import io
 from graph_calib.campaign import CampaignOptions, run_campaign
@@ -25,8 +22,7 @@ from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
 from graph_calib.solvers.joint import JointSolver, WarmStart, plan_unknowns, solve_joint
 from graph_calib.solvers.joint.result import joint_result, read_joint_result, write_joint_result
-from graph_calib.solvers.joint.marginal import unknowns_covariance
-from graph_calib.solvers.reduced import ExperimentSystem
+from graph_calib.model.attitude_elimination import AttitudeSolve
 from graph_calib.solvers.joint.solver import _extend, _priors
 from graph_calib.solvers.joint.unknowns import MAX_DEGREE, curve_label
 from graph_calib.options import CalibrationOptions
@@ -137,47 +133,6 @@ def test_chained_jacobians_match_finite_differences(linear):
     np.testing.assert_allclose(Hs[:, :, mount], fd, rtol=1e-5, atol=1e-6 * np.abs(fd).max())
 
 
-def test_the_unknowns_covariance_is_gtsams_marginal_over_every_attitude():
-    """The attitudes eliminated and the unknowns' remaining information inverted (unknowns_covariance) give
-    GTSAM's own joint marginal (Marginals, the whole graph factored), on two chains of attitudes tied to a
-    shared vector and one chain's own set-up vector, with arbitrary (seeded) factor Jacobians."""
-    rng = np.random.default_rng(5)
-    nz, ns, K = 4, 2, 6
-    graph, values = gtsam.NonlinearFactorGraph(), gtsam.Values()
-    graph.add(gtsam.PriorFactorVector(Z(0), np.zeros(nz), gtsam.noiseModel.Isotropic.Sigma(nz, 10.0)))
-    graph.add(gtsam.PriorFactorVector(S(1), np.zeros(ns), gtsam.noiseModel.Isotropic.Sigma(ns, 10.0)))
-    values.insert(Z(0), rng.normal(size=nz))
-    values.insert(S(1), rng.normal(size=ns))
-    x_keys = []
-
-    def fixed(blocks, r, this, v, H):
-        if H is not None:
-            for i, b in enumerate(blocks):
-                H[i] = b
-        return r
-
-    for e in range(2):
-        keys = [X(10 * e + k) for k in range(K)]
-        x_keys += keys
-        for k, key in enumerate(keys):
-            values.insert(key, gtsam.Rot3.Expmap(rng.normal(size=3)))
-            theta = [Z(0)] + ([S(1)] if e == 1 else [])
-            blocks = [rng.normal(size=(3, 3)), rng.normal(size=(3, nz))] + ([rng.normal(size=(3, ns))] if e else [])
-            graph.add(gtsam.CustomFactor(gtsam.noiseModel.Isotropic.Sigma(3, 0.5), [key] + theta,
-                                         partial(fixed, blocks, rng.normal(size=3))))
-            if k:
-                graph.add(gtsam.BetweenFactorRot3(keys[k - 1], key, gtsam.Rot3.Expmap(rng.normal(size=3)),
-                                                  gtsam.noiseModel.Isotropic.Sigma(3, 0.1)))
-    tkeys = [Z(0), S(1)]
-    got = unknowns_covariance(graph.linearize(values), x_keys, tkeys)
-    jm = gtsam.Marginals(graph, values).jointMarginalCovariance(gtsam.KeyVector(tkeys))
-    want = np.block([[np.asarray(jm.at(a, b)) for b in tkeys] for a in tkeys])
-    assert got.shape == (nz + ns, nz + ns)
-    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-12 * np.abs(want).max())
-    # not a covariance that could pass by accident: the attitudes matter (the shared vector's prior alone is 100)
-    assert np.all(np.diag(got)[:nz] < 50.0)
-
-
 def test_linear_truth_keeps_linear_curves_and_agrees_with_each_subrange_graph(linear):
     _, _, problems, graphs, out = linear
     assert out.converged
@@ -209,16 +164,16 @@ def test_warm_started_at_its_own_solution_the_joint_solver_starts_there(curved):
 
 def test_a_rejected_trial_is_undone_and_the_solve_ends_where_it_would(curved, monkeypatch):
     """The first trial spoiled (every attitude step off by 0.05 rad: its cost far higher, rejected): the solver
-    damps harder, rebuilds the linearised systems it freed for the trial and ends at the same solution."""
+    damps harder from the systems it kept and ends at the same solution."""
     _, _, problems, graphs, out = curved
-    original = ExperimentSystem.attitude_step
+    original = AttitudeSolve.step
     calls = []
 
-    def spoiled(Y, d_theta):
+    def spoiled(self, d_theta):
         calls.append(1)
-        return original(Y, d_theta) + (0.05 if len(calls) <= len(problems) else 0.0)
+        return original(self, d_theta) + (0.05 if len(calls) <= len(problems) else 0.0)
 
-    monkeypatch.setattr(ExperimentSystem, "attitude_step", staticmethod(spoiled))
+    monkeypatch.setattr(AttitudeSolve, "step", spoiled)
     again = JointSolver().solve_campaign(problems, options=OPTS,
                                          initial=[WarmStart(layout=g.layout, x=g.x, sigma=g.sigma) for g in graphs])
     assert again.converged and len(calls) >= (again.iterations + 1) * len(problems)

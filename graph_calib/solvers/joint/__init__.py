@@ -4,9 +4,8 @@
   calibration vector as an exact affine map of them;
 - :mod:`graph_calib.solvers.joint.solver`: the graph, its Levenberg-Marquardt loop, the degree chosen by evidence
   (``JointSolver``, registered as ``"joint"``);
-- :mod:`graph_calib.solvers.reduced` (shared with the factor graph): one experiment's factors linearised
-  with its attitudes eliminated (the reduced factor GTSAM solves with the others);
-- :mod:`graph_calib.solvers.joint.marginal`: the unknowns' covariance.
+- the loop, the reduced factor per experiment and the unknowns' covariance are the project's least-squares
+  driver's (:mod:`graph_calib.solvers.least_squares`), the factor graph's too.
 """
 
 from graph_calib.solvers.joint.solver import JOINT, DegreeChoice, JointOutput, JointSolver, WarmStart, choose_degrees, solve_joint

@@ -18,6 +18,7 @@ import numpy as np
 from graph_calib import io
 from graph_calib.sensors.effects import EFFECTS
 from graph_calib.errors import InputError
+from graph_calib.model.residual_list import MEASUREMENT_KINDS
 from graph_calib.records.experiment import Result
 from graph_calib.solvers.joint.unknowns import family_member
 from graph_calib.sensors.params import split_element_name
@@ -75,7 +76,7 @@ def joint_result(output, *, source, experiments, t_refs, sensor_ranges):
                                       for i, n in enumerate(u.setup_names[e])}}
     blocks = [residual_block(o) for o in output.outputs]
     chi2 = [b["chi2_per_dof"] for b in blocks]
-    counts = [sum(3 * n for k, n in b["counts"].items() if k != "rotation") for b in blocks]
+    counts = [sum(3 * n for k, n in b["counts"].items() if k in MEASUREMENT_KINDS) for b in blocks]
     kinds = sorted({k for b in blocks for k in b["counts"]})
     residuals = {"quantity": output.outputs[0].residual_quantity,
                  "counts": {k: int(sum(b["counts"].get(k, 0) for b in blocks)) for k in kinds},

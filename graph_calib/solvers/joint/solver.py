@@ -1,7 +1,7 @@
 r"""The joint campaign solver: every experiment of a campaign in one factor graph (GTSAM).
 
 Variables: the keyframe attitudes of every experiment (eliminated by the solver, experiment by
-experiment: :mod:`graph_calib.solvers.reduced`), the shared unknowns ``Z(0)`` (the
+experiment: :mod:`graph_calib.model.normal_equations`), the shared unknowns ``Z(0)`` (the
 temperature curves' coefficients and the shared elements, :mod:`graph_calib.solvers.joint.unknowns`) and each
 experiment's set-up ``S(e)`` (mount, lever arm, table lag, damper stiffness where its layout has them).
 Each experiment keeps its own :class:`graph_calib.model.CalibrationModel`, its layout extended by the
@@ -11,13 +11,13 @@ encoder) with the parameter Jacobians chained, ``H_z = H_x A_e``, ``H_s = H_x B_
 grade's (or the manifest's) prior of each unknown, once: a curve coefficient of order ``j`` takes the
 prior of the family's ``*_tc<j>`` about ``t0``; the alignment of each experiment's first attitude.
 
-The Levenberg-Marquardt loop is :mod:`graph_calib.solvers.factor_graph`'s (the same damping of every variable, the
-same acceptance and stopping rules, each experiment re-preintegrated when its own calibration moves too far
-from its preintegration point), on the graph linearised with every experiment's attitudes eliminated
-(:mod:`graph_calib.solvers.reduced`: each experiment's factors evaluated vectorised and reduced to one GTSAM
-factor on the unknowns it touches, the attitude chain's band factored directly); GTSAM solves the reduced
-graph of the unknowns, the attitudes' steps follow by back-substitution.  The cost is the graph's error:
-the unknowns' priors (GTSAM's factors) plus each experiment's factors and attitude prior.
+The Levenberg-Marquardt loop is the project's one driver (:mod:`graph_calib.solvers.least_squares`, the
+factor graph's too: the same damping, acceptance and stopping rules, first-order judging, mixing), on the
+graph linearised with every experiment's attitudes eliminated: each experiment's factors evaluated
+vectorised and reduced to one GTSAM factor on the unknowns it touches; GTSAM solves the reduced graph of
+the unknowns, the attitudes' steps follow by back-substitution, and the unknowns' covariance is the inverse
+of their reduced information at the solution.  The cost is the graph's error: the unknowns' priors plus
+each experiment's factors and attitude priors.
 
 Curve degree by evidence
     The solve estimates every family at the highest degree the registry has (biases cubic, scales
@@ -34,19 +34,16 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field, replace
 
-import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import S, Z
 from threadpoolctl import threadpool_limits
 
-from graph_calib.solvers.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _damped
-from graph_calib.solvers.joint.marginal import unknowns_covariance
-from graph_calib.solvers.reduced import ExperimentSystem, linearise, retract
+from graph_calib.model.residual_list import FACTOR_KINDS, MEASUREMENT_KINDS
+from graph_calib.solvers.least_squares import Experiment, LeastSquares
 from graph_calib.solvers.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.sensors.params import Layout, split_element_name
-from graph_calib.navigation.rotations import quat_to_dcm
-from graph_calib.solvers.interface import WHITENED_RESIDUAL, ProgressEvent, ResidualSeries, SolverOutput
+from graph_calib.solvers.interface import WHITENED_RESIDUAL, ResidualSeries, SolverOutput
 
 #: Name of the solver (entry point ``graph_calib.solvers``).
 JOINT = "joint"
@@ -115,55 +112,6 @@ class JointOutput:
         """Slice of ``theta`` holding experiment ``e``'s set-up."""
         start = self.unknowns.nz + sum(len(s) for s in self.unknowns.setup_names[:e])
         return slice(start, start + len(self.unknowns.setup_names[e]))
-
-
-class _Experiment:
-    """One experiment of the joint graph: its model, its current preintegration, its attitudes (K+1, 3, 3)
-    and ``M_u = d x_e / d theta_e`` (P, Nt), ``theta_e = (u_z, u_s)`` the unknowns it touches in GTSAM's
-    units.  Its factors are linearised by :func:`graph_calib.solvers.reduced.linearise` one experiment at a
-    time (their Jacobians, 0.2 GB for 3 h, released at once)."""
-
-    def __init__(self, e, model, preint, M_u, nz, R, R_prior):
-        self.e, self.model, self.preint, self.M_u, self.nz = e, model, preint, M_u, nz
-        self.R, self.R_prior = R, R_prior
-        self.has_setup = M_u.shape[1] > nz
-
-    def theta_of(self, v):
-        """``theta_e`` from GTSAM's ``Values`` or a ``VectorValues`` step."""
-        get = v.atVector if isinstance(v, gtsam.Values) else v.at
-        parts = [np.asarray(get(Z(0)), dtype=float)]
-        if self.has_setup:
-            parts.append(np.asarray(get(S(self.e)), dtype=float))
-        return np.concatenate(parts)
-
-    def x_of(self, v):
-        return self.M_u @ self.theta_of(v)
-
-    def linearise(self, values, R, options):
-        return linearise(self.model, self.preint, R, self.x_of(values), self.M_u, R_prior=self.R_prior,
-                         robust=options.robust, robust_k=options.robust_k)
-
-    def reduced_factor(self, H, g):
-        """The experiment's Schur complement as a GTSAM factor on ``Z(0)`` (and ``S(e)``)."""
-        nz = self.nz
-        if not self.has_setup:
-            return gtsam.HessianFactor(Z(0), H, -g, 0.0)
-        return gtsam.HessianFactor(Z(0), S(self.e), H[:nz, :nz], H[:nz, nz:], -g[:nz], H[nz:, nz:], -g[nz:], 0.0)
-
-
-def _reduced_graph(exps, systems, prior_lin, lam):
-    """The linearised graph with every experiment's attitudes eliminated (``lam`` their damping):
-    the priors of the unknowns and one reduced factor per experiment; and each experiment's
-    back-substitution (:meth:`graph_calib.solvers.reduced.ExperimentSystem.reduce`)."""
-    gfg = gtsam.GaussianFactorGraph()
-    gfg.push_back(prior_lin)
-    Ys = []
-    for c, sysm in zip(exps, systems):
-        H, g, Y = sysm.reduce(lam)
-        gfg.add(c.reduced_factor(H, g))
-        Ys.append(Y)
-    return gfg, Ys
-
 
 
 def _extend(problem, unknowns_degrees):
@@ -326,8 +274,7 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     -----
     BLAS runs on one thread inside the solve: its products are of a few tens of columns (an experiment's
     unknowns), where OpenBLAS's threads gain nothing on two cores and, on a machine shared with other
-    work, spin: the Schur complement's ``H_Rt^T (H_RR^-1 H_Rt)`` of a 3 h experiment took 0.4-2.4 s with its
-    threads instead of 0.04 s.
+    work, spin (the Schur complement ``H_xa H_aa^-1 H_ax`` of a 3 h experiment most).
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve_joint(problems, options=options, progress=progress, initial=initial,
@@ -354,156 +301,39 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
     offs = np.cumsum([nz] + [len(s) for s in s_sigmas])
     # GTSAM's variables are the unknowns in units of their prior sigmas, u = theta / sigma: the curve
     # coefficients span twenty orders of magnitude in SI (a bias in rad/s, its cubic in rad/s/degC^3), so
-    # that Levenberg-Marquardt's isotropic damping and GTSAM's Cholesky see a well-scaled system (unscaled,
-    # the damping crawled for 500 iterations on the demo's 72-s subranges and the marginals called the
-    # system indeterminate)
+    # that Levenberg-Marquardt's isotropic damping and GTSAM's Cholesky see a well-scaled system
     sig_theta = np.concatenate([z_sigma] + list(s_sigmas))
     u0 = theta / sig_theta
-    # the graph's factors on the unknowns alone (their priors); every experiment's own factors (its
-    # attitudes' prior, rotation, gravity, encoder) enter linearised with its attitudes eliminated
-    prior_graph = gtsam.NonlinearFactorGraph()
-    prior_graph.add(gtsam.PriorFactorVector(Z(0), np.zeros(nz), gtsam.noiseModel.Unit.Create(nz)))
-    values = gtsam.Values()
-    values.insert(Z(0), u0[:nz])
-    exps, s_keys, s_dims = [], [], []
+    exps, theta_keys = [], [(Z(0), nz)]
     have_attitudes = True
     for e, (p, (A, B)) in enumerate(zip(problems, maps)):
         m = p.model
         ns = B.shape[1]
         M_u = np.hstack([A * z_sigma[None, :], B * s_sigmas[e][None, :]])
-        u_e = np.concatenate([u0[:nz], u0[offs[e]:offs[e + 1]]])
-        x = M_u @ u_e
+        x = M_u @ np.concatenate([u0[:nz], u0[offs[e]:offs[e + 1]]])
         preint = m.preintegrate(x)
-        R_prior = quat_to_dcm(p.q_nb0)
+        R_prior = m.segment_priors(p.q_nb0)
         ws = starts[e]
         if ws is not None and ws.attitudes is not None and ws.attitudes.shape == (m.n_keyframes + 1, 3, 3):
             R = np.array(ws.attitudes, dtype=float)
         else:
             R = m.propagate(R_prior, preint, x)
             have_attitudes = False
-        exps.append(_Experiment(e, m, preint, M_u, nz, R, R_prior))
+        keys = [Z(0)] + ([S(e)] if ns else [])
         if ns:
-            prior_graph.add(gtsam.PriorFactorVector(S(e), np.zeros(ns), gtsam.noiseModel.Unit.Create(ns)))
-            values.insert(S(e), u0[offs[e]:offs[e + 1]])
-            s_keys.append(S(e))
-            s_dims.append(ns)
-    theta_keys = s_keys + [Z(0)]
-    theta_dims = s_dims + [nz]
-    ordering = gtsam.Ordering()
-    for k in theta_keys:
-        ordering.push_back(k)
-
-    def theta_of(v):
-        u = np.concatenate([np.asarray(v.atVector(k), dtype=float) for k in [Z(0)] + s_keys])
-        return u * sig_theta
-
+            theta_keys.append((S(e), ns))
+        heading = ws is None and m.record.reading_t.size == 0 and m.segment_keys.size == 1
+        exps.append(Experiment(model=m, R=R, R_prior=R_prior, preint=preint, keys=keys, M=M_u, search_heading=heading))
+    lsq = LeastSquares(exps, theta_keys=theta_keys, prior_mean=np.zeros(sig_theta.size),
+                       prior_sigma=np.ones(sig_theta.size), options=options, solver=JOINT, exact_at_solution=False)
     # attitudes dead-reckoned with a warm calibration (every experiment's own solution) stay within the
-    # alignment's error of the truth: no fit needed there (graph_calib.solvers.factor_graph._fit_attitudes)
-    if not have_attitudes and not all(s is not None for s in starts):
-        for _ in range(ATTITUDE_FIT_ITERATIONS):
-            moved = 0.0
-            for c in exps:
-                d = c.linearise(values, c.R, options).attitude_only_step(1e-9)
-                c.R = retract(c.R, d)
-                moved = max(moved, float(np.max(np.linalg.norm(d, axis=1))))
-            if moved < ATTITUDE_FIT_TOL:
-                break
-    # each experiment's linearised system at `values` (a few tens of MB for 3 h; its factors released)
-    systems = [c.linearise(values, c.R, options) for c in exps]
-    cost = prior_graph.error(values) + sum(s.cost for s in systems)
-    history = [cost]
-    lam = options.lambda_initial
-    it, converged = 0, False
-    # where each experiment's current preintegration was formed; a trial that re-preintegrates an experiment
-    # replaces its preintegration (never two held per experiment: 0.3 GB each for 3 h), and a rejected trial
-    # is undone by preintegrating again at the same point (the same arrays; rejections are rare)
-    lin_x = [c.preint.x_lin for c in exps]
-
-    def restore():
-        for c, xl in zip(exps, lin_x):
-            if not np.array_equal(c.preint.x_lin, xl):
-                c.preint = None
-                c.preint = c.model.preintegrate(xl)
-
-    fresh = True
-    for it in range(1, options.max_iterations + 1):
-        if not fresh:
-            restore()
-            if systems is None:
-                systems = [c.linearise(values, c.R, options) for c in exps]
-        prior_lin = prior_graph.linearize(values)
-        while True:
-            try:
-                gfg, Ys = _reduced_graph(exps, systems, prior_lin, lam)
-                delta = _damped(gfg, theta_keys, lam, theta_dims).optimize(ordering)
-            except RuntimeError:            # numerically indeterminate: damp harder
-                if lam > 1e8:
-                    raise
-                lam = max(lam * 10.0, 1e-6)
-                continue
-            gfg = None
-            R_trial = [retract(c.R, ExperimentSystem.attitude_step(Y, c.theta_of(delta))) for c, Y in zip(exps, Ys)]
-            Ys = systems = None     # freed during the trial (0.1 GB for six 3 h experiments), rebuilt if it fails
-            trial = values.retract(delta)
-            for c in exps:
-                x_t = c.x_of(trial)
-                if c.preint.needs_repreintegration(x_t, tol=options.repreintegrate_tol):
-                    c.preint = None
-                    c.preint = c.model.preintegrate(x_t)
-            trial_systems = [c.linearise(trial, Rt, options) for c, Rt in zip(exps, R_trial)]
-            new_cost = prior_graph.error(trial) + sum(s.cost for s in trial_systems)
-            if new_cost <= cost or lam > 1e8 or new_cost - cost <= 1e-10 * cost:
-                break
-            lam *= 10.0
-            trial_systems = None
-            restore()
-            systems = [c.linearise(values, c.R, options) for c in exps]
-        step = np.concatenate([np.asarray(delta.at(Z(0)))] + [np.asarray(delta.at(k)) for k in s_keys])
-        accepted = new_cost <= cost
-        fresh = accepted
-        if accepted:
-            values, systems = trial, trial_systems
-            for c, Rt in zip(exps, R_trial):
-                c.R = Rt
-            lin_x = [c.preint.x_lin for c in exps]
-            lam = max(lam / 10.0, 1e-9)
-        trial_systems = R_trial = None
-        rel = (cost - new_cost) / max(cost, 1e-300)
-        cost = min(cost, new_cost)
-        history.append(cost)
-        if progress is not None:
-            progress(ProgressEvent(solver=JOINT, iteration=it, cost=float(cost)))
-        if accepted and (abs(rel) < options.rel_tol or options.step_tol_sigma > 0
-                         and np.all(np.abs(step) < options.step_tol_sigma)):     # the step in sigmas
-            converged = True
-            break
-        if not accepted and (lam > 1e8 or new_cost - cost <= 1e-10 * cost):
-            converged = True
-            break
-    # covariance: an experiment whose calibration moved beyond the first-order range of its preintegration
-    # (the solver's own test) is re-preintegrated at the solution, so that its Jacobians hold there; one
-    # at a time, the preintegration it replaces freed first
-    if systems is None:         # the last trial failed: the systems at the solution were not kept
-        systems = [None] * len(exps)
-    for i, (c, xl) in enumerate(zip(exps, lin_x)):
-        x_c = c.x_of(values)
-        if (not np.array_equal(c.preint.x_lin, xl)
-                or c.preint.needs_repreintegration(x_c, tol=options.repreintegrate_tol)):
-            c.preint = None
-            c.preint = c.model.preintegrate(x_c)
-            systems[i] = None
-        if systems[i] is None:
-            systems[i] = c.linearise(values, c.R, options)
-    attitudes = [c.R for c in exps]
-    whitened = [s.whitened for s in systems]
-    n_meas = int(sum(3 * (w[1].shape[0] + w[2].shape[0]) for w in whitened))
-    tkeys = [Z(0)] + s_keys
-    # the graph linearised at the solution, every attitude eliminated; in GTSAM's units (prior sigmas), back to SI
-    gfg, _ = _reduced_graph(exps, systems, prior_graph.linearize(values), 0.0)
-    systems = None
-    cov = unknowns_covariance(gfg, [], tkeys) * np.outer(sig_theta, sig_theta)
-    gfg = None
-    theta = theta_of(values)
+    # alignment's error of the truth: no pre-fit needed there
+    sol = lsq.solve(u0, prefit=not have_attitudes and not all(s is not None for s in starts), progress=progress)
+    it, converged, cost = sol.iterations, sol.converged, sol.cost_history[-1]
+    whitened = sol.whitened
+    n_meas = int(sum(3 * w[k].shape[0] for w in whitened for k in MEASUREMENT_KINDS))
+    cov = sol.covariance * np.outer(sig_theta, sig_theta)
+    theta = sol.theta * sig_theta
     if select_degree:
         reduced, keep, th_c, cov_c, choices = choose_degrees(unknowns, theta, cov, n_measurements=n_meas)
     else:
@@ -522,16 +352,15 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
         cov_e = Mfull @ cov_r[np.ix_(cols, cols)] @ Mfull.T
         outputs.append(SolverOutput(
             solver=JOINT, layout=m.layout, x=x_e, covariance=0.5 * (cov_e + cov_e.T), t_key=m.t_key.copy(),
-            attitudes=attitudes[e],
-            residuals={"rotation": ResidualSeries(t=m.t_key[1:].copy(), values=whitened[e][0]),
-                       "gravity": ResidualSeries(t=m.t_key[:-1].copy(), values=whitened[e][1]),
-                       "encoder": ResidualSeries(t=m.record.reading_t.copy(), values=whitened[e][2])},
+            attitudes=c.R,
+            residuals={k.name: ResidualSeries(t=np.array(k.times(m), dtype=float), values=whitened[e][k.name])
+                       for k in FACTOR_KINDS},
             residual_quantity=WHITENED_RESIDUAL, iterations=it, converged=bool(converged),
             final_cost=float(cost), seconds=seconds))
     names = reduced.z_names + tuple(f"{e}/{n}" for e, s in enumerate(reduced.setup_names) for n in s)
     return JointOutput(unknowns=reduced, theta_names=names, theta=theta_r, covariance=0.5 * (cov_r + cov_r.T),
                        outputs=tuple(outputs), degree_choices=choices, n_measurements=n_meas, iterations=it,
-                       converged=bool(converged), final_cost=float(cost), seconds=seconds, cost_history=history)
+                       converged=bool(converged), final_cost=float(cost), seconds=seconds, cost_history=sol.cost_history)
 
 
 class JointSolver:

@@ -1,0 +1,132 @@
+r"""The model's residual list: every factor kind, enumerated once, with its robust-loss policy; the one whitening.
+
+A record's residuals are its factors (:mod:`graph_calib.model.factors`), one :class:`FactorKind` each in
+:data:`FACTOR_KINDS`, and its priors (the attitude of each segment's first keyframe, the calibration vector:
+:class:`graph_calib.model.factors.PriorResidual`).  Every solver, the diagnosis and the filter read the kinds
+from here; a new kind is one entry (its residual function in ``factors`` and a method of the model).
+
+Whitening (:func:`whiten`): a factor's rows divided by its one-sigma noise (the model's
+:class:`graph_calib.model.factors.Noise` gives each kind's sigma), then, under a robust loss, scaled by the
+square root of the M-estimator's weight of the norm of the factor's whole whitened residual (GTSAM's
+``noiseModel.Robust``), its cost the estimator's loss.  Factors of one robust group share one loss: an
+encoder group holds every reading of a keyframe (GTSAM's factor of stacked readings), its threshold
+``robust_k sqrt(m)`` for ``m`` readings (a group at pure noise has norm about ``sqrt(3 m)``), so that it is
+down-weighted no sooner than one reading would be.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FactorKind:
+    """One kind of factor of the model.
+
+    Attributes
+    ----------
+    name : str
+        Its name in result files and residual series.
+    method : str
+        The :class:`graph_calib.model.CalibrationModel` method that evaluates it, ``(R, preint, x) -> Residuals``.
+    robust : bool
+        Whether a requested robust loss applies to it (a measurement; the rotation factors are the process).
+    per_keyframe : bool
+        Whether one robust loss covers every factor of a keyframe (the encoder readings), else one per factor.
+    """
+
+    name: str
+    method: str
+    robust: bool
+    per_keyframe: bool = False
+
+    def evaluate(self, model, R, preint, x):
+        """The kind's :class:`graph_calib.model.factors.Residuals` at ``(R, x)``."""
+        return getattr(model, self.method)(R, preint, x)
+
+    def times(self, model):
+        """Time of each factor, s: the rotation factor's end, the gravity factor's keyframe start, a reading's time."""
+        if self.name == "rotation":
+            return model.t_key[model.record.rotation_keys + 1]
+        if self.name == "encoder":
+            return model.record.reading_t
+        return model.t_key[:-1]
+
+    def robust_groups(self, res, *, robust, robust_k):
+        """``(group (F,) or None, threshold per group or scalar)`` of the robust loss; ``(None, None)`` without one."""
+        if robust is None or not self.robust:
+            return None, None
+        if not self.per_keyframe:
+            return None, robust_k
+        _, group, counts = np.unique(res.key, return_inverse=True, return_counts=True)
+        return group, robust_k * np.sqrt(counts)
+
+
+#: Every factor kind of the model, in the order solvers and files list them.
+FACTOR_KINDS = (
+    FactorKind("rotation", "rotation_factors", robust=False),
+    FactorKind("gravity", "gravity_factors", robust=True),
+    FactorKind("encoder", "encoder_factors", robust=True, per_keyframe=True),
+)
+#: Their names.
+KIND_NAMES = tuple(k.name for k in FACTOR_KINDS)
+#: The kinds that are measurements (their components count in the degrees of freedom of the verdict).
+MEASUREMENT_KINDS = tuple(k.name for k in FACTOR_KINDS if k.robust)
+
+
+def robust_loss(e, kind, k):
+    """``(loss, weight)`` of GTSAM's M-estimator ``kind`` (``huber``, ``cauchy``) at whitened norms ``e``."""
+    if kind == "huber":
+        big = e > k
+        loss = np.where(big, k * e - 0.5 * k * k, 0.5 * e * e)
+        return loss, np.where(big, k / np.maximum(e, 1e-300), 1.0)
+    if kind == "cauchy":
+        q = (e / k) ** 2
+        return 0.5 * k * k * np.log1p(q), 1.0 / (1.0 + q)
+    raise ValueError(f"unknown robust loss {kind!r}")
+
+
+def whiten(kind, res, *, robust=None, robust_k=3.0):
+    """The one whitening: ``(cost, whitened (F, 3), row scale (F, 3))`` of a kind's factors.
+
+    ``whitened = r / sigma`` (no robust weight); ``row scale`` multiplies the factor's residual and Jacobian
+    rows in the normal equations: ``1 / sigma`` times the square root of the robust weight of its group;
+    ``cost`` is half the squared whitened norm, or the sum of the groups' robust losses.
+    """
+    inv_sigma = 1.0 / res.sigma               # the one place a kind's noise enters (a variance factor: here)
+    w = res.whitened()
+    group, k = kind.robust_groups(res, robust=robust, robust_k=robust_k)
+    if k is None:
+        return 0.5 * float(np.sum(w * w)), w, inv_sigma
+    g = np.arange(w.shape[0]) if group is None else group
+    e = np.sqrt(np.bincount(g, weights=np.sum(w * w, axis=1)))
+    loss, weight = robust_loss(e, robust, k)
+    return float(np.sum(loss)), w, np.sqrt(weight)[g][:, None] / res.sigma
+
+
+def cost_by_key(kind, res, n_keys, *, robust=None, robust_k=3.0):
+    """A kind's cost split by keyframe, (n_keys,): each factor's (a robust group's loss) on its first keyframe."""
+    out = np.zeros(n_keys)
+    w = res.whitened()
+    squares = np.sum(w * w, axis=1)
+    group, k = kind.robust_groups(res, robust=robust, robust_k=robust_k)
+    if k is None:
+        np.add.at(out, res.key, 0.5 * squares)
+        return out
+    g = np.arange(squares.size) if group is None else group
+    loss, _ = robust_loss(np.sqrt(np.bincount(g, weights=squares)), robust, k)
+    first = np.zeros(loss.size, dtype=np.int64)
+    first[g[::-1]] = res.key[::-1]          # the key of each group's first factor
+    np.add.at(out, first, loss)
+    return out
+
+
+def residual_list(model, R, preint, x):
+    """``{kind name: Residuals}`` of every factor kind at ``(R, x)``, in :data:`FACTOR_KINDS` order."""
+    return {kind.name: kind.evaluate(model, R, preint, x) for kind in FACTOR_KINDS}
+
+
+__all__ = ["FactorKind", "FACTOR_KINDS", "KIND_NAMES", "MEASUREMENT_KINDS", "robust_loss", "whiten", "cost_by_key",
+           "residual_list"]
