@@ -140,3 +140,43 @@ def test_the_report_subtracts_the_truth_at_the_points_own_temperature(d):
     pt = result_points(_result(d))["accel.bias.y"]
     truth = lambda T: by_hand(BIAS, T, d)         # noqa: E731
     assert point_minus_reference(pt, truth) == pytest.approx(0.0, abs=1e-15)
+
+
+# ---------------------------------------------------------------------------
+# the sensor terms of the higher orders: forward by hand, inverse, Jacobian against finite differences
+# ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("triad", ["gyro", "accel"])
+def test_the_higher_temperature_orders_enter_the_sensor_model_as_written(triad):
+    from graph_calib.sensors.effects import CURVE_ORDERS
+    from graph_calib.sensors.params import Layout
+    from graph_calib.sensors.sensor_model import correct, correct_with_jacobian, measure
+
+    rng = np.random.default_rng(77)
+    n = 64
+    layout = Layout.declared(extra=CURVE_ORDERS)
+    x = layout.zeros()
+    v = {}
+    for name in [n_ for n_ in layout.names if n_.startswith(triad + ".") and "_tc" in n_ and n_[-1] in "345"]:
+        x[layout.slice(name)] = rng.uniform(-1e-6, 1e-6, 3) / 10.0 ** int(name[-1])
+        v[name] = x[layout.slice(name)].copy()
+    signal = (rng.uniform(-1.0, 1.0, (n, 3)) if triad == "gyro" else np.array([0.5, -0.3, 9.8]) + rng.uniform(-1, 1, (n, 3)))
+    dT = rng.uniform(-25.0, 25.0, (n, 3))
+    out = measure(layout, x, triad, signal, dT=dT)
+    expected = signal.copy()
+    for k in (3, 4, 5):
+        if k >= 4:
+            expected += v[f"{triad}.bias_tc{k}"] * dT**k
+        expected += v[f"{triad}.scale_tc{k}"] * signal * dT**k
+    np.testing.assert_allclose(out, expected, rtol=1e-13, atol=1e-15)
+    np.testing.assert_allclose(correct(layout, x, triad, out, dT=dT), signal, rtol=0, atol=1e-12)
+    s, J = correct_with_jacobian(layout, x, triad, out, dT=dT)
+    cols = [i for i, e in enumerate(layout.element_names()) if e.rsplit(".", 1)[0] in v]
+    for i in cols:
+        h = 1e-3 * max(abs(x[i]), 1e-12)
+        xp, xm = x.copy(), x.copy()
+        xp[i] += h
+        xm[i] -= h
+        fd = (correct(layout, xp, triad, out, dT=dT) - correct(layout, xm, triad, out, dT=dT)) / (2 * h)
+        np.testing.assert_allclose(J[:, :, i], fd, rtol=1e-6, atol=1e-7 * np.abs(fd).max())

@@ -40,6 +40,7 @@ from gtsam.symbol_shorthand import S, Z
 from threadpoolctl import threadpool_limits
 
 from graph_calib.solvers.factor_graph import ATTITUDE_FIT_ITERATIONS, ATTITUDE_FIT_TOL, _damped
+from graph_calib.solvers.joint.degrees import choose_degrees_wald
 from graph_calib.solvers.joint.marginal import unknowns_covariance
 from graph_calib.solvers.reduced import ExperimentSystem, linearise, retract
 from graph_calib.solvers.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
@@ -505,7 +506,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
     gfg = None
     theta = theta_of(values)
     if select_degree:
-        reduced, keep, th_c, cov_c, choices = choose_degrees(unknowns, theta, cov, n_measurements=n_meas)
+        reduced, keep, th_c, cov_c, choices = choose_degrees_wald(unknowns, theta, cov, n_measurements=n_meas)
     else:
         reduced, keep, th_c, cov_c, choices = unknowns, np.ones(theta.size, bool), theta, cov, ()
     theta_r, cov_r = th_c[keep], cov_c[np.ix_(keep, keep)]
