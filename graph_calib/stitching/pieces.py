@@ -357,6 +357,7 @@ class Stitched:
             "rms_z": float(np.sqrt(np.mean(zs**2))) if zs.size else 0.0,
             "beyond_limit": int(np.count_nonzero(zs > limit)),
             "family_limit": family_limit,
+            "checked": bool(zs.size > 0),     # nothing to check (one subrange) is "not checked", never "consistent"
             "consistent": bool(zs.size == 0 or zs.max() <= family_limit),
             "boundaries": list(per.values()),
         }
