@@ -178,3 +178,25 @@ def test_every_input_is_checked_before_the_first_experiment_starts(small, tmp_pa
                      on_done=finished.append)
     assert finished == []
     assert not (tmp_path / "out" / "first" / "factor-graph.json").exists()
+
+
+def test_curvature_adopted_in_one_experiment_is_carried_into_the_others_lowest_order_first():
+    from types import SimpleNamespace
+
+    from graph_calib.campaign.waves import carried_curvature
+
+    decl = ("gyro.bias", "accel.bias", "accel.bias_tc")
+    states = {"sub1": SimpleNamespace(record={"chosen": decl}),
+              "sub2": SimpleNamespace(record={"chosen": decl + ("accel.bias_tc2", "accel.bias_tc3")}),
+              "sub3": SimpleNamespace(record={"chosen": decl + ("accel.bias_tc2",)})}
+    pick = carried_curvature(states)
+    assert (pick.effect, pick.experiments, pick.sources) == ("accel.bias_tc2", ("sub1",), ("sub2", "sub3"))
+    assert "carried accel.bias_tc2 into sub1" in pick.text()
+    states["sub1"].record["chosen"] = decl + ("accel.bias_tc2",)
+    assert carried_curvature(states).effect == "accel.bias_tc3"
+    for st in states.values():
+        st.record["chosen"] = decl + ("accel.bias_tc2", "accel.bias_tc3")
+    assert carried_curvature(states) is None
+    # a further effect that is no temperature curve (a g-sensitivity) is never carried
+    states["sub1"].record["chosen"] = decl + ("accel.bias_tc2", "accel.bias_tc3", "gyro.g_sensitivity")
+    assert carried_curvature(states) is None
