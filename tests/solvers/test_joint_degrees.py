@@ -62,3 +62,14 @@ def test_the_next_order_past_the_chosen_one_is_tested_for_every_family():
     assert top["order"] == 6 and top["passed"] is False and "cannot be ruled out" in top["text"]
     js = by["accel.scale"].to_json()
     assert js["rule"] == "wald" and js["next_order"]["passed"] is False
+
+
+def test_the_evidence_stays_finite_far_in_the_tail():
+    """A curvature thousands of sigma from zero (a long campaign's bias curve) gives a finite log10 p (the result
+    file is JSON)."""
+    u = _unknowns()
+    th, C = _plant(u, {"accel.bias": {3: 1e6}})
+    by = {c.family: c for c in choose_degrees_wald(u, th, C)[4]}
+    t = next(t for t in by["accel.bias"].tests if t["order"] == 3)
+    assert np.isfinite(t["log10_p"]) and t["log10_p"] < -1e5
+    assert by["accel.bias"].degree == 3

@@ -33,6 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
+from scipy.special import gammaln
 
 from graph_calib.sensors.params import split_element_name
 from graph_calib.solvers.joint.unknowns import curve_label
@@ -74,6 +75,17 @@ class DegreeEvidence:
     def to_json(self):
         return {"family": self.family, "degree": self.degree, "rule": "wald", "alpha": self.alpha,
                 "tests": list(self.tests), "next_order": dict(self.next_order)}
+
+
+def log10_chi2_sf(statistic, dof):
+    """``log10 P(chi2_dof > statistic)``, finite far in the tail (where ``chi2.sf`` underflows to 0)."""
+    x, k = float(statistic), int(dof)
+    v = float(stats.chi2.logsf(x, k))
+    if np.isfinite(v):
+        return v / np.log(10.0)
+    # the leading term of the upper incomplete gamma function: x^(k/2-1) e^(-x/2) / (2^(k/2-1) Gamma(k/2))
+    h = 0.5 * k
+    return float(((h - 1.0) * np.log(x) - 0.5 * x - (h - 1.0) * np.log(2.0) - gammaln(h)) / np.log(10.0))
 
 
 def _next_order(family, degree, max_degree, tests):
@@ -124,7 +136,7 @@ def choose_degrees_wald(unknowns, theta, covariance, *, n_measurements=None, alp
             threshold = float(stats.chi2.isf(alpha, len(D)))
             kept = wald > threshold
             tests.append({"order": d, "wald": wald, "k": len(D), "threshold": threshold, "alpha": alpha,
-                          "log10_p": float(stats.chi2.logsf(wald, len(D)) / np.log(10.0)), "kept": bool(kept)})
+                          "log10_p": log10_chi2_sf(wald, len(D)), "kept": bool(kept)})
             if kept:
                 break
             G = np.linalg.lstsq(CD, C[D, :], rcond=None)[0].T          # C[:, D] CD^-1
