@@ -200,3 +200,13 @@ def test_curvature_adopted_in_one_experiment_is_carried_into_the_others_lowest_o
     # a further effect that is no temperature curve (a g-sensitivity) is never carried
     states["sub1"].record["chosen"] = decl + ("accel.bias_tc2", "accel.bias_tc3", "gyro.g_sensitivity")
     assert carried_curvature(states) is None
+
+
+def test_a_one_subrange_campaign_reports_its_boundaries_as_not_checked():
+    from graph_calib.stitching import stitch
+
+    r = Result(source="s", solver="factor-graph", t_ref_degC=25.0, temperature_range_degC=(20.0, 30.0),
+               effects=("gyro.bias", "gyro.bias_tc"), values={"gyro.bias.x": 1e-7, "gyro.bias_tc.x": 1e-9},
+               sigmas={"gyro.bias.x": 1e-9, "gyro.bias_tc.x": 1e-10})
+    sm = stitch([r], names=["only"]).boundary_summary()
+    assert sm["checks"] == 0 and sm["checked"] is False
