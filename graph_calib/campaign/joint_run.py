@@ -31,9 +31,10 @@ from graph_calib.errors import InputError
 from graph_calib.solvers.joint.result import joint_element_at, joint_result, read_joint_result
 from graph_calib.solvers.joint.solver import JOINT, WarmStart
 from graph_calib.records.problem import build_problem
+from graph_calib.sensors.curves import evaluate_polynomial_curve
 from graph_calib.solvers.registry import get_solver
 from graph_calib.stitching import sensor_of
-from graph_calib.evaluation.validation import ResultCalibration, validate
+from graph_calib.evaluation.validation import ResultCalibration, truth_reference, validate
 
 #: The joint result's file name in the campaign's output folder.
 JOINT_FILE = "joint.json"
@@ -116,8 +117,7 @@ def cross_check(joint, collected, names):
 
 def _curve_truth(curves, name, T):
     c = curves[name]
-    d = np.asarray(T, dtype=float) - float(c["t0_degC"])
-    return sum(float(ci) * d**i for i, ci in enumerate(c["coefficients"]))
+    return evaluate_polynomial_curve(c["coefficients"], T, t0_degC=float(c["t0_degC"]))[0]
 
 
 def truth_check(joint, truths, summaries):
@@ -179,7 +179,8 @@ def _validate(joint, planned):
         kind, ref_path = planned.references[rec]
         if not Path(ref_path).is_file():
             continue
-        v = validate(io.read_experiment(rec), cal, ResultCalibration(io.read_result(ref_path)), record_name=rec.name)
+        # the reference a truth file stands for: its temperature curves over the whole range when it has them
+        v = validate(io.read_experiment(rec), cal, truth_reference(io.read_result(ref_path)), record_name=rec.name)
         out.append({"record": str(rec), "reference_kind": kind, "summary": v.summary()})
     return out
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from graph_calib import io
+from graph_calib.campaign.checks import check_inputs, judge_campaign
 from graph_calib.campaign.execution import Pool, execute
 from graph_calib.campaign.joint_run import joint_failures, run_joint
 from graph_calib.campaign.loop import loop_entry
@@ -133,6 +134,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     """
     t_start = time.perf_counter()
     planned = _read_and_plan(manifest, out, options=options)
+    check_inputs(planned)           # every input file read and checked before the first experiment starts
     pool = Pool(options)        # one cluster for the first wave and the pooled test's waves
     try:
         outcomes, compute_timing = _compute(planned, options=options, on_done=on_done, pool=pool)
@@ -156,6 +158,7 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     document["loop"] = loop_doc
     if pooled is not None:
         document["timing"]["pooled_seconds"] = pooled.document["seconds"]
+    judge_campaign(document, results=collected.results, joint=joint)     # checks over the whole campaign
     run = CampaignRun(out=planned.out, document=document, results=collected.results, summaries=collected.summaries,
                       truths=collected.truths, stitched=stitched, validations=validations, failed=collected.failed,
                       joint=joint)

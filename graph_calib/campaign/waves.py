@@ -6,7 +6,9 @@ files: nothing is recomputed), runs the pooled test (:mod:`graph_calib.campaign.
 passes, sends a wave of jobs: each experiment that adopts it, solved again with it by both of the campaign's
 solvers, warm-started from its previous results (:func:`graph_calib.diagnosis.diagnose_from`), its files in
 ``<experiment>/pooled/<wave>/``.  Then the pooled test again on the new final rounds, until nothing passes or
-:data:`graph_calib.campaign.pooled.MAX_WAVES` waves have run.
+:data:`graph_calib.campaign.pooled.MAX_WAVES` waves have run.  When nothing passes, a curvature term
+(``*_tc2``, ``*_tc3``) that some experiment adopted is carried, in a wave of its own, into the experiments
+whose model lacks it (:func:`carried_curvature`): one IMU has one curve over the range.
 
 A wave's tasks are cached and resumable like the first wave's: the key covers the grown model's options (the
 adopted effects), the loop's options and the keys of the results it starts from; a campaign run again with
@@ -26,6 +28,7 @@ from graph_calib import io
 from graph_calib.campaign.execution import execute
 from graph_calib.campaign.pooled import MAX_WAVES, RULE, adoption, decision_text, final_statistics, pooled_tests
 from graph_calib.campaign.tasks import Task, cached, options_sha256, task_key
+from graph_calib.sensors.effects import EFFECTS
 
 #: Where a wave's files go, under the experiment's folder: ``pooled/<wave>/``.
 POOLED_FOLDER = "pooled"
@@ -92,6 +95,46 @@ def _wave_tasks(state, *, name, effect, wave, dopts):
             for t in state.tasks]
 
 
+@dataclass(frozen=True)
+class CarriedCurvature:
+    """A curvature term adopted somewhere, carried into the experiments whose model lacks it.
+
+    An IMU's temperature curve is one curve over the campaign: when some experiment's loop (or a pooled
+    wave) adopted a family's ``*_tc2`` (``*_tc3``), the other subranges have that curvature too, unresolved
+    by their own records, and their linear models absorb it into ``p`` and ``p_tc`` (biased estimates, the
+    campaign's check "curvature carried", :mod:`graph_calib.campaign.checks`).  The lowest such order missing
+    anywhere is carried first, one order per wave.
+    """
+
+    effect: str
+    experiments: tuple
+    sources: tuple
+    kind: str = "carried"
+
+    def to_json(self):
+        return {"effect": self.effect, "kind": self.kind, "experiments": list(self.experiments),
+                "adopted_in": list(self.sources), "statistic": None, "dof": None, "threshold": None,
+                "log10_p": None}
+
+    def text(self):
+        return (f"carried {self.effect} into {', '.join(self.experiments)}: the curvature "
+                f"{', '.join(self.sources)} adopted is the same IMU's curve there")
+
+
+def carried_curvature(states):
+    """The curvature term to carry next (:class:`CarriedCurvature`), or None when every experiment has it."""
+    chosen = {n: set(st.record.get("chosen") or ()) for n, st in states.items()}
+    candidates = sorted({c for names in chosen.values() for c in names
+                         if EFFECTS.get(c) is not None and EFFECTS[c].temperature_order >= 2},
+                        key=lambda c: (EFFECTS[c].temperature_order, c))
+    for c in candidates:
+        lacking = tuple(n for n in states if c not in chosen[n])
+        if lacking:
+            return CarriedCurvature(effect=c, experiments=lacking,
+                                    sources=tuple(n for n in states if c in chosen[n]))
+    return None
+
+
 def _states(planned, outcomes):
     """``{experiment: _State}`` of every experiment whose first-wave tasks all finished with the loop."""
     tasks = {}
@@ -141,10 +184,10 @@ def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
     for wave in range(1, MAX_WAVES + 2):
         tests = pooled_tests({n: final_statistics(st.record) for n, st in states.items()}, alpha=dopts.alpha,
                              identifiable=dopts.identifiable)
-        pick = adoption(tests)
+        pick = adoption(tests) or carried_curvature(states)
         limit = pick is not None and wave > MAX_WAVES
         text = (f"{pick.effect} passes but the limit of {MAX_WAVES} pooled waves is reached" if limit
-                else decision_text(tests, pick))
+                else pick.text() if isinstance(pick, CarriedCurvature) else decision_text(tests, pick))
         waves.append({"wave": wave, "tests": [t.to_json() for t in tests],
                       "adopted": None if pick is None or limit else pick.to_json(), "decision": text})
         if options.progress:
@@ -180,4 +223,4 @@ def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
     return PooledRun(folders=folders, outcomes=wave_outcomes, document=document, adopted=adopted)
 
 
-__all__ = ["POOLED_FOLDER", "PooledRun", "run_waves"]
+__all__ = ["POOLED_FOLDER", "PooledRun", "CarriedCurvature", "carried_curvature", "run_waves"]

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from graph_calib.campaign.checks import check_lines
 from graph_calib.errors import InputError
 from graph_calib.evaluation.validation import validation_text
 
@@ -75,7 +76,8 @@ def print_summary(run, out=None):
     if st is not None:
         b = st.boundary_summary()
         print(f"  boundaries: max |z| {b['max_abs_z']:.2f} over {b['checks']} checks, "
-              f"{b['beyond_limit']} beyond {b['limit']:g} sigma", file=out)
+              f"{b['beyond_limit']} beyond {b['limit']:g} sigma" if b["checked"] else
+              "  boundaries: not checked (no boundary between subranges)", file=out)
     tc = (doc.get("truth_check") or {}).get(primary, {}).get(doc["stitch_model"])
     if tc:
         print(f"  stitched vs truth: max |error| / sigma {tc['max_abs_z']:.2f}, "
@@ -90,11 +92,17 @@ def print_summary(run, out=None):
     _print_joint(doc, out)
     outdir = Path(run.out)
     print(f"  -> {outdir / 'campaign.json'}" + (f", {run.report_path}" if run.report_path else ""), file=out)
+    checks = doc.get("campaign_checks")
+    for line in check_lines(checks) if checks else []:
+        print(f"  check {line}", file=out)
     failed = run.verdict_failed
     if failed:
         print(f"verdict: FAIL: {len(failed)} of {len(doc['experiments'])} experiment(s) failed theirs "
               f"({', '.join(failed)}); converged, solvers agree and residuals consistent are required", file=out)
-    else:
+    if checks and not checks["passed"]:
+        print(f"verdict: FAIL: {len(checks['failed'])} check(s) over the whole campaign failed: "
+              + " | ".join(checks["failed"]), file=out)
+    if not failed and not (checks and not checks["passed"]):
         print("verdict: pass: every experiment converged, its solvers agree and its residuals are consistent",
               file=out)
 
@@ -130,6 +138,9 @@ def _print_loop(loop, out):
                       for a in loop["added"]) or "nothing"
     line = f"    loop: added {added}"
     for a in loop.get("pooled") or []:
+        if a.get("kind") == "carried":
+            line += f"; carried {a['effect']} (adopted in {', '.join(a.get('adopted_in') or [])})"
+            continue
         line += (f"; pooled test adopted {a['effect']} ({a['kind']} score {a['statistic']:.1f} > {a['threshold']:.1f} over "
                  f"{len(a['experiments'])} experiments, log10 p {a['log10_p']:.1f})")
     err = (loop.get("error_vs_truth") or {}).get("factor-graph") or {}
@@ -150,4 +161,4 @@ def run(args):
         for f in result.failed:
             print(f"graph-calib campaign: {f['name']} {f['solver']} failed: {f['error']}", file=sys.stderr)
         return 1
-    return 0 if not result.verdict_failed else 3
+    return 0 if result.document["verdict"]["passed"] and not result.verdict_failed else 3

@@ -21,7 +21,7 @@ from graph_calib.compensation.stitched import INTERPOLATION_CHECK_POINTS, read_c
 from graph_calib.compensation.table import CompensationTable, TableCurve, interpolate
 from graph_calib.errors import InputError
 from graph_calib.solvers.joint.result import read_joint_result
-from graph_calib.solvers.joint.unknowns import evaluate_curve
+from graph_calib.sensors.curves import evaluate_polynomial_curve
 from graph_calib.stitching import sensor_of
 
 
@@ -45,7 +45,7 @@ class JointCurve:
 
     def evaluate(self, T, model=None):
         """``(value, sigma)`` at temperatures ``T`` (degC), SI (``model`` ignored: one curve form)."""
-        return evaluate_curve(self.coefficients, self.covariance, T, self.t0_degC)
+        return evaluate_polynomial_curve(self.coefficients, T, t0_degC=self.t0_degC, covariance=self.covariance)
 
 
 @dataclass(frozen=True, eq=False)

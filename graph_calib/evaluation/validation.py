@@ -56,6 +56,7 @@ import numpy as np
 
 from graph_calib import constants as c
 from graph_calib.compensation.calibration import Calibration, triad_errors
+from graph_calib.sensors.curves import evaluate_polynomial_curve
 from graph_calib.sensors.effects import EFFECTS
 from graph_calib.sensors.params import Layout, split_element_name
 from graph_calib.stitching import family, result_points, sensor_columns, sensor_of
@@ -83,11 +84,12 @@ def _parameter_of(element):
 class ResultCalibration:
     """A single result (truth or estimate) as a calibration over temperature.
 
-    Every gyro/accel element follows ``p + p_tc dT + p_tc2 dT^2`` with
-    ``dT = T_sensor - T_ref`` (absent coefficients are zero), one
-    :class:`graph_calib.stitching.SubrangePoint` per element.  For a truth file of
-    the simulator the curvature remainder ``extra.simulation.unmodelled`` supplies
-    ``p_tc2``, which makes the truth exact over any range.
+    Every gyro/accel element follows ``p + p_tc dT + p_tc2 dT^2 + p_tc3 dT^3 + ...``, every temperature
+    coefficient the result holds (the registry's, up to ``*_tc5``), with ``dT = T_sensor - T_ref``,
+    one :class:`graph_calib.stitching.SubrangePoint` per element (evaluated by
+    :func:`graph_calib.sensors.curves.evaluate_polynomial_curve`); :meth:`sensor_errors` applies the same
+    coefficients through the one sensor model.  For a truth file of the simulator the curvature remainder
+    ``extra.simulation.unmodelled`` supplies the coefficients the truth layout lacks.
 
     Parameters
     ----------
@@ -177,7 +179,7 @@ class TruthCurves:
         out = self._own.evaluate(T_sensors)
         for k, (t0, coef) in self.curves.items():
             T = sensor_columns(T_sensors, sensor_of(k))
-            out[k] = np.polynomial.polynomial.polyval(T - t0, coef)
+            out[k] = evaluate_polynomial_curve(coef, T, t0_degC=t0)[0]
         return out
 
     def element_sigmas(self, T_sensors, model=None):

@@ -64,6 +64,19 @@ def fig_temperatures(run):
     return fig
 
 
+#: How far right of its own reference temperature the other solver's point is drawn, degC (drawing only).
+PLOT_OFFSET_DEGC = 0.5
+
+
+def point_minus_reference(point, reference):
+    """A subrange point's value minus the reference curve at the point's own reference temperature, SI.
+
+    ``reference(T) -> values`` (the truth curve or the stitched one); the offset a figure draws a point at
+    never enters the difference.
+    """
+    return float(point.value - np.asarray(reference(np.array([point.t_ref_degC])), dtype=float).reshape(-1)[0])
+
+
 def _truth_curve(truth_cal, element, T):
     if truth_cal is None:
         return None
@@ -109,13 +122,15 @@ def fig_parameter(parameter, stitched, *, other=None, truth_cal=None, model="cub
                 for a, base in ((ax, 0.0), (axd, ref_of(tt))):
                     a.plot(tt, (pv - base) * k, ":", color=color, lw=1.4)
                     a.fill_between(tt, (pv - ps - base) * k, (pv + ps - base) * k, color=color, alpha=0.15, lw=0)
-            for a, base in ((ax, 0.0), (axd, float(ref_of(np.array([p.t_ref_degC]))[0]))):
+            for a, base in ((ax, 0.0), (axd, p.value - point_minus_reference(p, ref_of))):
                 a.errorbar([p.t_ref_degC], [(p.value - base) * k], yerr=[p.sigma * k], fmt="o", ms=4, color=color,
                            capsize=3, lw=1.2, label=p.name if a is ax else None)
             for q in other_pts.get(cv.element, ()):
                 if q.name == p.name:
-                    for a, base in ((ax, 0.0), (axd, float(ref_of(np.array([q.t_ref_degC + 0.5]))[0]))):
-                        a.errorbar([q.t_ref_degC + 0.5], [(q.value - base) * k], yerr=[q.sigma * k], fmt="s",
+                    # drawn PLOT_OFFSET_DEGC to the right so that both markers show; the reference is
+                    # subtracted at the point's own temperature
+                    for a, base in ((ax, 0.0), (axd, q.value - point_minus_reference(q, ref_of))):
+                        a.errorbar([q.t_ref_degC + PLOT_OFFSET_DEGC], [(q.value - base) * k], yerr=[q.sigma * k], fmt="s",
                                    mfc="none", ms=4, color=color, capsize=2, lw=0.8)
         lin_v, lin_s = cv.fit("linear").evaluate(T)
         label_s = {"cubic": "stitched cubic", "constant": "stitched constant"}.get(fit.kind, f"stitched {fit.kind}")
@@ -294,5 +309,5 @@ def fig_residuals(run, solver):
     return fig
 
 
-__all__ = ["SOLVER_LABEL", "report_unit", "fig_parameter", "fig_validation", "fig_boundaries", "fig_residuals",
+__all__ = ["SOLVER_LABEL", "PLOT_OFFSET_DEGC", "point_minus_reference", "report_unit", "fig_parameter", "fig_validation", "fig_boundaries", "fig_residuals",
            "fig_solver_comparison", "fig_temperatures"]

@@ -168,7 +168,9 @@ def _loop_table(doc):
             continue
         added = "; ".join(f"{a['effect']} (score {a['statistic']:.1f} > {a['threshold']:.1f}, log10 p "
                           f"{a['log10_p']:.1f})" for a in lp["added"]) or "nothing"
-        pooled = "; ".join(f"{a['effect']} (wave {a['wave']}: pooled {a['kind']} score {a['statistic']:.1f} > "
+        pooled = "; ".join((f"{a['effect']} (wave {a['wave']}: carried, the curvature "
+                            f"{', '.join(a.get('adopted_in') or [])} adopted)") if a.get("kind") == "carried" else
+                           f"{a['effect']} (wave {a['wave']}: pooled {a['kind']} score {a['statistic']:.1f} > "
                            f"{a['threshold']:.1f}, "
                            f"{a['dof']} dof, log10 p {a['log10_p']:.1f}, over {len(a['experiments'])} experiments)"
                            for a in lp.get("pooled") or []) or "-"
@@ -266,13 +268,20 @@ def build_report(run, *, figures_dir=None):
     st_primary = run.stitched.get(primary) if primary else None
     if st_primary is not None:
         bsm = st_primary.boundary_summary()
+        if not bsm["checked"]:
+            verdicts.append(["consecutive subranges agree at their boundaries", H.Raw("not checked"),
+                             f"no boundary between subranges to check ({len(st_primary.subranges)} subrange(s))"])
+    if st_primary is not None and bsm["checked"]:
         verdicts.append(["consecutive subranges agree at their boundaries", H.verdict(bsm["consistent"], "yes", "NO"),
                          f"largest |z| {bsm['max_abs_z']:.2f} over {bsm['checks']} checks (limit "
                          f"{bsm['family_limit']:.2f} for that many); rms z {bsm['rms_z']:.2f}; "
                          f"{bsm['beyond_limit']} beyond {bsm['limit']:g} sigma "
                          f"({0.0027 * bsm['checks']:.1f} expected by chance)"])
     tc = (doc.get("truth_check") or {}).get(primary, {}).get(model)
-    if tc:
+    if tc and not tc.get("points"):
+        verdicts.append([f"stitched {model} curves match the truth within their bands", H.Raw("not checked"),
+                         "no point of a curve where a truth holds"])
+    elif tc:
         verdicts.append([f"stitched {model} curves match the truth within their bands",
                          H.verdict(tc["consistent"], "yes", "NO"),
                          f"within 1 sigma: {100 * tc['fraction_within_1sigma']:.0f} % of the points (68 % expected), "
@@ -287,6 +296,9 @@ def build_report(run, *, figures_dir=None):
         elif ventry.get("error"):
             verdicts.append([f"validation on {Path(ventry['record']).name}", H.verdict(False, "", "not done"),
                              ventry["error"]])
+    for c in (doc.get("campaign_checks") or {}).get("checks", []):
+        verdicts.append([f"campaign check: {c['check']}",
+                         H.Raw("not checked") if not c["checked"] else H.verdict(c["passed"], "pass", "FAIL"), c["text"]])
     if run.failed:
         verdicts.append(["tasks that failed", H.verdict(False, "", str(len(run.failed))),
                          "; ".join(f"{f['name']} {f['solver']}: {f['error']}" for f in run.failed)])

@@ -92,7 +92,9 @@ def joint_sections(run, fig):
                                  "covariance, over each subrange's estimate at its reference temperature."))
     choice = "; ".join(
         f"{c['family']}: degree {c['degree']} ("
-        + ", ".join(f"order {t['order']} Wald {t['wald']:.3g} vs BIC price {t['bic_price']:.3g}" for t in c["tests"])
+        + ", ".join(f"order {t['order']} Wald {t['wald']:.3g} vs "
+                    + (f"BIC price {t['bic_price']:.3g}" if "bic_price" in t else f"threshold {t['threshold']:.3g}")
+                    for t in c["tests"])
         + ")" for c in entry.get("degree_choice", []))
     tc = entry.get("truth_check") or {}
     truth = (f"Against the truth ({tc['mode']}): {100 * tc['fraction_within_2sigma']:.1f} % of {tc['points']} points "

@@ -93,6 +93,9 @@ class Effect:
         For a temperature coefficient: the parameter it belongs to (``gyro.bias`` for ``gyro.bias_tc``).
     temperature_order : int
         Its power of ``dT`` (1 for ``*_tc``, 2 for ``*_tc2``); 0 for other parameters.
+    loop_candidate : bool
+        Whether the closed loop of one experiment tests it (:data:`FURTHER_EFFECTS`); False for the higher
+        orders of the temperature curves (:data:`CURVE_ORDERS`), which a campaign decides.
     """
 
     name: str
@@ -112,6 +115,7 @@ class Effect:
     report_view: tuple | None = None
     temperature_of: str | None = None
     temperature_order: int = 0
+    loop_candidate: bool = True
 
     @property
     def size(self):
@@ -142,11 +146,12 @@ def _declared(name, elements, unit, report_unit, to_report, *, triad=None, term=
 
 
 def _further(name, elements, unit, report_unit, to_report, *, triad, term, prior, size, view, needs=None,
-             why_needs="", positive=False, drawn_when_off=False, temperature_of=None, temperature_order=0):
+             why_needs="", positive=False, drawn_when_off=False, temperature_of=None, temperature_order=0,
+             loop_candidate=True):
     return Effect(name, tuple(elements), unit, report_unit, to_report, False, triad=triad, term=term, prior=prior,
                   needs=needs, why_needs=why_needs, simulation_size=size, drawn_when_off=drawn_when_off,
                   positive=positive, report_view=view, temperature_of=temperature_of,
-                  temperature_order=temperature_order)
+                  temperature_order=temperature_order, loop_candidate=loop_candidate)
 
 
 #: Every parameter, declared model first, in the canonical order of a calibration vector.
@@ -216,12 +221,32 @@ REGISTRY = (
     _further("accel.bias_tc3", XYZ, "m/s^2/degC^3", "micro-g/degC^3", _UG, triad="accel", term="bias_tc3",
              prior=PriorRule("accel.bias_tc", divisor=2.0), size=(1 * UG, 2 * UG),
              view=("temperature", "accel"), temperature_of="accel.bias", temperature_order=3),
+    # the higher orders of the four temperature families, up to dT^5: the capacity of a curve over a whole
+    # campaign (docs/campaign.md, "Curve capacity"); never a closed-loop candidate of one subrange
+    *(_further(f"{base}_tc{k}", XYZ, f"{unit}/degC^{k}", f"{runit}/degC^{k}", to, triad=base.split(".")[0],
+               term=f"{base.split('.')[1]}_tc{k}", prior=PriorRule(f"{base}_tc", divisor=10.0 ** (k - 1)), size=None,
+               view=("temperature", base.split(".")[0]), temperature_of=base, temperature_order=k,
+               loop_candidate=False)
+      for k, base, unit, runit, to in (
+          (4, "gyro.bias", "rad/s", "deg/h", _DH), (4, "accel.bias", "m/s^2", "micro-g", _UG),
+          (5, "gyro.bias", "rad/s", "deg/h", _DH), (5, "accel.bias", "m/s^2", "micro-g", _UG),
+          (3, "gyro.scale", "1", "ppm", _PPM), (3, "accel.scale", "1", "ppm", _PPM),
+          (4, "gyro.scale", "1", "ppm", _PPM), (4, "accel.scale", "1", "ppm", _PPM),
+          (5, "gyro.scale", "1", "ppm", _PPM), (5, "accel.scale", "1", "ppm", _PPM))),
 )
 
 #: ``{name: Effect}``.
 EFFECTS = {e.name: e for e in REGISTRY}
 DECLARED = tuple(e.name for e in REGISTRY if e.declared)
-FURTHER_EFFECTS = tuple(e.name for e in REGISTRY if not e.declared)
+#: The further effects of model.md and the project: the closed loop's candidates (the higher curve orders
+#: of :data:`CURVE_ORDERS` are not among them).
+FURTHER_EFFECTS = tuple(e.name for e in REGISTRY if not e.declared and e.loop_candidate)
+#: Temperature coefficients of order 3 to 5 that only a curve over a whole campaign uses (the joint
+#: solver's degrees, a campaign's curvature carried into its subranges); never tested by one subrange's loop.
+CURVE_ORDERS = tuple(e.name for e in REGISTRY if not e.declared and not e.loop_candidate)
+#: Highest power of ``dT`` of each temperature family: ``{"gyro.bias": 5, ...}``.
+MAX_TEMPERATURE_ORDER = {b: max(e.temperature_order for e in REGISTRY if e.temperature_of == b)
+                         for b in dict.fromkeys(e.temperature_of for e in REGISTRY if e.temperature_of)}
 
 
 def effect(name):
@@ -258,5 +283,6 @@ def temperature_family(name):
     return base, {e.temperature_order: e.name for e in REGISTRY if e.temperature_of == base}
 
 
-__all__ = ["Effect", "PriorRule", "REGISTRY", "EFFECTS", "DECLARED", "FURTHER_EFFECTS", "effect", "uninformed",
+__all__ = ["Effect", "PriorRule", "REGISTRY", "EFFECTS", "DECLARED", "FURTHER_EFFECTS", "CURVE_ORDERS",
+           "MAX_TEMPERATURE_ORDER", "effect", "uninformed",
            "temperature_family", "NEEDS_TABLE", "NEEDS_VALID_READINGS", "NEEDS_READINGS_IN_MOTION", "XYZ", "NINE"]

@@ -20,6 +20,8 @@ code                feature on ``axis`` (``s`` the triad signal)  parameters
 ``SCALE``           ``s[axis]``                                  ``*.scale``
 ``SCALE_TC``        ``s[axis] * dT``                             ``*.scale_tc``
 ``SCALE_TC2``       ``s[axis] * dT**2``                          ``*.scale_tc2``
+``BIAS_TC4/5``      ``dT**4``, ``dT**5``                         ``*.bias_tc4``, ``*.bias_tc5``
+``SCALE_TC3/4/5``   ``s[axis] * dT**3`` (``**4``, ``**5``)        ``*.scale_tc3`` ... ``*.scale_tc5``
 ``SCALE_ASYM``      ``abs(s[axis])``                             ``gyro.scale_asym``
 ``CROSS``           ``s[aux]``                                   ``*.misalignment``
 ``GSENS``           ``f_b[aux]``                                 ``gyro.g_sensitivity``
@@ -62,6 +64,7 @@ from graph_calib.sensors.effects import EFFECTS, XYZ
 
 BIAS, BIAS_TC, BIAS_TC2, BIAS_DTDT, SCALE, SCALE_TC, SCALE_TC2, SCALE_ASYM, CROSS, GSENS, NONLIN, SIZE, LAG = range(13)
 BIAS_TC3 = 13
+BIAS_TC4, BIAS_TC5, SCALE_TC3, SCALE_TC4, SCALE_TC5 = range(14, 19)
 
 _AXIS = {"x": 0, "y": 1, "z": 2}
 
@@ -70,6 +73,7 @@ TERM_CODES = {
     "bias": BIAS, "bias_tc": BIAS_TC, "bias_tc2": BIAS_TC2, "bias_dtdt": BIAS_DTDT,
     "scale": SCALE, "scale_tc": SCALE_TC, "scale_tc2": SCALE_TC2, "scale_asym": SCALE_ASYM,
     "cross": CROSS, "gsens": GSENS, "nonlin": NONLIN, "size": SIZE, "lag": LAG, "bias_tc3": BIAS_TC3,
+    "bias_tc4": BIAS_TC4, "bias_tc5": BIAS_TC5, "scale_tc3": SCALE_TC3, "scale_tc4": SCALE_TC4, "scale_tc5": SCALE_TC5,
 }
 
 
@@ -113,7 +117,7 @@ def term_rows(layout, triad):
 def _is_slope_term(code):
     """Whether the term's feature depends on the triad's own signal (it then enters ``I + dPhi x/ds``)."""
     return (code == SCALE or code == SCALE_TC or code == SCALE_TC2 or code == SCALE_ASYM or code == CROSS
-            or code == NONLIN)
+            or code == NONLIN or code == SCALE_TC3 or code == SCALE_TC4 or code == SCALE_TC5)
 
 
 @numba.njit(cache=True, inline="always")
@@ -142,6 +146,16 @@ def _feature(code, axis, aux, s, dT, dTdt, other, domega, dsig):
         return other[aux]
     if code == NONLIN:
         return s[axis] * s[axis]
+    if code == BIAS_TC4:
+        return dT[axis] ** 4
+    if code == BIAS_TC5:
+        return dT[axis] ** 5
+    if code == SCALE_TC3:
+        return s[axis] * dT[axis] ** 3
+    if code == SCALE_TC4:
+        return s[axis] * dT[axis] ** 4
+    if code == SCALE_TC5:
+        return s[axis] * dT[axis] ** 5
     if code == SIZE:
         # (w' x e + w x (w x e))[axis] with e = e_aux, w = other, w' = domega
         e0 = 1.0 if aux == 0 else 0.0
@@ -173,6 +187,12 @@ def _dfeature(code, axis, aux, s, dT, k):
         return dT[axis] if k == axis else 0.0
     if code == SCALE_TC2:
         return dT[axis] * dT[axis] if k == axis else 0.0
+    if code == SCALE_TC3:
+        return dT[axis] ** 3 if k == axis else 0.0
+    if code == SCALE_TC4:
+        return dT[axis] ** 4 if k == axis else 0.0
+    if code == SCALE_TC5:
+        return dT[axis] ** 5 if k == axis else 0.0
     if code == SCALE_ASYM:
         if k != axis:
             return 0.0

@@ -42,6 +42,18 @@ NAV_CHANNELS = (
     ("chamber", 0.0, 0.0),
 )
 NAV_TEMPERATURE_MAP = (0, 1, 2, 3, 3, 3)
+#: Channels of a unit with a temperature sensor at each of the six sensors, each lagging the chamber with its own
+#: time constant (name, minutes, self-heating offset degC); the chamber last.
+SENSOR_CHANNELS = (
+    ("gyro_x", 20.0, 0.8),
+    ("gyro_y", 28.0, 0.6),
+    ("gyro_z", 35.0, 1.0),
+    ("accel_x", 12.0, 0.4),
+    ("accel_y", 16.0, 0.5),
+    ("accel_z", 22.0, 0.3),
+    ("chamber", 0.0, 0.0),
+)
+SENSOR_TEMPERATURE_MAP = (0, 1, 2, 3, 4, 5)
 
 #: Sinusoids per axis of a hand's sway (:meth:`HandheldMotion.sway`).
 HAND_SWAY_TERMS = 4
@@ -124,7 +136,8 @@ def _truth_result(*, file_name, imu, t_ref, T_rec_sensors, tl, x_truth, unmodell
 
 def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, start_degC, span_degC,
                            design, latitude_rad, gravity_mps2, noise, valid, encoder_rate_hz, azimuth_rad,
-                           description, tag, program=None, thermal=None):
+                           description, tag, program=None, thermal=None, channels=NAV_CHANNELS,
+                           temperature_map=NAV_TEMPERATURE_MAP):
     """``program`` and ``thermal`` (a bench program's, :mod:`graph_calib.simulation.program`) replace the
     rotation design's programme and the ramped chamber; ``design``, ``duration_s``, ``start_degC`` and
     ``span_degC`` are then unused."""
@@ -134,19 +147,19 @@ def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, d
         program = rotation_program(rate_hz, duration_s, rng=r_prog, design=design)
 
     if thermal is None:
-        names = tuple(c[0] for c in NAV_CHANNELS)
-        tau = np.array([c[1] for c in NAV_CHANNELS]) * 60.0 * r_therm.uniform(0.9, 1.1, len(names))
-        offset = np.array([c[2] for c in NAV_CHANNELS]) + np.where(tau > 0, r_therm.normal(0.0, 0.1, len(names)),
-                                                                   0.0)
+        names = tuple(c[0] for c in channels)
+        tau = np.array([c[1] for c in channels]) * 60.0 * r_therm.uniform(0.9, 1.1, len(names))
+        offset = np.array([c[2] for c in channels]) + np.where(tau > 0, r_therm.normal(0.0, 0.1, len(names)),
+                                                               0.0)
         pattern = np.array([1.0, 0.55, 1.4]) * r_therm.uniform(0.85, 1.15, 3)
         thermal = ramp_chamber(duration=program.duration, start_degC=start_degC, span_degC=span_degC, names=names,
-                               tau=tau, offset=offset, temperature_map=NAV_TEMPERATURE_MAP, pattern=tuple(pattern))
+                               tau=tau, offset=offset, temperature_map=temperature_map, pattern=tuple(pattern))
     names = tuple(thermal.names)
     tau, offset = np.asarray(thermal.tau), np.asarray(thermal.offset)
 
     n = program.n_ticks
     t = np.arange(1, n + 1) / rate_hz
-    tmap = np.array(NAV_TEMPERATURE_MAP)
+    tmap = np.array(temperature_map)
     sig_T = TEMPERATURE_NOISE[imu.grade] if noise else 0.0
     T_rec = thermal.temperature(t)
     if sig_T > 0:
@@ -333,4 +346,5 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
                                thermal=thermal, layout=sl, x=x_sim)
 
 
-__all__ = ["SimulatedExperiment", "cut_out", "NAV_CHANNELS", "NAV_TEMPERATURE_MAP", "TEMPERATURE_NOISE"]
+__all__ = ["SimulatedExperiment", "cut_out", "NAV_CHANNELS", "NAV_TEMPERATURE_MAP", "SENSOR_CHANNELS",
+           "SENSOR_TEMPERATURE_MAP", "TEMPERATURE_NOISE"]

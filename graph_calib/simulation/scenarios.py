@@ -28,6 +28,8 @@ from graph_calib.sensors import effects
 from graph_calib.errors import InputError
 from graph_calib.simulation.design import NAV_DESIGN, SHORT_DESIGN
 from graph_calib.simulation.experiments import (
+    SENSOR_CHANNELS,
+    SENSOR_TEMPERATURE_MAP,
     _make_handheld_experiment,
     _make_table_experiment,
 )
@@ -148,15 +150,19 @@ def _check_common(hours, rate_hz, effect_scale, effect_names):
 
 def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, noise, errors, rate_hz, effects,
                     effect_scale, curvature, latitude_deg, gravity_mps2, table_valid, encoder_rate_hz, tag,
-                    file_stem, cubic_scale=0.0):
+                    file_stem, cubic_scale=0.0, scale_cubic_scale=0.0, channels=None):
     _check_common(hours, rate_hz, effect_scale, effects)
     if not (np.isfinite(cubic_scale) and cubic_scale >= 0):
         raise InputError(f"--cubic-scale must be a non-negative number, got {cubic_scale!r}")
+    if not (np.isfinite(scale_cubic_scale) and scale_cubic_scale >= 0):
+        raise InputError(f"scale_cubic_scale must be a non-negative number, got {scale_cubic_scale!r}")
     if table_valid not in ("static", "all"):
         raise InputError(f"table_valid must be 'static' or 'all', got {table_valid!r}")
     imu_seed, *seeds = (int(s) for s in rng.integers(0, 2**62, size=1 + len(subranges)))
     imu = draw_imu("navigation", rng=np.random.default_rng(imu_seed), effects=effects, effect_scale=effect_scale,
-                   errors=errors, curvature=curvature, cubic_scale=float(cubic_scale))
+                   errors=errors, curvature=curvature, cubic_scale=float(cubic_scale),
+                   scale_cubic_scale=float(scale_cubic_scale))
+    thermal_keywords = {} if channels is None else {"channels": channels[0], "temperature_map": channels[1]}
     azimuth = 0.0
     plans = []
     for i, ((lo, hi), seed) in enumerate(zip(subranges, seeds)):
@@ -176,12 +182,14 @@ def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, n
             rate_hz=float(rate_hz), duration_s=float(hours) * 3600.0, start_degC=start, span_degC=span,
             design=design, latitude_rad=np.radians(latitude_deg), gravity_mps2=float(gravity_mps2), noise=noise,
             valid=table_valid, encoder_rate_hz=float(encoder_rate_hz), azimuth_rad=azimuth, description=desc,
-            tag=tag,
+            tag=tag, **thermal_keywords,
         )
         plans.append(ExperimentPlan(file_name=f"{stem}.h5", make=make,
                                     summary=f"subrange {lo:g}..{hi:g} degC, {hours:g} h"))
     info = {"hours": hours, "rate_hz": rate_hz, "noise": noise, "errors": errors, "effects": list(effects),
             "subranges": [list(s) for s in subranges], "cubic_scale": float(cubic_scale)}
+    if scale_cubic_scale:
+        info["scale_cubic_scale"] = float(scale_cubic_scale)
     return Simulation(scenario=name, imu_id=imu_id, grade="navigation", plans=tuple(plans), imu=imu, info=info)
 
 
@@ -223,6 +231,25 @@ def nav_campaign(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effe
                            effects=tuple(effects), effect_scale=effect_scale, curvature=curvature,
                            latitude_deg=latitude_deg, gravity_mps2=gravity_mps2, table_valid=table_valid,
                            encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=None, cubic_scale=cubic_scale)
+
+
+def nav_campaign_cubic(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
+                       cubic_scale=1.0, scale_cubic_scale=1.0, span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG,
+                       gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag=""):
+    """Six navigation-grade experiments over -10..+50 degC whose four temperature families are cubic curves.
+
+    Every bias and scale factor of both triads follows a cubic in its own sensor's temperature (the
+    grade's ``*_tc3`` ranges times ``cubic_scale`` and ``scale_cubic_scale``), and each of the six sensors
+    has its own temperature channel lagging the chamber with its own time constant
+    (:data:`graph_calib.simulation.experiments.SENSOR_CHANNELS`).  The truth files carry the curves
+    (``temperature_curves``).
+    """
+    return _table_scenario("nav-campaign-cubic", rng=rng, subranges=CAMPAIGN_SUBRANGES, hours=hours,
+                           span_degC=span_degC, design=NAV_DESIGN, imu_id="SIM-NAV 0002", noise=noise, errors=errors,
+                           rate_hz=rate_hz, effects=tuple(effects), effect_scale=effect_scale, curvature=True,
+                           latitude_deg=latitude_deg, gravity_mps2=gravity_mps2, table_valid=table_valid,
+                           encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=None, cubic_scale=cubic_scale,
+                           scale_cubic_scale=scale_cubic_scale, channels=(SENSOR_CHANNELS, SENSOR_TEMPERATURE_MAP))
 
 
 def effect_scenario(effect, *, rng, hours=0.3, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
@@ -340,6 +367,8 @@ def _registry():
                                        nav_subrange_short),
         "nav-campaign": Scenario("nav-campaign", "navigation grade, six 1.5 h experiments over -10..+50 degC",
                                  nav_campaign),
+        "nav-campaign-cubic": Scenario("nav-campaign-cubic", "nav-campaign with cubic curves in all four temperature "
+                                       "families and a lagging temperature channel per sensor", nav_campaign_cubic),
         "consumer-handheld": Scenario("consumer-handheld", "consumer MEMS turned by hand, no table, ~5 min",
                                       consumer_handheld),
         "consumer-ferraris": Scenario("consumer-ferraris", "consumer MEMS by hand: six faces, three full turns",
@@ -410,6 +439,6 @@ def simulate(name, *, rng, **options):
 
 __all__ = [
     "ExperimentPlan", "Simulation", "Scenario", "SCENARIOS", "scenario_names", "get_scenario", "simulate",
-    "nav_subrange", "nav_subrange_short", "nav_campaign", "consumer_handheld", "consumer_ferraris", "effect_scenario",
+    "nav_subrange", "nav_subrange_short", "nav_campaign", "nav_campaign_cubic", "consumer_handheld", "consumer_ferraris", "effect_scenario",
     "CAMPAIGN_SUBRANGES", "DEFAULT_LATITUDE_DEG", "DEFAULT_GRAVITY_MPS2",
 ]

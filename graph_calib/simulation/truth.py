@@ -29,6 +29,9 @@ and the curvature ``c_2`` is a small ``*_tc2`` remainder that the declared
 is part of the truth (effect value plus curvature).
 
 A cubic term, as real IMUs show, is added to the biases with ``cubic_scale > 0``
+(and to the scale factors of both triads with ``scale_cubic_scale > 0``, drawn after the biases' and
+from the grade's ``*.scale_tc3`` range: a pendulous accelerometer's scale factor bends by a few ppm over
+60 degC)
 (:func:`draw_imu`): ``p(T) = ... + c_3 (T - T_c)^3`` with ``c_3`` drawn from the
 grade's ``*.bias_tc3`` range times ``cubic_scale`` (drawn after every other
 parameter, so the other draws of a seed stay the same; ``cubic_scale = 0``, the
@@ -79,6 +82,7 @@ TRUTH_RANGES = {
         "gyro.scale": (10 * PPM, 100 * PPM),
         "gyro.scale_tc": (0.3 * PPM, 1.5 * PPM),
         "gyro.scale_tc2": (0.002 * PPM, 0.01 * PPM),
+        "gyro.scale_tc3": (0.5e-4 * PPM, 2e-4 * PPM),
         "gyro.misalignment": (10 * AS, 60 * AS),
         "accel.bias": (1e-4, 1e-3),
         "accel.bias_tc": (0.5e-5, 2e-5),
@@ -87,6 +91,7 @@ TRUTH_RANGES = {
         "accel.scale": (50 * PPM, 300 * PPM),
         "accel.scale_tc": (0.5 * PPM, 2 * PPM),
         "accel.scale_tc2": (0.002 * PPM, 0.01 * PPM),
+        "accel.scale_tc3": (1e-4 * PPM, 3e-4 * PPM),
         "accel.misalignment": (10 * AS, 60 * AS),
         "mount": (1 * AM, 5 * AM),
         "lever_arm": (0.05, 0.15),
@@ -100,6 +105,7 @@ TRUTH_RANGES = {
         "gyro.scale": (100 * PPM, 1000 * PPM),
         "gyro.scale_tc": (3 * PPM, 15 * PPM),
         "gyro.scale_tc2": (0.02 * PPM, 0.1 * PPM),
+        "gyro.scale_tc3": (0.5e-3 * PPM, 2e-3 * PPM),
         "gyro.misalignment": (20 * AS, 200 * AS),
         "accel.bias": (5e-4, 5e-3),
         "accel.bias_tc": (2e-5, 1e-4),
@@ -108,6 +114,7 @@ TRUTH_RANGES = {
         "accel.scale": (200 * PPM, 1000 * PPM),
         "accel.scale_tc": (5 * PPM, 20 * PPM),
         "accel.scale_tc2": (0.02 * PPM, 0.1 * PPM),
+        "accel.scale_tc3": (1e-3 * PPM, 3e-3 * PPM),
         "accel.misalignment": (20 * AS, 200 * AS),
         "mount": (2 * AM, 10 * AM),
         "lever_arm": (0.05, 0.15),
@@ -121,6 +128,7 @@ TRUTH_RANGES = {
         "gyro.scale": (0.005, 0.03),
         "gyro.scale_tc": (50 * PPM, 300 * PPM),
         "gyro.scale_tc2": (0.0, 0.0),
+        "gyro.scale_tc3": (0.0, 0.0),
         "gyro.misalignment": (0.2 * c.DEG_TO_RAD, 2.0 * c.DEG_TO_RAD),
         "accel.bias": (0.02, 0.2),
         "accel.bias_tc": (1e-3, 5e-3),
@@ -129,6 +137,7 @@ TRUTH_RANGES = {
         "accel.scale": (0.005, 0.03),
         "accel.scale_tc": (50 * PPM, 300 * PPM),
         "accel.scale_tc2": (0.0, 0.0),
+        "accel.scale_tc3": (0.0, 0.0),
         "accel.misalignment": (0.2 * c.DEG_TO_RAD, 2.0 * c.DEG_TO_RAD),
         "mount": (0.5 * c.DEG_TO_RAD, 3.0 * c.DEG_TO_RAD),
         "lever_arm": (0.0, 0.05),
@@ -260,7 +269,8 @@ class ImuTruth:
         return tl, x_truth, sl, x_sim, unmodelled
 
 
-def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature=True, exclude=(), cubic_scale=0.0):
+def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature=True, exclude=(), cubic_scale=0.0,
+             scale_cubic_scale=0.0):
     """Draw one IMU's truth.
 
     Parameters
@@ -281,6 +291,9 @@ def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature
     cubic_scale : float
         Multiplies the cubic term of the bias curves (``*.bias_tc3`` of :data:`TRUTH_RANGES`); 0 (the
         default): none, and nothing drawn, so every seed's IMU stays as before.  Needs ``curvature``.
+    scale_cubic_scale : float
+        The same for the scale-factor curves of both triads (``*.scale_tc3`` of :data:`TRUTH_RANGES`), drawn
+        after the biases' cubic terms; 0 (the default): none, nothing drawn.
 
     Returns
     -------
@@ -325,6 +338,10 @@ def draw_imu(grade, *, rng, effects=(), effect_scale=1.0, errors=True, curvature
         for p in ("gyro.bias", "accel.bias"):
             lo, hi = ranges[f"{p}_tc3"]
             cubic[p] = _draw(rng, lo * cubic_scale, hi * cubic_scale, 3)
+    if scale_cubic_scale > 0 and errors and curvature:   # after the biases' cubic terms: their draws stay
+        for p in ("gyro.scale", "accel.scale"):
+            lo, hi = ranges[f"{p}_tc3"]
+            cubic[p] = _draw(rng, lo * scale_cubic_scale, hi * scale_cubic_scale, 3)
     return ImuTruth(grade=grade, constants=consts, curves=curves, effects=effects, exclude=tuple(exclude),
                     curvature=curvature, cubic=cubic)
 

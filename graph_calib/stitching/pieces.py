@@ -15,6 +15,7 @@ import numpy as np
 from scipy.stats import norm
 
 from graph_calib.sensors import params
+from graph_calib.sensors.curves import evaluate_polynomial_curve
 from graph_calib.sensors.effects import REGISTRY, temperature_family
 
 #: The six sensors whose temperatures the model uses, in ``temperature_map`` order.
@@ -94,7 +95,8 @@ class SubrangePoint:
         Experiment name.
     t_ref_degC : float
     coef : ndarray, shape (d+1,)
-        ``[p, p_tc, (p_tc2)]``, SI: the value and its temperature coefficients at ``t_ref_degC``.
+        ``[p, p_tc, p_tc2, ...]``, SI: the value and its temperature coefficients at ``t_ref_degC``, as
+        many as the result holds (:func:`graph_calib.sensors.curves.evaluate_polynomial_curve` evaluates them).
     cov : ndarray, shape (d+1, d+1)
     t_range : (float, float)
         Temperature range of the element's sensor during the experiment, degC.
@@ -116,11 +118,7 @@ class SubrangePoint:
 
     def predict(self, T):
         """The subrange's own model at temperatures ``T``: ``(value, sigma)`` arrays."""
-        dT = np.atleast_1d(np.asarray(T, dtype=float)) - self.t_ref_degC
-        J = np.stack([dT**k for k in range(self.coef.size)], axis=1)
-        v = J @ self.coef
-        s = np.sqrt(np.clip(np.einsum("ij,jk,ik->i", J, self.cov, J), 0.0, None))
-        return v, s
+        return evaluate_polynomial_curve(self.coef, T, t0_degC=self.t_ref_degC, covariance=self.cov)
 
 
 @dataclass(frozen=True)
@@ -359,6 +357,7 @@ class Stitched:
             "rms_z": float(np.sqrt(np.mean(zs**2))) if zs.size else 0.0,
             "beyond_limit": int(np.count_nonzero(zs > limit)),
             "family_limit": family_limit,
+            "checked": bool(zs.size > 0),     # nothing to check (one subrange) is "not checked", never "consistent"
             "consistent": bool(zs.size == 0 or zs.max() <= family_limit),
             "boundaries": list(per.values()),
         }

@@ -20,6 +20,7 @@ from graph_calib.compensation import read_compensation
 from graph_calib.compensation import read_table, write_table
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
+from graph_calib.sensors.effects import REGISTRY
 from graph_calib.solvers.joint import JointSolver, WarmStart, plan_unknowns, solve_joint
 from graph_calib.solvers.joint.result import joint_result, read_joint_result, write_joint_result
 from graph_calib.model.attitude_elimination import AttitudeSolve
@@ -72,8 +73,7 @@ def _ranges(runs):
 
 def test_the_map_is_the_exact_taylor_expansion_of_the_curves():
     degrees = {b: d for b, d in MAX_DEGREE.items()}
-    lay = Layout.declared(extra=("gyro.bias_tc2", "gyro.bias_tc3", "accel.bias_tc2", "accel.bias_tc3",
-                                 "gyro.scale_tc2", "accel.scale_tc2"))
+    lay = Layout.declared(extra=tuple(e.name for e in REGISTRY if e.temperature_order >= 2))
     u = plan_unknowns([lay, lay], [3.0, 41.0], degrees=degrees)
     rng = np.random.default_rng(1)
     z = rng.normal(size=u.nz)

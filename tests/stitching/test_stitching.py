@@ -62,8 +62,10 @@ def test_names_sensors_families():
     assert sensor_of("gyro.bias.x") == 0 and sensor_of("accel.scale_tc.z") == 5
     assert sensor_of("gyro.misalignment.zx") == 2 and sensor_of("accel.misalignment.yx") == 4
     assert sensor_of("lever_arm.x") is None and sensor_of("time_lag.table") is None
-    assert family("gyro.bias") == ("gyro.bias", {1: "gyro.bias_tc", 2: "gyro.bias_tc2", 3: "gyro.bias_tc3"})
-    assert family("accel.scale_tc") == ("accel.scale", {1: "accel.scale_tc", 2: "accel.scale_tc2"})
+    assert family("gyro.bias") == ("gyro.bias", {1: "gyro.bias_tc", 2: "gyro.bias_tc2", 3: "gyro.bias_tc3",
+                                                 4: "gyro.bias_tc4", 5: "gyro.bias_tc5"})
+    assert family("accel.scale_tc") == ("accel.scale", {k: "accel.scale_tc" + ("" if k == 1 else str(k))
+                                                        for k in range(1, 6)})
     assert is_stitched("gyro.bias") and is_stitched("accel.misalignment")
     assert not is_stitched("gyro.bias_tc") and not is_stitched("mount")
 

@@ -20,19 +20,15 @@ of their reduced information at the solution.  The cost is the graph's error: th
 each experiment's factors and attitude priors.
 
 Curve degree by evidence
-    The solve estimates every family at the highest degree the registry has (biases cubic, scales
-    quadratic).  Then, per family, from the highest order down to 2, the Wald statistic of that order's
-    coefficients (all three axes) from the joint covariance, ``W = c^T Sigma^-1 c``, is set against the
-    Bayesian information criterion's price of those parameters, ``k ln n`` (``n`` scalar measurements:
-    gravity and encoder components of every experiment); an order that does not pay is dropped, the
-    estimate conditioned on it being zero (the Gauss-Newton solution of the smaller model at the same
-    linearisation point), and the next lower order tested.  The linear terms are always kept (declared).
+    The solve estimates every family at the highest degree the registry has; each family's degree is then
+    chosen by a Wald test of its highest orders at the loop's alpha, with the test of the next order past
+    the chosen one (:mod:`graph_calib.solvers.joint.degrees`).
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 from gtsam.symbol_shorthand import S, Z
@@ -40,36 +36,14 @@ from threadpoolctl import threadpool_limits
 
 from graph_calib.model.residual_list import FACTOR_KINDS, MEASUREMENT_KINDS
 from graph_calib.solvers.least_squares import Experiment, LeastSquares
-from graph_calib.solvers.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, curve_label, family_member, plan_unknowns
+from graph_calib.solvers.joint.degrees import choose_degrees_wald
+from graph_calib.solvers.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.sensors.params import Layout, split_element_name
 from graph_calib.solvers.interface import WHITENED_RESIDUAL, ResidualSeries, SolverOutput
 
 #: Name of the solver (entry point ``graph_calib.solvers``).
 JOINT = "joint"
-@dataclass(frozen=True)
-class DegreeChoice:
-    """The evidence for one curve family's degree.
-
-    Attributes
-    ----------
-    family : str
-        ``gyro.bias``, ...
-    degree : int
-        Degree kept.
-    tests : list of dict
-        Per order tested (highest first): ``order``, ``wald`` (chi-square of its coefficients), ``k``
-        (their number), ``bic_price`` (``k ln n``), ``kept``.
-    """
-
-    family: str
-    degree: int
-    tests: list
-
-    def to_json(self):
-        return {"family": self.family, "degree": self.degree, "tests": list(self.tests)}
-
-
 @dataclass(frozen=True)
 class JointOutput:
     """What the joint solver concludes about a campaign.
@@ -205,52 +179,6 @@ def _warm_theta(unknowns, models, maps, starts, priors):
     return np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
 
 
-def choose_degrees(unknowns, theta, covariance, *, n_measurements):
-    """Each curve family's degree by the Wald test against the BIC price (module docstring).
-
-    Returns
-    -------
-    unknowns : Unknowns
-        With the degrees kept.
-    keep : ndarray of bool, shape (Nt,)
-        Which entries of ``theta`` remain.
-    theta, covariance : ndarray
-        Conditioned on the dropped coefficients being zero (full size; dropped entries zero).
-    choices : tuple of DegreeChoice
-    """
-    th = np.asarray(theta, dtype=float).copy()
-    C = np.asarray(covariance, dtype=float).copy()
-    keep = np.ones(th.size, dtype=bool)
-    idx = unknowns.z_index()
-    price_each = float(np.log(max(int(n_measurements), 2)))
-    degrees, choices = dict(unknowns.degrees), []
-    for base, d in unknowns.degrees.items():
-        elements = [f for f in unknowns.curve_elements() if split_element_name(f)[0] == base]
-        tests = []
-        while d >= 2:
-            D = [idx[curve_label(f, d)] for f in elements]
-            cD, CD = th[D], C[np.ix_(D, D)]
-            wald = float(cD @ np.linalg.solve(CD, cD))
-            price = len(D) * price_each
-            tests.append({"order": d, "wald": wald, "k": len(D), "bic_price": price, "kept": wald > price})
-            if wald > price:
-                break
-            G = np.linalg.solve(CD, C[D, :]).T          # C[:, D] CD^-1
-            th = th - G @ cD
-            C = C - G @ C[D, :]
-            C = 0.5 * (C + C.T)
-            th[D] = 0.0
-            C[D, :] = 0.0
-            C[:, D] = 0.0
-            keep[D] = False
-            d -= 1
-        degrees[base] = d
-        choices.append(DegreeChoice(family=base, degree=d, tests=tests))
-    z_names = tuple(n for n, k in zip(unknowns.z_names, keep[:unknowns.nz]) if k)
-    reduced = replace(unknowns, degrees=degrees, z_names=z_names)
-    return reduced, keep, th, C, tuple(choices)
-
-
 def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None, select_degree=True):
     """Solve every experiment of a campaign in one factor graph (module docstring).
 
@@ -335,7 +263,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
     cov = sol.covariance * np.outer(sig_theta, sig_theta)
     theta = sol.theta * sig_theta
     if select_degree:
-        reduced, keep, th_c, cov_c, choices = choose_degrees(unknowns, theta, cov, n_measurements=n_meas)
+        reduced, keep, th_c, cov_c, choices = choose_degrees_wald(unknowns, theta, cov, n_measurements=n_meas)
     else:
         reduced, keep, th_c, cov_c, choices = unknowns, np.ones(theta.size, bool), theta, cov, ()
     theta_r, cov_r = th_c[keep], cov_c[np.ix_(keep, keep)]
