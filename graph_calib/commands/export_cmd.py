@@ -15,6 +15,7 @@ from pathlib import Path
 from graph_calib.compensation import STITCH_MODELS, SUFFIX, TABLE_FORMATS, StitchedCalibration, write_table
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
+from graph_calib.solvers.joint.solver import JOINT
 
 #: Largest interpolation error (in sigma of the element) the export accepts without a remark.
 INTERPOLATION_REMARK_SIGMA = 0.1
@@ -45,7 +46,7 @@ def run(args):
     if out.is_dir():
         raise InputError("is a folder; --out names the table file", path=out)
     fmt = _format(args, out)
-    if args.solver == "joint":       # the joint campaign solver's curves (docs/campaign.md), not a stitching
+    if args.solver == JOINT:       # the joint campaign solver's curves (docs/campaign.md), not a stitching
         if args.model:
             raise InputError("the joint calibration has one curve form; --model chooses among stitched models",
                              dataset="--model")

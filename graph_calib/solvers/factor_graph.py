@@ -557,7 +557,7 @@ def _solve(model, *, q_nb0, options, progress, initial):
 
 
 class FactorGraphSolver:
-    """The factor graph behind the solver interface (registered as ``"factor-graph"``)."""
+    """The factor graph behind the solver interface (registered under its ``name``)."""
 
     name = "factor-graph"
 
