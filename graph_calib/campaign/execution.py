@@ -269,10 +269,18 @@ def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, p
 # ---------------------------------------------------------------------------
 
 
+class _Bar(tqdm):
+    """tqdm without its monitor thread, which would outlive the campaign: a process with a thread left running
+    cannot fork (``calibrate`` after a campaign in one Python session would solve one solver after the other,
+    graph_calib.solvers.concurrent.fork_available)."""
+
+    monitor_interval = 0
+
+
 def _progress_bar(total, enabled):
     if not enabled or total == 0:
         return None
-    return tqdm(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
+    return _Bar(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
 
 
 def _say(bar, text, enabled):

@@ -47,7 +47,7 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.navigation.rotations import exp_so3
 from graph_calib.solvers.orchestration import run_solvers
-from graph_calib.solvers.registry import comparison_order, solve
+from graph_calib.solvers.registry import SOLVER_LABELS, comparison_order, solve
 
 
 def _columns(layout, name):
@@ -111,9 +111,10 @@ def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed
         else:
             initial[name] = (graph.attitudes, model.prior()[0])
     if initial:
-        say(f"  {', '.join(initial)} ...")
-    run = run_solvers(problem, options=options, solvers=comparison_order(diagnosis_options.solvers),
-                      outputs={primary: graph}, initial=initial, stamp=False)
+        say(f"  {', '.join(SOLVER_LABELS.get(n, n) for n in initial)} ...")
+    run = run_solvers(problem, options=options, solvers=diagnosis_options.solvers,
+                      order=comparison_order(diagnosis_options.solvers), outputs={primary: graph}, initial=initial,
+                      stamp=False)
     outputs = {primary: graph, **{n: o for n, o in run.outputs.items() if n != primary}}
     results = {n: run.results[n] for n in outputs}
     stage = Stage(layout=tuple(model.layout.names), problem=problem, primary=primary, outputs=outputs,
@@ -466,7 +467,7 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     problem = build_problem(experiment, options=options)
     options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
     say(f"declared model: {problem.model.layout.size} parameters, {problem.model.n_keyframes} keyframes; "
-        f"{_primary(diagnosis)} ...")
+        f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
     graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis)
     return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=truth,
                       max_added=diagnosis.max_added, starts_x=None, t_start=t_start, say=say)
@@ -517,7 +518,8 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), a
         R0 = np.asarray(attitudes, dtype=float)
     else:
         R0 = model.propagate(model.segment_priors(problem.q_nb0), model.preintegrate(x0), x0)
-    say(f"grown model: {model.layout.size} parameters, warm start; {_primary(diagnosis)} ...")
+    say(f"grown model: {model.layout.size} parameters, warm start; "
+        f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
     graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis, initial=(R0, x0))
     starts_x = {s: model.layout.from_dict(v) for s, v in (starts or {}).items() if s in diagnosis.solvers[1:]}
     return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=None,

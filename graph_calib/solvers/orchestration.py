@@ -76,7 +76,7 @@ def judge(results, *, order=None, stamp=True):
 
 
 def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, initial=None, outputs=None,
-                on_start=None, on_solved=None, keep_going=False, stamp=True):
+                order=None, on_start=None, on_solved=None, keep_going=False, stamp=True):
     """Solve ``problem`` with each of ``solvers``, make their results, compare the first two, give the verdict.
 
     Parameters
@@ -84,13 +84,15 @@ def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, i
     problem : graph_calib.records.problem.Problem
     options : graph_calib.options.CalibrationOptions
     solvers : sequence of str
-        Registered solver names, in comparison order.
+        Registered solver names, in the order run (and of the results).
     progress : callable, optional
         Called with each solver's :class:`graph_calib.solvers.interface.ProgressEvent`.
     concurrent : bool
         With two solvers to run, the first in a forked worker process while the second runs here
         (:func:`graph_calib.solvers.concurrent.solve_pair`: the same outputs, events and errors as one
         after the other).
+    order : sequence of str, optional
+        The comparison order (default ``solvers``'): the first two of it are compared.
     initial : mapping of str to (R, x), optional
         A solver's starting keyframe attitudes and calibration; the others start on their own.
     outputs : mapping of str to SolverOutput, optional
@@ -139,7 +141,7 @@ def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, i
             errors[name] = exc
             continue
         solved[name], results[name] = output, result
-    results, comparison, verdict = judge(results, order=solvers, stamp=stamp)
+    results, comparison, verdict = judge(results, order=solvers if order is None else order, stamp=stamp)
     return CalibrationRun(problem=problem, outputs={n: solved[n] for n in solvers if n in results}, results=results,
                           comparison=comparison, verdict=verdict, errors=errors)
 
