@@ -448,10 +448,30 @@ def execute(tasks, *, options, on_done=None, timing=None, pool=None):
 
 
 def _connect(scheduler):
-    """A Dask client of the cluster at ``scheduler``; InputError when it cannot be reached."""
+    """A Dask client of the cluster at ``scheduler``; InputError when it cannot be reached.
+
+    The scheduler is reached once first in this thread's own event loop (``asyncio.run``), so that an address
+    nobody answers at is refused before a client exists: a client whose construction fails leaves its IO-loop
+    thread running, and a process with a thread left running cannot fork
+    (graph_calib.solvers.concurrent.fork_available).
+    """
+    import asyncio
+
     from distributed import Client  # seconds to import: only here (module docstring)
+    from distributed.comm import connect
+
+    async def reach():
+        comm = await connect(scheduler, timeout="10s")
+        await comm.close()
 
     try:
+        asyncio.get_running_loop()
+        running = True          # called from inside an event loop (a notebook): the client alone
+    except RuntimeError:
+        running = False
+    try:
+        if not running:
+            asyncio.run(reach())
         return Client(scheduler, timeout="10s")
     except (OSError, TimeoutError) as exc:
         raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None

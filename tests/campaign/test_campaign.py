@@ -19,6 +19,9 @@ from graph_calib import io
 from graph_calib.campaign import CampaignOptions, run_campaign
 from graph_calib.cli import main
 
+#: Every test here shares a simulated six-subrange campaign (minutes to simulate and run).
+pytestmark = pytest.mark.slow
+
 HOURS = 0.3
 SEED = 11
 

@@ -209,7 +209,7 @@ def test_iterated_filter_reproduces_batch_solution():
     exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=30.0, dwell_s=3.0,
                                   rate=np.deg2rad(30.0), noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
     model = CalibrationModel(exp, options=ModelOptions())
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged
     R_prior = np.eye(3)
     R0 = model.propagate(R_prior, model.preintegrate(model.prior()[0]), model.prior()[0])
@@ -239,7 +239,7 @@ def test_noise_free_turntable_recovers_truth_to_a_tenth_of_sigma():
     x_true = _truth(rng, NAV, 0.1)
     exp, C_true = turntable_experiment(layout=DECL, x=x_true)
     model = CalibrationModel(exp, options=ModelOptions())
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged and fr.n_passes <= 4
     z = _z(fr, x_true)
     assert np.abs(z).max() < 0.1, _worst(fr, z)
@@ -256,7 +256,7 @@ def test_noisy_turntable_within_a_few_sigma_and_innovations_white():
     exp, _ = turntable_experiment(layout=DECL, x=x_true, rng=rng, static_s=60.0, dwell_s=5.0,
                                   noise=(NAV.gyro_noise, NAV.accel_noise, NAV.encoder_noise))
     model = CalibrationModel(exp, options=ModelOptions())
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged
     z = _z(fr, x_true)
     informative = fr.sigma < 0.5 * NAV.prior_vector(fr.layout)
@@ -287,7 +287,7 @@ def test_consumer_grade_converges_from_zero_calibration():
     R_true = np.concatenate([np.eye(3)[None], C_true[model.record.k0[1:] - 1]])
     R_dr = model.propagate(np.eye(3), model.preintegrate(x0), x0)
     assert np.abs(log_so3(np.swapaxes(R_true, 1, 2) @ R_dr)).max() > 0.3      # really far from linear
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY)
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY)
     assert fr.converged and fr.n_passes >= 3
     assert fr.passes[-1].max_dx_sigma < 1e-3
     z = _z(fr, x_true)
@@ -301,7 +301,7 @@ def test_to_result_and_progress():
     exp, _ = turntable_experiment(layout=DECL, x=x_true, static_s=20.0, dwell_s=2.0, rate=np.deg2rad(30.0))
     model = CalibrationModel(exp, options=ModelOptions())
     seen = []
-    fr = kf_reference.passes(model, q_nb0=Q_IDENTITY, max_passes=2,
+    fr = kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=2,
                                 progress=lambda ev: seen.append((ev.iteration, ev)))
     assert [i for i, _ in seen] == [1, 2] and fr.n_passes == 2
     # one progress-event type for every solver (graph_calib.solvers.interface)
@@ -319,7 +319,7 @@ def test_to_result_and_progress():
     assert res.residuals["iterations"] == 2 and set(res.residuals["counts"]) == {"gravity", "encoder"}
     assert res.extra["priors"] == model.priors_used()
     with pytest.raises(ValueError, match="max_passes"):
-        kf_reference.passes(model, q_nb0=Q_IDENTITY, max_passes=0)
+        kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=0)
 
 
 # The simulator's scenarios (noise-free recovery, Monte Carlo, agreement with the graph, remaining

@@ -95,6 +95,7 @@ def test_the_map_is_the_exact_taylor_expansion_of_the_curves():
     assert np.all(A[[lay.index(n) for n in u.setup_names[1]]] == 0.0)
 
 
+@pytest.mark.slow
 def test_chained_jacobians_match_finite_differences(linear):
     _, _, problems, graphs, out = linear
     ps = [_extend(p, {b: d for b, d in MAX_DEGREE.items()}) for p in problems[:2]]
@@ -194,6 +195,7 @@ def test_linear_truth_keeps_linear_curves_and_agrees_with_each_subrange_graph(li
     assert z_all.max() < 4.0, z_all.max()
 
 
+@pytest.mark.slow
 def test_warm_started_at_its_own_solution_the_joint_solver_starts_there(curved):
     """Handed its own solution (each experiment's view: calibration, sigmas, attitudes) as the warm start, the
     solver's first cost is the solution's: the factors are evaluated at the warm calibration, as GTSAM's
@@ -301,6 +303,7 @@ def test_the_joint_solver_is_registered_by_its_entry_point():
     assert get_solver("joint").name == "joint" and get_solver("joint").campaign
 
 
+@pytest.mark.slow
 def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(tmp_path):
     sim = simulate("nav-campaign", rng=np.random.default_rng(5), hours=HOURS, curvature=False)
     write_simulation(sim, tmp_path / "data")

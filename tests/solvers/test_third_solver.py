@@ -102,6 +102,7 @@ def test_an_unregistered_solver_is_refused_with_exit_2(record, tmp_path, capsys)
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow
 def test_diagnose_command_with_the_third_solver_beside_the_graph(third_solver, record, tmp_path):
     rc = main(["diagnose", str(record), "--out", str(tmp_path), "--solver", f"factor-graph+{NAME}", "--max-added", "1"])
     assert rc == 3                                   # the prior disagrees with the graph: said, files written
@@ -123,6 +124,7 @@ def test_diagnose_in_python_with_the_third_solver_as_the_primary(third_solver, r
     assert NAME in diag.to_json()["before"]["residual_rms"]
 
 
+@pytest.mark.slow
 def test_campaign_command_with_the_third_solver(third_solver, small_campaign, tmp_path):
     out = tmp_path / "camp"
     rc = main(["campaign", str(small_campaign), "--out", str(out), "--workers", "0", "--solver", NAME,
@@ -136,6 +138,7 @@ def test_campaign_command_with_the_third_solver(third_solver, small_campaign, tm
         assert e["loop"] is not None                 # the closed loop ran (the graph tests, the prior is run)
 
 
+@pytest.mark.slow
 def test_campaign_in_python_with_the_third_solver_without_the_loop(third_solver, small_campaign, tmp_path):
     from graph_calib.campaign import CampaignOptions, run_campaign
 
