@@ -1,10 +1,11 @@
-# Two commands for a fresh machine: `make demo` and `make test`; `make bench [BENCH_ARGS="--quick"]` times the code.
+# Two commands for a fresh machine: `make demo` and `make test`; `make test-fast` for the inner loop (the tests
+# not marked montecarlo, measured or slow: pyproject.toml); `make bench [BENCH_ARGS="--quick"]` times the code.
 PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: demo test env bench clean clean-cache
+.PHONY: demo test test-fast env bench clean clean-cache
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -19,6 +20,9 @@ demo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest -q -x --durations=15
+
+test-fast: $(STAMP)
+	$(PY) -m pytest -q -x -m "not (montecarlo or measured or slow)" --durations=10
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py $(BENCH_ARGS)

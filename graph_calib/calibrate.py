@@ -3,50 +3,19 @@
 >>> from graph_calib import io
 >>> from graph_calib.calibrate import CalibrationOptions, calibrate
 >>> run = calibrate(io.read_experiment("sim/sub1_20_30.h5"), options=CalibrationOptions())   # doctest: +SKIP
->>> run.results["factor-graph"].values["gyro.bias.x"]                                          # doctest: +SKIP
+>>> run.results[PRIMARY_SOLVER].values["gyro.bias.x"]                                          # doctest: +SKIP
 >>> run.comparison["summary"]["agree"]                                                          # doctest: +SKIP
 
 Every solver is reached through :mod:`graph_calib.solvers` by name; the problem (shared model and
-alignment) is built once and solved by each.
+alignment) is built once and solved by each (:func:`graph_calib.solvers.orchestration.run_solvers`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
-from typing import Mapping
-
-from graph_calib.records.experiment import Result
 from graph_calib.options import CalibrationOptions
-from graph_calib.records.problem import Problem, build_problem
-from graph_calib.solvers.concurrent import solve_pair
-from graph_calib.solvers.interface import SolverOutput
-from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
-from graph_calib.solvers.results import compare, to_result
-from graph_calib.solvers.verdict import Verdict, verdict_of
-
-
-@dataclass(frozen=True)
-class CalibrationRun:
-    """One experiment calibrated by one or more solvers.
-
-    Attributes
-    ----------
-    problem : graph_calib.records.problem.Problem
-    outputs : mapping of str to SolverOutput
-        Each solver's output, by solver name, in the order run.
-    results : mapping of str to Result
-        Each solver's result file contents, the verdict included (key ``verdict``).
-    comparison : dict or None
-        ``comparison.json`` of the first two solvers (None with one solver), the verdict included.
-    verdict : Verdict
-        Converged, solvers agree, residuals consistent (:mod:`graph_calib.solvers.verdict`).
-    """
-
-    problem: Problem
-    outputs: Mapping[str, SolverOutput]
-    results: Mapping[str, Result]
-    comparison: dict | None
-    verdict: Verdict
+from graph_calib.records.problem import build_problem
+from graph_calib.solvers.orchestration import CalibrationRun, run_solvers
+from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER
 
 
 def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None,
@@ -70,20 +39,7 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     -------
     CalibrationRun
     """
-    solvers = tuple(solvers)
-    if concurrent and len(solvers) == 2:
-        outputs = dict(zip(solvers, solve_pair(solvers, problem, options=options, progress=progress)))
-    else:
-        outputs = {name: solve(name, problem, options=options, progress=progress) for name in solvers}
-    results = {name: to_result(problem.model, out) for name, out in outputs.items()}
-    names = list(results)
-    comparison = compare(results[names[0]], results[names[1]]) if len(names) >= 2 else None
-    verdict = verdict_of(results, comparison)
-    results = {s: replace(r, extra={**r.extra, "verdict": verdict.to_json()}) for s, r in results.items()}
-    if comparison is not None:
-        comparison = {**comparison, "verdict": verdict.to_json()}
-    return CalibrationRun(problem=problem, outputs=outputs, results=results, comparison=comparison,
-                          verdict=verdict)
+    return run_solvers(problem, options=options, solvers=solvers, progress=progress, concurrent=concurrent)
 
 
 def calibrate(experiment, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None):
@@ -104,4 +60,4 @@ def calibrate(experiment, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVE
     return solve_problem(problem, options=options, solvers=solvers, progress=progress)
 
 
-__all__ = ["CalibrationOptions", "CalibrationRun", "build_problem", "solve_problem", "calibrate"]
+__all__ = ["CalibrationOptions", "CalibrationRun", "PRIMARY_SOLVER", "build_problem", "solve_problem", "calibrate"]

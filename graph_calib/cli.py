@@ -131,8 +131,8 @@ def main(argv=None):
 
     With ``argv`` None (the ``graph-calib`` script, ``python -m graph_calib.cli``) the process ends after
     it, and every object is first frozen for the garbage collector (``gc.freeze``): the interpreter's
-    final collections then skip the 140,000 objects that numba, scipy and gtsam made, 0.25-0.5 s of CPU
-    at every exit of ``calibrate`` (docs/performance.md).  Files are written and closed explicitly before;
+    final collections then skip the many objects numba, scipy and gtsam made (docs/performance.md has the
+    figure).  Files are written and closed explicitly before;
     nothing waits for the collector.  Called with ``argv`` (the tests, other Python code), nothing is frozen.
     """
     if argv is None:

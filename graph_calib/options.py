@@ -25,9 +25,9 @@ class GraphOptions:
     step_tol_sigma : float
         ... or when every calibration step is below this fraction of its *prior* sigma.
         Off (0) by default: a prior sigma is no measure of a well-determined element
-        (on the measured MPU-6050 session 1e-4 of the prior stopped the iterations 43
-        steps into a 137-step crawl along the weakly held heading, 0.17 sigma from the
-        optimum); the cost rule is scale-free.
+        (where the heading is weakly held, a small fraction of the prior stops the
+        iterations early in their crawl along it, short of the optimum); the cost rule
+        is scale-free.
     robust : str or None
         ``"huber"`` or ``"cauchy"`` on gravity and encoder factors; None for least squares.
     robust_k : float

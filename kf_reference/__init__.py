@@ -4,11 +4,11 @@ An iterated, linearised square-root filter over keyframes that consumes the
 shared model's factors (:mod:`graph_calib.model`) and must agree with the factor
 graph (:mod:`graph_calib.solvers.factor_graph`) on every parameter.  It imports only the
 shared model and the solver interface (:mod:`graph_calib.solvers.interface`), and is
-registered as the solver ``"sqrt-kf"`` (:class:`kf_reference.solver.SqrtKalmanSolver`).
+registered as the solver :data:`kf_reference.passes.SOLVER_NAME` (:class:`kf_reference.solver.SqrtKalmanSolver`).
 See ``docs/kf_reference.md``.
 
 >>> from graph_calib.solvers import solve                           # doctest: +SKIP
->>> output = solve("sqrt-kf", problem, options=CalibrationOptions())  # doctest: +SKIP
+>>> output = solve(SOLVER_NAME, problem, options=CalibrationOptions())  # doctest: +SKIP
 >>> from kf_reference import calibrate                                # doctest: +SKIP
 >>> fr = calibrate(problem.model, q_nb0=problem.q_nb0)                # the native FilterResult  # doctest: +SKIP
 """

@@ -1,4 +1,4 @@
-"""The square-root filter behind graph-calib's solver interface (registered as ``"sqrt-kf"``)."""
+"""The square-root filter behind graph-calib's solver interface (registered as :data:`kf_reference.passes.SOLVER_NAME`)."""
 
 from __future__ import annotations
 

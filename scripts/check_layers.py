@@ -1,8 +1,10 @@
-"""Check the package's layers (docs/architecture.md): every import points down, no circle, no module too long.
+"""Check the package's layers (docs/architecture.md): every import points down, no circle, no module too long,
+and the reference filter independent of the batch solvers.
 
-Usage: ``python scripts/check_layers.py`` (exit 1 and one line per breach).  Reads every ``.py`` file of
-``graph_calib/`` and ``kf_reference/`` with :mod:`ast`; imports inside functions count like the others, so a
-function-local import cannot hide an upward arrow.  Also run by ``tests/test_architecture.py``.
+Usage: ``python scripts/check_layers.py [ROOT]`` (exit 1 and one line per breach; ROOT: the checkout, by
+default this one).  Reads every ``.py`` file of ``graph_calib/`` and ``kf_reference/`` with :mod:`ast`;
+imports inside functions count like the others, so a function-local import cannot hide an upward arrow.
+Also run by ``tests/test_architecture.py``.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ LAYERS = {
     "graph_calib": 0,                         # the package root: conventions docstring and version only
     "graph_calib.sensors.effects": 1,
     "graph_calib.sensors.params": 2, "graph_calib.sensors.sensor_model": 2,
+    "graph_calib.solvers.registry": 2,        # solver names and the dispatch: imports nothing of the package
     "graph_calib.io": 3, "graph_calib.navigation.strapdown": 3, "graph_calib.navigation.static_detection": 3, "graph_calib.navigation.alignment": 3,
     "graph_calib.model": 4, "graph_calib.records.plausibility": 4,
     "graph_calib.options": 5, "graph_calib.records.problem": 5, "graph_calib.compensation.calibration": 5, "graph_calib.records.grade_choice": 5,
@@ -32,6 +35,13 @@ LAYERS = {
     "graph_calib.reports": 9,
     "graph_calib.campaign": 10,
     "graph_calib.commands": 11, "graph_calib.cli": 11,
+}
+
+#: Imports forbidden although the layers allow them: the reference filter is an independent check of the batch
+#: solvers, so nothing of ``kf_reference`` may import the factor graph or the joint solver (importer prefix ->
+#: forbidden target prefixes).
+FORBIDDEN = {
+    "kf_reference": ("graph_calib.solvers.factor_graph", "graph_calib.solvers.joint"),
 }
 
 #: Longest module allowed, lines (docs/architecture.md; the compiled kernel is the one exception).
@@ -49,16 +59,22 @@ def layer(module):
     return None if best is None else best[1]
 
 
-def module_name(path):
-    rel = path.relative_to(ROOT).with_suffix("")
+def _within(module, prefix):
+    return module == prefix or module.startswith(prefix + ".")
+
+
+def module_name(path, root=None):
+    root = ROOT if root is None else root
+    rel = path.relative_to(root).with_suffix("")
     parts = list(rel.parts)
     if parts[-1] == "__init__":
         parts = parts[:-1]
     return ".".join(parts)
 
 
-def imports_of(path, module):
+def imports_of(path, module, root=None):
     """``[(imported module, line)]`` of every import in ``path`` (relative imports resolved)."""
+    root = ROOT if root is None else root
     tree = ast.parse(path.read_text(), filename=str(path))
     package = module if path.name == "__init__.py" else module.rpartition(".")[0]
     out = []
@@ -74,32 +90,38 @@ def imports_of(path, module):
             # `from graph_calib import io` imports the submodule graph_calib.io
             for a in node.names:
                 sub = f"{base}.{a.name}"
-                if layer(sub) is not None and (ROOT / Path(*sub.split("."))).exists() or \
-                        (ROOT / Path(*sub.split("."))).with_suffix(".py").exists():
+                if layer(sub) is not None and (root / Path(*sub.split("."))).exists() or \
+                        (root / Path(*sub.split("."))).with_suffix(".py").exists():
                     out.append((sub, node.lineno))
     return out
 
 
-def check():
-    """Breaches, one line each."""
+def check(root=None):
+    """Breaches of the checkout at ``root`` (default: this one), one line each."""
+    root = ROOT if root is None else Path(root)
     problems = []
     modules = {}
     for top in ("graph_calib", "kf_reference"):
-        for path in sorted((ROOT / top).rglob("*.py")):
-            modules[module_name(path)] = path
+        for path in sorted((root / top).rglob("*.py")):
+            modules[module_name(path, root)] = path
     graph = {}
     for module, path in modules.items():
         mine = layer(module)
         n_lines = len(path.read_text().splitlines())
         if n_lines > MAX_LINES and module not in LONG_ALLOWED:
-            problems.append(f"{path.relative_to(ROOT)}: {n_lines} lines (at most {MAX_LINES})")
+            problems.append(f"{path.relative_to(root)}: {n_lines} lines (at most {MAX_LINES})")
         graph[module] = set()
-        for target, line in imports_of(path, module):
+        forbidden = [t for importer, ts in FORBIDDEN.items() if _within(module, importer) for t in ts]
+        for target, line in imports_of(path, module, root):
+            bad = next((t for t in forbidden if _within(target, t)), None)
+            if bad is not None:
+                problems.append(f"{path.relative_to(root)}:{line}: {module} imports {target}: the reference filter "
+                                f"must not depend on {bad} (docs/architecture.md)")
             theirs = layer(target)
             if theirs is None or target == module:
                 continue
             if theirs > mine:
-                problems.append(f"{path.relative_to(ROOT)}:{line}: layer {mine} imports {target} (layer {theirs})")
+                problems.append(f"{path.relative_to(root)}:{line}: layer {mine} imports {target} (layer {theirs})")
             if target in modules and not module.startswith(target + "."):
                 graph[module].add(target)
     # circles between modules (a package's __init__ importing its own submodules is not one)
@@ -123,8 +145,9 @@ def check():
     return problems
 
 
-def main():
-    problems = check()
+def main(argv=None):
+    argv = sys.argv[1:] if argv is None else argv
+    problems = check(Path(argv[0]) if argv else None)
     for p in problems:
         print(p)
     print(f"{len(problems)} breach(es) of docs/architecture.md" if problems else "layers as drawn: no upward "

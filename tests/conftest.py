@@ -1,9 +1,14 @@
-"""Small shared fixtures: a valid synthetic experiment factory and the measured data folder."""
+"""Small shared fixtures: a valid synthetic experiment factory and the measured data folder; the threads a
+campaign leaves behind stopped after each test module."""
 
 import json
+import sys
+import threading
 import tomllib
 from importlib.metadata import EntryPoint
 from pathlib import Path
+
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -106,6 +111,35 @@ def solvers_of_this_checkout():
     yield
     registry._entry_points = original
     registry.get_solver.cache_clear()
+
+
+@pytest.fixture(scope="module", autouse=True)
+def no_threads_left_behind():
+    """After each test module, the Python threads a campaign run in this process left behind are stopped.
+
+    ``calibrate`` forks its filter worker only from a process without other threads
+    (:func:`graph_calib.solvers.concurrent.fork_available`); a user's ``graph-calib calibrate`` process has
+    none, but a test process that ran a Dask campaign before keeps distributed's offload thread
+    (``Dask-Offload``, a thread pool distributed creates on first use and never ends).  It is replaced here
+    by a fresh pool (its thread starts on first use again), so that the forked path is tested in the full
+    suite as users run it (tests/solvers/test_concurrent.py fails, not skips, when a thread is left).
+    """
+    yield
+    utils = sys.modules.get("distributed.utils")
+    if utils is not None and isinstance(getattr(utils, "_offload_executor", None), ThreadPoolExecutor):
+        old = utils._offload_executor
+        utils._offload_executor = ThreadPoolExecutor(max_workers=1, thread_name_prefix="Dask-Offload")
+        old.shutdown(wait=True)
+    tqdm_std = sys.modules.get("tqdm.std")
+    monitor = getattr(getattr(tqdm_std, "tqdm", None), "monitor", None)
+    if monitor is not None:
+        monitor.exit()
+        tqdm_std.tqdm.monitor = None
+
+
+def other_threads():
+    """Names of the Python threads running beside this one."""
+    return [t.name for t in threading.enumerate() if t is not threading.current_thread()]
 
 
 COMPENSATION_EFFECTS = ("gyro.g_sensitivity", "time_lag.accel")

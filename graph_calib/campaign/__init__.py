@@ -4,7 +4,7 @@ This is the public Python API behind ``graph-calib campaign``::
 
     from graph_calib.campaign import CampaignOptions, run_campaign
     run = run_campaign("campaign.toml", "out", options=CampaignOptions(workers=2))
-    run.stitched["factor-graph"].curves["gyro.bias.x"].evaluate([25.0])
+    run.stitched[run.document["primary_solver"]].curves["gyro.bias.x"].evaluate([25.0])
 
 Work and files
 --------------

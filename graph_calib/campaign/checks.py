@@ -41,6 +41,7 @@ from pathlib import Path
 
 import numpy as np
 
+from graph_calib.solvers.joint.solver import JOINT
 from graph_calib import io
 from graph_calib.evaluation.validation import validation_text
 from graph_calib.sensors.curves import taylor_at
@@ -89,7 +90,7 @@ def _validation_checks(document):
         out.append(_check(f"validation {name} (stitched)", ok,
                           f"validation on {name} of the stitched {model} calibration ({primary}): "
                           f"{validation_text(summ)} -> {'met' if ok else 'NOT met'}"))
-    joint = (document.get("joint") or {}).get("joint") or {}
+    joint = (document.get(JOINT) or {}).get(JOINT) or {}
     for val in joint.get("validation") or []:
         name = str(val.get("record", "?")).rsplit("/", 1)[-1]
         summ = val["summary"]
@@ -141,7 +142,7 @@ def _joint_check(joint, results):
     text = (f"the joint model at each subrange's T_ref and the per-subrange results agree within their two "
             f"covariances: largest |z| {worst[0]:.2f} ({worst[3]} of {worst[2]}, {worst[1]}) over {len(items)} "
             f"checks, limit {limit:.2f}" if ok else
-            f"the joint model and the per-subrange results DISAGREE beyond their two covariances: "
+            "the joint model and the per-subrange results DISAGREE beyond their two covariances: "
             + "; ".join(f"{el} of {n} ({s}) {z:+.2f} sigma" for _, s, n, el, z in beyond[:6])
             + (f" and {len(beyond) - 6} more" if len(beyond) > 6 else "") + f" (limit {limit:.2f} for {len(items)} checks)")
     return _check("joint against subranges", ok, text, details={"limit": limit, "checks": len(items),
@@ -185,7 +186,7 @@ def curvature_bias(joint, results, sensor_ranges):
     cause: ``{experiment: {solver: {element: z}}}`` (only elements with a lacking order)."""
     if joint is None:
         return {}
-    block = joint.extra["joint"]
+    block = joint.extra[JOINT]
     t0 = float(block["t0_degC"])
     out = {}
     for name, per in results.items():
@@ -216,7 +217,7 @@ def _curvature_adopted(document, joint):
     """``{family: [where]}``: where the campaign adopted curvature of each family."""
     out = {}
     if joint is not None:
-        for f, d in joint.extra["joint"]["degrees"].items():
+        for f, d in joint.extra[JOINT]["degrees"].items():
             if d >= 2:
                 out.setdefault(f, []).append(f"the joint's degree {d}")
     for e in document.get("experiments", []):
@@ -264,7 +265,7 @@ def _next_order_checks(joint):
     if joint is None:
         return []
     out = []
-    for c in joint.extra["joint"].get("degree_choice") or []:
+    for c in joint.extra[JOINT].get("degree_choice") or []:
         nxt = c.get("next_order")
         if nxt is None:             # an older joint result (degrees by BIC): no next-order test recorded
             out.append(_check(f"next order {c['family']}", None, f"{c['family']}: no test of the next order recorded",
@@ -275,7 +276,7 @@ def _next_order_checks(joint):
 
 
 def _joint_verdict_check(document, joint):
-    entry = (document.get("joint") or {}).get("joint") or {}
+    entry = (document.get(JOINT) or {}).get(JOINT) or {}
     if entry.get("status") == "failed":
         return [_check("joint verdict", False, f"the joint solve failed: {entry.get('error')}")]
     if joint is None:
@@ -288,7 +289,7 @@ def _joint_verdict_check(document, joint):
 
 def _truth_checks(document):
     out = []
-    tc = (((document.get("joint") or {}).get("joint") or {}).get("truth_check")) or {}
+    tc = (((document.get(JOINT) or {}).get(JOINT) or {}).get("truth_check")) or {}
     if tc.get("points"):
         ok = tc["fraction_within_2sigma"] >= TRUTH_FRACTION_2SIGMA and tc["max_abs_z"] <= TRUTH_MAX_SIGMA
         w = tc.get("worst") or {}

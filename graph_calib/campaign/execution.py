@@ -32,8 +32,8 @@ from graph_calib.campaign.loop import declared_path, loop_record, wave_record
 from graph_calib.diagnosis import diagnose, diagnose_from
 from graph_calib.errors import InputError
 from graph_calib.records.problem import build_problem
-from graph_calib.solvers.registry import solve
-from graph_calib.solvers.results import to_result
+from graph_calib.solvers.orchestration import run_solvers
+from graph_calib.solvers.registry import PRIMARY_SOLVER
 from graph_calib.stitching import SENSORS
 from graph_calib.campaign.warmup import CompileClock, cache_present, warm_kernels
 
@@ -42,9 +42,9 @@ from graph_calib.campaign.warmup import CompileClock, cache_present, warm_kernel
 # one task (runs on a worker)
 # ---------------------------------------------------------------------------
 
-#: The factor graph's keyframe attitudes of an experiment's chosen solution (with the loop), beside its results:
-#: where a pooled wave's graph starts (docs/campaign.md).
-ATTITUDES_FILE = "factor-graph.attitudes.npy"
+#: The primary solver's keyframe attitudes of an experiment's chosen solution (with the loop), beside its results:
+#: where a pooled wave's primary solve starts (docs/campaign.md).
+ATTITUDES_FILE = f"{PRIMARY_SOLVER}.attitudes.npy"
 
 
 def _write_attitudes(folder, graph):
@@ -123,31 +123,38 @@ def run_tasks(tasks):
     except Exception as exc:  # noqa: BLE001 - reported per task
         return [_failure(t, exc) for t in tasks]
     build_seconds = time.perf_counter() - t0 - build_clock.seconds
-    outcomes = []
-    for task in tasks:
-        t1 = time.perf_counter()
-        try:
-            with CompileClock() as clock:
-                output = solve(task.solver, problem, options=task.options)
-                result = to_result(problem.model, output)
-            solve_seconds = time.perf_counter() - t1 - clock.seconds
+    by_solver = {t.solver: t for t in tasks}
+    outcomes = {}
+    with CompileClock() as clock:
+        mark = [0.0, 0.0]         # when the running solver started, and the compiling until then
+
+        def start(name):
+            mark[:] = [time.perf_counter(), clock.seconds]
+
+        def write(name, output, result):
+            """A task's files as soon as its solver finished (its seconds: its share of the set-up plus its solve)."""
+            task = by_solver[name]
+            solve_seconds = time.perf_counter() - mark[0] - (clock.seconds - mark[1])
+            compile_seconds = build_clock.seconds / len(tasks) + clock.seconds - mark[1]
+            seconds = build_seconds / len(tasks) + solve_seconds
             io.write_residuals(task.residuals_path, output.residual_arrays(), solver=task.solver,
                                source=Path(task.file).name, kind=output.residual_quantity)
-            seconds = build_seconds / len(tasks) + solve_seconds
-            compile_seconds = build_clock.seconds / len(tasks) + clock.seconds
             extra = dict(result.extra)
             extra["campaign"] = {"key": task.key, "input_sha256": task.input_sha256,
                                  "options_sha256": task.options_sha256, "experiment": task.name,
                                  "seconds": seconds, "setup_seconds": build_seconds, "solve_seconds": solve_seconds,
                                  "compile_seconds": compile_seconds}
             io.write_result(replace(result, extra=extra), task.result_path)
-            outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
-                             "compile_seconds": compile_seconds})
-        except (KeyboardInterrupt, SystemExit):
-            raise
-        except Exception as exc:  # noqa: BLE001
-            outcomes.append(_failure(task, exc))
-    return outcomes
+            outcomes[name] = {"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
+                              "compile_seconds": compile_seconds}
+
+        # the tasks' result files hold no verdict: the campaign judges the experiment's results together
+        # (graph_calib.campaign.run), also those read back from the cache
+        run = run_solvers(problem, options=first.options, solvers=[t.solver for t in tasks], on_start=start,
+                          on_solved=write, keep_going=True, stamp=False)
+    for name, exc in run.errors.items():
+        outcomes[name] = _failure(by_solver[name], exc)
+    return [outcomes[t.solver] for t in tasks]
 
 
 def _run_tasks_with_loop(tasks):
@@ -182,12 +189,12 @@ def _run_wave_tasks(tasks):
         start = Path(first.start_dir)
         previous = {t.solver: io.read_result(start / f"{t.solver}.json") for t in tasks}
         record = next(r.extra["campaign"]["loop"] for r in previous.values())
-        graph_start = previous.get("factor-graph") or next(iter(previous.values()))
-        kf_start = previous.get("sqrt-kf")
+        primary = first.diagnosis.solvers[0]
+        primary_start = previous.get(primary) or next(iter(previous.values()))
         left = max(0, first.diagnosis.max_added - len(record["added"]))
-        diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=graph_start.values,
-                             attitudes=_read_attitudes(start) if "factor-graph" in previous else None,
-                             kf_start=None if kf_start is None else kf_start.values, max_added=left)
+        diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=primary_start.values,
+                             attitudes=_read_attitudes(start) if primary in previous else None,
+                             starts={s: r.values for s, r in previous.items() if s != primary}, max_added=left)
         return diag, wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
 
     return _loop_job(tasks, wave, wave=tasks[0].wave, pooled_effect=tasks[0].pooled[-1])
@@ -219,7 +226,7 @@ def _write_diagnosis(first, exp, diag):
     js = diag.to_json()
     js["source"] = Path(first.file).name
     io.atomic_write_json(Path(first.out_dir) / "diagnosis.json", js)
-    _write_attitudes(first.out_dir, diag.after.graph)
+    _write_attitudes(first.out_dir, diag.after.solution)
 
 
 def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, pooled_effect=None):
@@ -230,7 +237,7 @@ def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, p
     outcomes = []
     for task in tasks:
         try:
-            output = diag.after.graph if task.solver == "factor-graph" else getattr(diag.after, "kf", None)
+            output = diag.after.outputs.get(task.solver)
             result = diag.after.results.get(task.solver)
             if output is None or result is None:
                 raise RuntimeError(f"the {'loop' if wave is None else 'pooled wave'} ran no {task.solver} on the "
@@ -262,11 +269,19 @@ def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, p
 # ---------------------------------------------------------------------------
 
 
+class _Bar(tqdm):
+    """tqdm without its monitor thread, which would outlive the campaign: a process with a thread left running
+    cannot fork (``calibrate`` after a campaign in one Python session would solve one solver after the other,
+    graph_calib.solvers.concurrent.fork_available)."""
+
+    monitor_interval = 0
+
+
 def _progress_bar(total, enabled):
     """A tqdm bar on a terminal only: in a CI log or a file its redraws break the lines (the task lines stay)."""
     if not enabled or total == 0 or not sys.stderr.isatty():
         return None
-    return tqdm(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
+    return _Bar(total=total, desc="calibrating", unit="task", file=sys.stderr, dynamic_ncols=True)
 
 
 def _say(bar, text, enabled):
@@ -434,10 +449,30 @@ def execute(tasks, *, options, on_done=None, timing=None, pool=None):
 
 
 def _connect(scheduler):
-    """A Dask client of the cluster at ``scheduler``; InputError when it cannot be reached."""
+    """A Dask client of the cluster at ``scheduler``; InputError when it cannot be reached.
+
+    The scheduler is reached once first in this thread's own event loop (``asyncio.run``), so that an address
+    nobody answers at is refused before a client exists: a client whose construction fails leaves its IO-loop
+    thread running, and a process with a thread left running cannot fork
+    (graph_calib.solvers.concurrent.fork_available).
+    """
+    import asyncio
+
     from distributed import Client  # seconds to import: only here (module docstring)
+    from distributed.comm import connect
+
+    async def reach():
+        comm = await connect(scheduler, timeout="10s")
+        await comm.close()
 
     try:
+        asyncio.get_running_loop()
+        running = True          # called from inside an event loop (a notebook): the client alone
+    except RuntimeError:
+        running = False
+    try:
+        if not running:
+            asyncio.run(reach())
         return Client(scheduler, timeout="10s")
     except (OSError, TimeoutError) as exc:
         raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None

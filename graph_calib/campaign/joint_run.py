@@ -4,8 +4,8 @@
 
 1. the cache: ``joint.json`` in the output folder is reused when its key (SHA-256 over every experiment
    file, the calibration options of each and the solver) matches;
-2. else every experiment is read and made a problem in this process, warm-started from its factor-graph
-   result when the campaign has it, and solved jointly through the solver registry (``"joint"``); the
+2. else every experiment is read and made a problem in this process, warm-started from its result by the
+   registry's primary solver when the campaign has it, and solved jointly through the solver registry; the
    result file (:mod:`graph_calib.solvers.joint.result`) is written atomically;
 3. the cross-check: per subrange and element, the joint calibration at the subrange's ``T_ref`` minus
    each per-subrange solver's estimate, in units of that estimate's sigma;
@@ -32,7 +32,7 @@ from graph_calib.solvers.joint.result import joint_element_at, joint_result, rea
 from graph_calib.solvers.joint.solver import JOINT, WarmStart
 from graph_calib.records.problem import build_problem
 from graph_calib.sensors.curves import evaluate_polynomial_curve
-from graph_calib.solvers.registry import get_solver
+from graph_calib.solvers.registry import PRIMARY_SOLVER, get_solver
 from graph_calib.stitching import sensor_of
 from graph_calib.evaluation.validation import ResultCalibration, truth_reference, validate
 
@@ -48,7 +48,7 @@ def _key(planned):
         opts = calibration_options(planned.campaign, t_ref_degC=e.t_ref_degC)
         parts.append(f"{file_sha256(e.file)}:{options_sha256(opts)}")
     combined = hashlib.sha256("|".join(parts).encode("utf-8")).hexdigest()
-    return task_key(input_sha256=combined, options_sha256="joint", solver=JOINT)
+    return task_key(input_sha256=combined, options_sha256=JOINT, solver=JOINT)
 
 
 def _sensor_ranges(exp):
@@ -69,7 +69,7 @@ def _solve(planned, collected, key, *, progress):
         ranges.append(_sensor_ranges(exp))
         names.append(e.name)
         t_refs.append(p.model.t_ref_degC)
-        fg = collected.results.get(e.name, {}).get("factor-graph")
+        fg = collected.results.get(e.name, {}).get(PRIMARY_SOLVER)
         starts.append(WarmStart.from_result(fg) if fg is not None else None)
         del exp
     show = (lambda ev: print(ev.text(), file=sys.stderr)) if progress else None
@@ -187,7 +187,7 @@ def _validate(joint, planned):
 
 def run_joint(planned, collected, *, progress=False, force=False):
     """The campaign's joint phase (module docstring): ``(joint Result or None, campaign.json's joint entry)``."""
-    if not getattr(planned, "joint", False):
+    if JOINT not in getattr(planned, "campaign_solvers", ()):
         return None, {}
     key = _key(planned)
     path = planned.out / JOINT_FILE
@@ -209,7 +209,7 @@ def run_joint(planned, collected, *, progress=False, force=False):
             error = f"{type(exc).__name__}: {exc}"
             return None, {JOINT: {"file": None, "status": "failed", "error": error, "truth_check": {}}}
     names = [e.name for e in planned.campaign.experiments]
-    block = joint.extra["joint"]
+    block = joint.extra[JOINT]
     entry = {"file": JOINT_FILE, "status": status, "seconds": (joint.extra.get("campaign") or {}).get("seconds"),
              "t0_degC": block["t0_degC"], "degrees": block["degrees"], "degree_choice": block["degree_choice"],
              "verdict": joint.extra.get("verdict"),

@@ -25,6 +25,7 @@ from graph_calib.sensors import effects
 from graph_calib import io
 from graph_calib.diagnosis import DiagnosisOptions, residual_rms
 from graph_calib.errors import InputError
+from graph_calib.solvers.registry import PRIMARY_SOLVER, primary_of
 
 #: The files of the declared model's results (before the loop), beside the chosen ones.
 DECLARED_FOLDER = "declared"
@@ -39,14 +40,14 @@ def loop_options(campaign, options, solvers):
     options : CampaignOptions
         ``diagnose``: True / False, or None for the manifest's ``[solver] diagnose`` (default on).
     solvers : tuple of str
-        The campaign's solvers (the loop's tests always use the factor graph; the filter is run on the
-        declared and the chosen model when it is one of them).
+        The campaign's per-experiment solvers.  The loop's tests always use the registry's primary solver
+        (:data:`graph_calib.solvers.registry.PRIMARY_SOLVER`); the others are run on the declared and the
+        chosen model.
     """
     on = options.diagnose if options.diagnose is not None else campaign.solver.get("diagnose", True)
     if not on:
         return None
-    kf = ("sqrt-kf",) if "sqrt-kf" in solvers else ()
-    return DiagnosisOptions(solvers=("factor-graph",) + kf)
+    return DiagnosisOptions(solvers=(PRIMARY_SOLVER,) + tuple(s for s in solvers if s != PRIMARY_SOLVER))
 
 
 def declared_path(task):
@@ -193,11 +194,11 @@ def loop_entry(folder, results, truth=None):
     Returns
     -------
     dict or None
-        :func:`loop_record` of its factor-graph (else first) result, with ``error_vs_truth``
+        :func:`loop_record` of its primary solver's (else first) result, with ``error_vs_truth``
         ``{solver: {"before", "after"}}`` (:func:`truth_errors`) when a truth exists.
     """
     recs = {s: (r.extra.get("campaign") or {}).get("loop") for s, r in results.items()}
-    rec = recs.get("factor-graph") or next((v for v in recs.values() if v), None)
+    rec = recs.get(primary_of(tuple(recs))) or next((v for v in recs.values() if v), None)
     if rec is None:
         return None
     entry = dict(rec)

@@ -17,11 +17,12 @@ import numpy as np
 
 from graph_calib import io
 from graph_calib.campaign.tasks import (
-    JOINT_CHOICES, SOLVER_CHOICES, Task, cached, calibration_options, file_sha256, options_sha256, task_key,
+    Task, cached, calibration_options, file_sha256, options_sha256, solver_choice, task_key,
 )
 from graph_calib.campaign.loop import loop_options
 from graph_calib.campaign.truth import truth_path
 from graph_calib.errors import InputError
+from graph_calib.solvers import registry
 
 
 @dataclass(frozen=True)
@@ -43,8 +44,8 @@ class CampaignPlan:
         The same for the validation records without a truth file (factor graph only).
     references : dict
         ``{record: (kind, path)}``: ``("truth", its truth file)`` or ``("estimate", its factor-graph result)``.
-    joint : bool
-        Whether the joint campaign solver runs (:data:`graph_calib.campaign.tasks.JOINT_CHOICES`).
+    campaign_solvers : tuple of str
+        The campaign solvers that run (:func:`graph_calib.campaign.tasks.solver_choice`).
     """
 
     campaign: io.Campaign
@@ -56,7 +57,7 @@ class CampaignPlan:
     validation_todo: tuple[Task, ...]
     validation_done: tuple[Task, ...]
     references: dict[Path, tuple[str, Path]]
-    joint: bool = False
+    campaign_solvers: tuple[str, ...] = ()
 
     @property
     def to_compute(self):
@@ -97,14 +98,16 @@ def plan_campaign(campaign, out, *, options):
     return CampaignPlan(campaign=campaign, out=out, solvers=_solvers(campaign, options), records=tuple(records),
                         todo=tuple(todo), done=tuple(done), validation_todo=tuple(vtodo),
                         validation_done=tuple(vdone), references=refs,
-                        joint=(options.solvers or campaign.solver.get("solvers", "both")) in JOINT_CHOICES)
+                        campaign_solvers=_choice(campaign, options)[1])
+
+
+def _choice(campaign, options):
+    """``(per-experiment solvers, campaign solvers)`` of the option, else the manifest's, else the default."""
+    return solver_choice(options.solvers or campaign.solver.get("solvers", registry.BOTH))
 
 
 def _solvers(campaign, options):
-    choice = options.solvers or campaign.solver.get("solvers", "both")
-    if choice not in SOLVER_CHOICES:
-        raise InputError(f"unknown solver choice {choice!r}; known: {', '.join(SOLVER_CHOICES)}", dataset="--solver")
-    return SOLVER_CHOICES[choice]
+    return _choice(campaign, options)[0]
 
 
 def _remove_stale_temporaries(folder):
@@ -140,7 +143,7 @@ def plan(campaign, out, *, options):
 
 
 def _validation_tasks(campaign, out, records, *, options):
-    """Tasks calibrating validation records that have no truth file (factor graph only)."""
+    """Tasks calibrating validation records that have no truth file (the registry's primary solver only)."""
     todo, done, refs = [], [], {}
     threads = 1 if (options.scheduler or options.workers != 0) else 0
     for rec in records:
@@ -153,8 +156,9 @@ def _validation_tasks(campaign, out, records, *, options):
         fsha = file_sha256(rec)
         folder = Path(out) / "validation" / rec.stem
         _remove_stale_temporaries(folder)
-        t = Task(name=f"validation/{rec.stem}", file=str(rec), solver="factor-graph", options=copts,
-                 out_dir=str(folder), key=task_key(input_sha256=fsha, options_sha256=osha, solver="factor-graph"),
+        solver = registry.PRIMARY_SOLVER
+        t = Task(name=f"validation/{rec.stem}", file=str(rec), solver=solver, options=copts,
+                 out_dir=str(folder), key=task_key(input_sha256=fsha, options_sha256=osha, solver=solver),
                  input_sha256=fsha, options_sha256=osha, numba_threads=threads)
         refs[rec] = ("estimate", t.result_path)
         (done if (not options.force and cached(t)) else todo).append(t)

@@ -38,8 +38,9 @@ from graph_calib.campaign.waves import run_waves
 from graph_calib.errors import InputError
 from graph_calib.records.experiment import Result
 from graph_calib.reports.campaign_report import write_report
-from graph_calib.solvers.results import compare
-from graph_calib.solvers.verdict import verdict_of
+from graph_calib.solvers.joint import JOINT
+from graph_calib.solvers.orchestration import judge
+from graph_calib.solvers.registry import PRIMARY_SOLVER, comparison_order, primary_of
 from graph_calib.stitching import Stitched, stitch
 from graph_calib.evaluation.validation import Validation, truth_reference, validate, window_means
 
@@ -147,13 +148,13 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     stitched = _stitch(planned, collected)
     truth_doc = _check_truth(stitched, collected.truths, collected.summaries)
     joint, joint_doc = run_joint(planned, collected, progress=options.progress, force=options.force)
-    truth_doc.update({s: {"joint": e["truth_check"]} for s, e in joint_doc.items() if e["truth_check"]})
-    primary = "factor-graph" if "factor-graph" in stitched else next(iter(stitched), None)
+    truth_doc.update({s: {JOINT: e["truth_check"]} for s, e in joint_doc.items() if e["truth_check"]})
+    primary = primary_of(tuple(stitched))
     validations, validation_doc = _validate(planned, stitched, outcomes, primary=primary,
                                             stitch_model=options.stitch_model)
     document = _document(planned, collected, stitched, outcomes, primary=primary, stitch_model=options.stitch_model,
                          truth_doc=truth_doc, validation_doc=validation_doc, compute_timing=compute_timing)
-    document["joint"] = joint_doc
+    document[JOINT] = joint_doc
     collected.failed.extend(joint_failures(joint_doc))     # after the timing counted the tasks
     document["loop"] = loop_doc
     if pooled is not None:
@@ -234,14 +235,15 @@ def _collect(planned, outcomes, *, folders):
                 if "compile_seconds" in (r.extra.get("campaign") or {}):
                     info["compile_seconds"] = r.extra["campaign"]["compile_seconds"]
             entry["results"][s] = info
-        cmp_ = compare(res["sqrt-kf"], res["factor-graph"]) if "sqrt-kf" in res and "factor-graph" in res else None
         if res:
             # the verdict of the experiment's solvers together: in campaign.json and comparison.json (the
             # tasks' result files stay as their workers wrote them, so that cached work is kept byte for byte)
-            entry["verdict"] = verdict_of(res, cmp_).to_json()
+            _, cmp_, verdict = judge(res, order=comparison_order(res), stamp=False)
+            entry["verdict"] = verdict.to_json()
+        else:
+            cmp_ = None
         results[e.name] = res
         if cmp_ is not None:
-            cmp_["verdict"] = entry["verdict"]
             io.atomic_write_json(folder / "comparison.json", cmp_)
             entry["comparison"] = cmp_["summary"]
         tp = truth_path(e.file)
@@ -328,7 +330,7 @@ def _validate(planned, stitched, outcomes, *, primary, stitch_model):
         kind, ref_path = planned.references[rec]
         entry = {"record": str(rec), "reference_kind": kind, "reference": str(ref_path)}
         if not Path(ref_path).is_file():
-            oc = outcomes.get((f"validation/{rec.stem}", "factor-graph"), {})
+            oc = outcomes.get((f"validation/{rec.stem}", PRIMARY_SOLVER), {})
             entry["error"] = oc.get("error", "the record's own calibration is missing")
             validation_doc.append(entry)
             continue

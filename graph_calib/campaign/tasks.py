@@ -18,20 +18,29 @@ from pathlib import Path
 
 from graph_calib import __version__
 from graph_calib.diagnosis import DiagnosisOptions
+from graph_calib.errors import InputError
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, FilterOptions, GraphOptions
-from graph_calib.solvers.registry import DEFAULT_SOLVERS
+from graph_calib.solvers import registry
 
 #: Bumped when a change of the code invalidates cached results (2: the loop's record holds its final round's
 #: candidate statistics, which the pooled score test sums).
 CACHE_VERSION = 2
 
-#: The per-experiment solvers each value of :attr:`CampaignOptions.solvers` (and ``[solver] solvers``) stands for.
-SOLVER_CHOICES = {"both": DEFAULT_SOLVERS, "sqrt-kf": ("sqrt-kf",), "factor-graph": ("factor-graph",),
-                  "per-subrange": DEFAULT_SOLVERS, "joint": (), "factor-graph+joint": ("factor-graph",)}
-#: The choices that also run the joint campaign solver (graph_calib.solvers.joint; docs/campaign.md): by default it
-#: runs beside both per-subrange solvers ("both"); "per-subrange" leaves it out, "joint" runs it alone.
-JOINT_CHOICES = ("both", "joint", "factor-graph+joint")
+def solver_choice(choice):
+    """``(per-experiment solvers, campaign solvers)`` a :attr:`CampaignOptions.solvers` (or ``[solver] solvers``)
+    value stands for (:func:`graph_calib.solvers.registry.parse_choice`): by default ("both") the registry's
+    default solvers and every campaign solver (the joint one); "per-subrange" leaves the campaign solvers out.
+
+    Raises
+    ------
+    InputError
+        Naming ``--solver`` when the value is not one the registry accepts.
+    """
+    try:
+        return registry.parse_choice(choice, campaign=True)
+    except ValueError as exc:
+        raise InputError(str(exc), dataset="--solver") from None
 
 
 @dataclass(frozen=True)
@@ -48,14 +57,14 @@ class CampaignOptions:
         Address of an existing Dask scheduler (``tcp://host:8786``); its workers must
         see the output folder.  Overrides ``workers``.
     solvers : str or None
-        ``"both"`` (both per-subrange solvers and the joint one), ``"per-subrange"`` (both, no joint),
-        ``"sqrt-kf"``, ``"factor-graph"``, ``"factor-graph+joint"`` or ``"joint"``; None: the manifest's
-        ``[solver] solvers``, else both.
+        ``"both"`` (the default per-experiment solvers and every campaign solver), ``"per-subrange"`` (the
+        default solvers alone), or registered solver names joined by ``+`` (:func:`solver_choice`); None: the
+        manifest's ``[solver] solvers``, else both.
     stitch_model : str
         ``"cubic"`` or ``"linear"``: the stitched model that validation uses.
     validate : tuple of str
         Independent experiment files for validation.  A ``<stem>.truth.json`` next
-        to one is its reference; otherwise it is calibrated (factor graph) as an
+        to one is its reference; otherwise it is calibrated (the primary solver) as an
         extra task and its own estimate is the reference.
     diagnose : bool or None
         The closed loop on every experiment (:mod:`graph_calib.campaign.loop`): True, False, or None for
@@ -190,5 +199,5 @@ def cached(task):
     return isinstance(doc, dict) and isinstance(doc.get("campaign"), dict) and doc["campaign"].get("key") == task.key
 
 
-__all__ = ["CACHE_VERSION", "SOLVER_CHOICES", "JOINT_CHOICES", "CampaignOptions", "Task", "calibration_options", "file_sha256",
+__all__ = ["CACHE_VERSION", "solver_choice", "CampaignOptions", "Task", "calibration_options", "file_sha256",
            "options_sha256", "task_key", "cached"]

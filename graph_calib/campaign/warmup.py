@@ -155,13 +155,13 @@ def _run_everything(exp):
     from graph_calib.options import CalibrationOptions
     from graph_calib.records.problem import build_problem
     from graph_calib.sensors.sensor_model import correct, correct_with_jacobian, measure
-    from graph_calib.solvers.registry import solve
+    from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
     from graph_calib.solvers.results import to_result
     from graph_calib.navigation.strapdown import integrate_attitude
 
     options = CalibrationOptions()
     problem = build_problem(exp, options=options)       # static detector, alignment (strapdown), preintegration
-    for solver in ("factor-graph", "sqrt-kf"):          # the model's kernels and the filter's
+    for solver in DEFAULT_SOLVERS:                      # the model's kernels and the filter's
         to_result(problem.model, solve(solver, problem, options=options))
     layout = problem.model.layout
     x = np.zeros(layout.size)

@@ -1,7 +1,8 @@
-"""``graph-calib calibrate EXPERIMENT.h5 --out DIR [--solver sqrt-kf|factor-graph|both]``."""
+"""``graph-calib calibrate EXPERIMENT.h5 --out DIR [--solver both|NAME[+NAME...]]``: the registered solvers."""
 
 from __future__ import annotations
 
+import argparse
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -15,15 +16,15 @@ from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, GraphOptions
 from graph_calib.sensors.effects import FURTHER_EFFECTS
-from graph_calib.solvers.registry import DEFAULT_SOLVERS
+from graph_calib.solvers import registry
 from graph_calib.solvers.results import comparison_text
 
 
 def add_arguments(p):
     p.add_argument("experiment", help="experiment file (HDF5, data-format.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    p.add_argument("--solver", choices=("sqrt-kf", "factor-graph", "both"), default="both",
-                   help="which solver(s) (default both, compared)")
+    p.add_argument("--solver", type=solver_choice, default=registry.BOTH, metavar="SOLVERS",
+                   help=f"the solvers to run: {registry.choice_help()} (default {registry.BOTH})")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals' noise and "
                         "offsets, printed with the reason)")
@@ -35,6 +36,15 @@ def add_arguments(p):
     add_sway(p)
     p.add_argument("--residuals", action="store_true",
                    help="also write each solver's residual time series, SOLVER.residuals.h5 (docs/data-format.md)")
+
+
+def solver_choice(value, *, campaign=False):
+    """An argparse ``type`` for ``--solver``: the value, checked against the registry (exit 2 naming it)."""
+    try:
+        registry.parse_choice(value, campaign=campaign)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    return value
 
 
 def options_from_args(args, *, grade=None):
@@ -65,7 +75,7 @@ def run(args):
         print(f"grade: {choice.reason}")
     options = options_from_args(args, grade=choice.grade if choice else None)
     out = Path(args.out)
-    solvers = DEFAULT_SOLVERS if args.solver == "both" else (args.solver,)
+    solvers, _ = registry.parse_choice(args.solver)
     problem = build_problem(exp, options=options)
     out.mkdir(parents=True, exist_ok=True)
     m = problem.model

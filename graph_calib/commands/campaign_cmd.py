@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import functools
 import sys
 from pathlib import Path
 
 from graph_calib.campaign.checks import check_lines
+from graph_calib.commands.calibrate_cmd import solver_choice
 from graph_calib.errors import InputError
+from graph_calib.solvers import registry
 from graph_calib.evaluation.validation import validation_text
 
 
@@ -19,10 +22,10 @@ def add_arguments(p):
                         "process")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="use an existing Dask cluster (e.g. tcp://host:8786); its workers must see --out")
-    p.add_argument("--solver", choices=("both", "per-subrange", "sqrt-kf", "factor-graph", "factor-graph+joint",
-                                        "joint"), default=None,
-                   help="override the manifest's [solver] solvers (default: both: the two per-subrange solvers "
-                        "and the joint campaign solver; per-subrange: without the joint one)")
+    p.add_argument("--solver", type=functools.partial(solver_choice, campaign=True), default=None,
+                   metavar="SOLVERS",
+                   help=f"override the manifest's [solver] solvers: {registry.choice_help(campaign=True)} "
+                        f"(default {registry.BOTH})")
     p.add_argument("--validate", action="append", default=[], metavar="RECORD.h5",
                    help="independent record to validate the stitched calibration on (repeatable); a "
                         "RECORD.truth.json next to it is the reference, else its own calibration")
@@ -109,24 +112,30 @@ def print_summary(run, out=None):
 
 def _print_joint(doc, out):
     """The joint campaign solver's lines of the summary (docs/campaign.md)."""
-    j = (doc.get("joint") or {}).get("joint")
+    from graph_calib.solvers.joint import JOINT
+
+    for name, j in (doc.get(JOINT) or {}).items():
+        _print_joint_one(name, j, out)
+
+
+def _print_joint_one(name, j, out):
     if not j:
         return
     if j.get("status") == "failed":
-        print(f"  joint: FAILED: {j['error']}", file=out)
+        print(f"  {name}: FAILED: {j['error']}", file=out)
         return
     v = j.get("verdict") or {}
-    print(f"  joint ({j['status']}): degrees {', '.join(f'{k} {d}' for k, d in j['degrees'].items())}; "
+    print(f"  {name} ({j['status']}): degrees {', '.join(f'{k} {d}' for k, d in j['degrees'].items())}; "
           f"{v.get('text', '')}", file=out)
     for solver, cc in (j.get("cross_check") or {}).items():
         if cc.get("rms_z") is not None:
-            print(f"    joint at T_ref - {solver}: rms {cc['rms_z']:.2f}, max {cc['max_abs_z']:.2f} sigma", file=out)
+            print(f"    {name} at T_ref - {solver}: rms {cc['rms_z']:.2f}, max {cc['max_abs_z']:.2f} sigma", file=out)
     tc = j.get("truth_check") or {}
     if tc.get("points"):
-        print(f"    joint vs truth ({tc['mode']}): {100 * tc['fraction_within_2sigma']:.0f} % within 2 sigma, "
+        print(f"    {name} vs truth ({tc['mode']}): {100 * tc['fraction_within_2sigma']:.0f} % within 2 sigma, "
               f"max |z| {tc['max_abs_z']:.2f}", file=out)
     for val in j.get("validation", []):
-        print(f"    joint validation {Path(val['record']).name}: {validation_text(val['summary'])} -> "
+        print(f"    {name} validation {Path(val['record']).name}: {validation_text(val['summary'])} -> "
               f"{'pass' if val['summary']['pass']['all'] else 'FAIL'}", file=out)
 
 
@@ -143,7 +152,7 @@ def _print_loop(loop, out):
             continue
         line += (f"; pooled test adopted {a['effect']} ({a['kind']} score {a['statistic']:.1f} > {a['threshold']:.1f} over "
                  f"{len(a['experiments'])} experiments, log10 p {a['log10_p']:.1f})")
-    err = (loop.get("error_vs_truth") or {}).get("factor-graph") or {}
+    err = (loop.get("error_vs_truth") or {}).get(registry.PRIMARY_SOLVER) or {}
     if err.get("before") and err.get("after"):
         b, a = err["before"], err["after"]
         line += (f"; graph vs truth RMS {b['rms_z']:.2f} -> {a['rms_z']:.2f} sigma, max {b['max_abs_z']:.1f} -> "

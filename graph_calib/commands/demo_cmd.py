@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib.errors import InputError
+from graph_calib.solvers.registry import PRIMARY_SOLVER
 
 #: Default length of each subrange experiment, h: short enough for a few minutes on 2 cores.
 DEMO_HOURS = 0.4
@@ -164,10 +165,10 @@ def diagnosis_line(diagnosis_json, *, planted=None):
         else:
             parts.append(name)
     line = "diagnosis: added " + (", ".join(parts) if parts else "nothing")
-    err = [((d.get(k) or {}).get("error_vs_truth") or {}).get("factor-graph", {}).get("rms_z")
+    err = [((d.get(k) or {}).get("error_vs_truth") or {}).get(PRIMARY_SOLVER, {}).get("rms_z")
            for k in ("before", "after")]
     if None not in err:
-        line += f", error vs truth RMS {err[0]:.2f} -> {err[1]:.2f} sigma (factor graph)"
+        line += f", error vs truth RMS {err[0]:.2f} -> {err[1]:.2f} sigma ({PRIMARY_SOLVER})"
     found = None
     if planted:
         found = planted in added

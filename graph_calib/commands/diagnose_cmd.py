@@ -17,9 +17,8 @@ from pathlib import Path
 from graph_calib.commands.model_options import add_sway, sway_of
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
-from graph_calib.solvers.registry import DEFAULT_SOLVERS
-from graph_calib.solvers.results import compare
-from graph_calib.solvers.verdict import verdict_of
+from graph_calib.commands.calibrate_cmd import solver_choice
+from graph_calib.solvers import registry
 
 
 def add_arguments(p):
@@ -39,8 +38,9 @@ def add_arguments(p):
     p.add_argument("--max-iterations", type=int, default=None,
                    help="Levenberg-Marquardt iterations of the factor graph (default: GraphOptions'; hand-held "
                         "sessions may need 100 or more)")
-    p.add_argument("--solver", choices=("both", "factor-graph"), default="both",
-                   help="solvers run before and after (the tests always use the factor graph)")
+    p.add_argument("--solver", type=solver_choice, default=registry.BOTH, metavar="SOLVERS",
+                   help=f"solvers run before and after: {registry.choice_help()} (default {registry.BOTH}); the "
+                        f"tests use the first in the diagnosis' order ({registry.PRIMARY_SOLVER} when given)")
     p.add_argument("--truth", default=None,
                    help="truth file (result layout); default <stem>.truth.json beside the experiment if present")
     p.add_argument("--no-truth", action="store_true", help="ignore a truth file beside the experiment")
@@ -69,7 +69,7 @@ def _options(args, *, grade="navigation"):
     calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade,
                                                  extra_effects=tuple(args.effect), sway_sigma=sway_of(args)),
                                              graph=graph, t_ref_degC=args.t_ref)
-    solvers = ("factor-graph", "sqrt-kf") if args.solver == "both" else ("factor-graph",)
+    solvers = registry.primary_first(registry.parse_choice(args.solver)[0])
     diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers)
     return calibration_options, diagnosis_options
 
@@ -118,16 +118,14 @@ def run(args):
     diag = diagnose(exp, options=calibration_options, diagnosis=diagnosis_options, truth=truth, progress=say)
     # the calibration the loop ends with, as calibrate writes it: each solver's result, the comparison, the verdict
     final = dict(diag.after.results)
-    solvers = [s for s in DEFAULT_SOLVERS if s in final]
-    comparison = compare(final[solvers[0]], final[solvers[1]]) if len(solvers) == 2 else None
-    verdict = verdict_of(final, comparison)
+    comparison, verdict = diag.after.comparison, diag.after.verdict
     extra = {"verdict": verdict.to_json(), "diagnosis": {"added": list(diag.added)}}
     if choice is not None:
         extra["grade_choice"] = choice.to_json()
     for s, res in final.items():
         io.write_result(replace(res, extra={**res.extra, **extra}), out / f"{s}.json")
     if comparison is not None:
-        io.atomic_write_json(out / "comparison.json", {**comparison, "verdict": verdict.to_json()})
+        io.atomic_write_json(out / "comparison.json", comparison)
     js = diag.to_json()
     js["source"] = path.name
     js["verdict"] = verdict.to_json()
@@ -139,11 +137,11 @@ def run(args):
     for d in diag.signature[:3]:
         print(f"  left: {d.group} as a bias on {d.axis} (statistic {d.statistic:.1f} > {d.threshold:.1f})")
     for label, st in (("before", diag.before), ("after", diag.after)):
-        rms = residual_rms(st).get("factor-graph", {})
+        rms = residual_rms(st).get(st.primary, {})
         line = ", ".join(f"{k} {max(v):.3f}" for k, v in rms.items() if isinstance(v, list))
         err = ""
         if st.error:
-            e = st.error["factor-graph"]
+            e = st.error[st.primary]
             err = f"; error vs truth RMS {e['rms_z']:.2f} sigma (max {e['max_abs_z']:.1f}, {e['worst']})"
         print(f"  {label}: largest whitened residual RMS per kind: {line}{err}")
     print(f"  -> {out / 'diagnosis.json'}, {out / 'report.html'}, the final calibration "

@@ -25,6 +25,7 @@ from graph_calib.compensation.exports import DEFAULT_ENVELOPE_DPS, EXPORT_FORMAT
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
 from graph_calib.io import atomic_write_text
+from graph_calib.solvers.joint.solver import JOINT
 
 #: Largest interpolation error (in sigma of the element) the export accepts without a remark.
 INTERPOLATION_REMARK_SIGMA = 0.1
@@ -80,7 +81,7 @@ def _format(args, out):
 
 
 def _table(args, out, fmt):
-    if args.solver == "joint":       # the joint campaign solver's curves (docs/campaign.md), not a stitching
+    if args.solver == JOINT:       # the joint campaign solver's curves (docs/campaign.md), not a stitching
         if args.model:
             raise InputError("the joint calibration has one curve form; --model chooses among stitched models",
                              dataset="--model")

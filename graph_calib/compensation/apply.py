@@ -38,6 +38,7 @@ from graph_calib.compensation.table import TABLE_FORMAT
 from graph_calib.constants import MPS2_TO_UG, RS_TO_DH
 from graph_calib.errors import InputError
 from graph_calib.solvers.joint.result import read_joint_result
+from graph_calib.solvers.joint.solver import JOINT
 
 #: Root attribute of a corrected experiment file: the provenance of its correction, JSON.
 PROVENANCE_ATTRIBUTE = "corrected_by"
@@ -92,7 +93,7 @@ def read_compensation(path, *, solver=None, model=None):
         result = io.read_result(path)
         # a joint result (docs/joint-result.md): its curves with their bands, like a stitched calibration
         comp = (JointCalibration.from_result(read_joint_result(path), source=str(path.resolve()))
-                if isinstance(result.extra.get("joint"), dict) else Calibration.from_result(result))
+                if isinstance(result.extra.get(JOINT), dict) else Calibration.from_result(result))
         prov.update(solver=result.solver, source=result.source, t_ref_degC=result.t_ref_degC,
                     temperature_range_degC=list(result.temperature_range_degC))
         if isinstance(result.extra.get("verdict"), dict):
@@ -111,7 +112,7 @@ def read_compensation(path, *, solver=None, model=None):
         prov.update(format=fmt, **{k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model",
                                                                               "source", "step_degC")})
         prov["grid_degC"] = [float(comp.grid_degC[0]), float(comp.grid_degC[-1])]
-    elif solver == "joint":
+    elif solver == JOINT:
         comp = JointCalibration.from_campaign(path)
         prov.update({k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model", "subranges")})
     else:

@@ -22,6 +22,7 @@ from graph_calib.compensation.table import CompensationTable, TableCurve, interp
 from graph_calib.errors import InputError
 from graph_calib.solvers.joint.result import read_joint_result
 from graph_calib.sensors.curves import evaluate_polynomial_curve
+from graph_calib.solvers.joint.solver import JOINT
 from graph_calib.stitching import sensor_of
 
 
@@ -69,7 +70,7 @@ class JointCalibration(ElementCompensation):
     @classmethod
     def from_result(cls, result, *, source=""):
         """From a joint result (:func:`graph_calib.solvers.joint.result.joint_result`)."""
-        block = result.extra["joint"]
+        block = result.extra[JOINT]
         t0 = float(block["t0_degC"])
         spans = np.asarray(block["sensor_ranges_degC"], dtype=float).reshape(6, 2)
         curves = {}
@@ -85,7 +86,7 @@ class JointCalibration(ElementCompensation):
                      if n not in family_members and n not in curves}
         curves = {n: curves[n] for n in element_order(list(curves))}
         constants = {n: constants[n] for n in element_order(list(constants))}
-        info = {"solver": result.solver, "stitch_model": "joint", "source": source or result.source,
+        info = {"solver": result.solver, "stitch_model": JOINT, "source": source or result.source,
                 "t0_degC": t0, "degrees": dict(block.get("degrees", {})),
                 "subranges": list(block.get("experiments", []))}
         return cls(curves=curves, constants=constants, info=info)
@@ -96,7 +97,7 @@ class JointCalibration(ElementCompensation):
         return cls.from_result(read_joint_result(path), source=str(Path(path).resolve()))
 
     @classmethod
-    def from_campaign(cls, campaign, *, solver="joint"):
+    def from_campaign(cls, campaign, *, solver=JOINT):
         """From a campaign folder (or its ``campaign.json``) whose joint solver ran.
 
         Raises
@@ -108,10 +109,10 @@ class JointCalibration(ElementCompensation):
         if path.is_dir():
             path = path / "campaign.json"
         doc = read_campaign(path)
-        entry = (doc.get("joint") or {}).get(solver)
+        entry = (doc.get(JOINT) or {}).get(solver)
         if not isinstance(entry, dict) or "file" not in entry:
             raise InputError(f"no {solver} result in this campaign (run it with --solver {solver} or both)",
-                             path=path, dataset="joint")
+                             path=path, dataset=JOINT)
         out = cls.from_file(path.parent / entry["file"])
         out.info["imu_id"] = doc.get("imu_id", "")
         return out

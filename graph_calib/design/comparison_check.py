@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from graph_calib.solvers.registry import PRIMARY_SOLVER
 from graph_calib import io
 from graph_calib.calibrate import solve_problem
 from graph_calib.design.comparison import AXES, FAMILIES, equal_accuracy_duration
@@ -63,7 +64,7 @@ def calibrate_realisation(procedure, length_s, r, *, work, seed=1, progress=None
             se = program_simulation(prog, rng=np.random.default_rng(_seed(procedure.name, length_s, k, r, seed)),
                                     noise=True, errors=False).run()[0]
             problem = build_problem(se.experiment, options=opts)
-            res = solve_problem(problem, options=opts, solvers=("factor-graph",)).results["factor-graph"]
+            res = solve_problem(problem, options=opts, solvers=(PRIMARY_SOLVER,)).results[PRIMARY_SOLVER]
             Ts = se.experiment.sensor_temperatures()
             doc = replace(res, extra={**res.extra, "sensor_ranges_degC": np.stack([Ts.min(0), Ts.max(0)], 1).tolist()})
             path.parent.mkdir(parents=True, exist_ok=True)

@@ -12,9 +12,9 @@ candidate is significant (or the limit of added effects is reached).  A round
    significant driver signatures, or is needed beyond those it leaves
    (:func:`_encompassing_check`).
 
-After an effect is added the graph is re-solved on the same record from the previous
-solution (:func:`_add_effect`).  Driver signatures significant at the final model are
-reported as ``unexplained``.
+After an effect is added the primary solver (the first of ``DiagnosisOptions.solvers``) re-solves the
+same record from the previous solution (:func:`_add_effect`).  Driver signatures significant at the final
+model are reported as ``unexplained``.
 """
 
 from __future__ import annotations
@@ -46,8 +46,8 @@ from graph_calib.diagnosis.score import score_test, with_priors
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.navigation.rotations import exp_so3
-from graph_calib.solvers.registry import solve
-from graph_calib.solvers.results import to_result
+from graph_calib.solvers.orchestration import run_solvers
+from graph_calib.solvers.registry import SOLVER_LABELS, comparison_order, solve
 
 
 def _columns(layout, name):
@@ -60,9 +60,14 @@ def _with_effects(options, extra_effects):
     return replace(options, model=replace(options.model, extra_effects=tuple(extra_effects)))
 
 
-def _solve_graph(problem, *, options, initial=None):
-    """The factor graph's solution of ``problem``."""
-    return solve("factor-graph", problem, options=options, initial=initial)
+def _primary(diagnosis_options):
+    """The solver the rounds linearise at: the first of ``diagnosis_options.solvers``."""
+    return diagnosis_options.solvers[0]
+
+
+def _solve_graph(problem, *, options, diagnosis_options, initial=None):
+    """The primary solver's solution of ``problem`` (:func:`_primary`)."""
+    return solve(_primary(diagnosis_options), problem, options=options, initial=initial)
 
 
 # ---------------------------------------------------------------------------
@@ -70,43 +75,51 @@ def _solve_graph(problem, *, options, initial=None):
 # ---------------------------------------------------------------------------
 
 
-def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None, kf_from=None,
-                kf_x=None, linearised=None, context=None, say=lambda msg: None):
-    """The stage of ``problem`` solved by the factor graph (``graph``): the filter, residuals, statistics, error.
+def _make_stage(problem, graph, *, options, diagnosis_options, truth=None, fixed_sigmas=None, starts_from=None,
+                starts_x=None, linearised=None, context=None, say=lambda msg: None):
+    """The stage of ``problem`` solved by the primary solver (``graph``): the others, residuals, statistics, error.
 
+    Every solver of ``diagnosis_options.solvers`` is run through
+    :func:`graph_calib.solvers.orchestration.run_solvers` (the primary's output given), which makes the
+    results, compares the first two (comparison order) and gives the verdict.
     ``linearised``: the :class:`_Linearised` of the round run at ``graph`` (:func:`_round`): the factor
     residuals are taken from its factors (the candidates zero, they are the current model's residuals)
     instead of preintegrating the record and evaluating the factors once more.
-    ``kf_from``: the filter's solution of a smaller model (its ``SolverOutput``), embedded in ``problem``'s
-    layout as the filter's first linearisation point (its own solution, not the graph's: the two solvers
-    stay independent; the fixed point is the same, only fewer passes reach it).  Without it the filter
-    starts from the prior calibration, as it does on its own, with the graph's keyframe attitudes as its
-    first attitudes (instead of fitting attitudes at the prior, ``initial_attitudes``).
-    ``kf_x``: instead, the filter's first calibration in ``problem``'s layout (its solution of a smaller model
-    kept in a result file, :func:`diagnose_from`), with the graph's keyframe attitudes.
+    ``starts_from``: ``{solver: SolverOutput}``, each further solver's solution of a smaller model, embedded in
+    ``problem``'s layout as its first linearisation point (its own solution, not the primary's: the solvers
+    stay independent; the fixed point is the same, only fewer passes reach it).  Without it a further
+    solver starts from the prior calibration, as it does on its own, with the primary's keyframe attitudes
+    as its first attitudes (instead of fitting attitudes at the prior).
+    ``starts_x``: ``{solver: x}``, instead, its first calibration in ``problem``'s layout (its solution of a
+    smaller model kept in a result file, :func:`diagnose_from`), with the primary's keyframe attitudes.
     ``context``: the record's :func:`~graph_calib.diagnosis.drivers.keyframe_context` (one for both stages).
     """
     model = problem.model
+    primary = _primary(diagnosis_options)
     if linearised is None:
         series = factor_residuals(model, graph.attitudes, graph.x)
     else:
         series = factor_residuals(linearised.model, graph.attitudes, linearised.x, factors=linearised.factors)
-    results = {"factor-graph": to_result(model, graph)}
-    stage = Stage(layout=tuple(model.layout.names), problem=problem, graph=graph, results=results, residuals=series)
-    if "sqrt-kf" in diagnosis_options.solvers:
-        say("  square-root filter ...")
-        if kf_from is not None:
-            initial = (kf_from.attitudes, model.layout.embed(kf_from.layout, kf_from.x))
-        elif kf_x is not None:
-            initial = (graph.attitudes, np.asarray(kf_x, dtype=float))
+    starts_from, starts_x = starts_from or {}, starts_x or {}
+    initial = {}
+    for name in diagnosis_options.solvers[1:]:
+        if name in starts_from:
+            initial[name] = (starts_from[name].attitudes, model.layout.embed(starts_from[name].layout,
+                                                                             starts_from[name].x))
+        elif name in starts_x:
+            initial[name] = (graph.attitudes, np.asarray(starts_x[name], dtype=float))
         else:
-            # the prior calibration, as the filter starts on its own; the first attitudes the graph's keyframe
-            # attitudes instead of the filter's attitude-only fit at the prior (initial_attitudes)
-            initial = (graph.attitudes, model.prior()[0])
-        kf = solve("sqrt-kf", problem, options=options, initial=initial)
-        stage.results["sqrt-kf"] = to_result(model, kf)
-        stage.kf = kf
-        stage.innovations = filter_innovations(kf, model)
+            initial[name] = (graph.attitudes, model.prior()[0])
+    if initial:
+        say(f"  {', '.join(SOLVER_LABELS.get(n, n) for n in initial)} ...")
+    run = run_solvers(problem, options=options, solvers=diagnosis_options.solvers,
+                      order=comparison_order(diagnosis_options.solvers), outputs={primary: graph}, initial=initial,
+                      stamp=False)
+    outputs = {primary: graph, **{n: o for n, o in run.outputs.items() if n != primary}}
+    results = {n: run.results[n] for n in outputs}
+    stage = Stage(layout=tuple(model.layout.names), problem=problem, primary=primary, outputs=outputs,
+                  results=results, comparison=run.comparison, verdict=run.verdict, residuals=series,
+                  innovations={n: filter_innovations(o, model) for n, o in outputs.items() if n != primary})
     stage.statistics = residual_statistics(stage, context=context)
     if truth is not None:
         stage.error = {}
@@ -399,7 +412,7 @@ def _round(index, *, options, problem, graph, diagnosis_options, candidates, all
 # ---------------------------------------------------------------------------
 
 
-def _add_effect(name, *, options, problem, graph, lin, say):
+def _add_effect(name, *, options, problem, graph, lin, diagnosis_options, say):
     """Add effect ``name`` to the model and re-solve: ``(options, problem, graph)``.
 
     The solve starts where the round's linearisation (``lin``, :class:`_Linearised`) put the first
@@ -413,7 +426,7 @@ def _add_effect(name, *, options, problem, graph, lin, say):
     else:
         initial = (graph.attitudes, grown.model.layout.embed(problem.model.layout, graph.x))
     say(f"re-solving with {name} ...")
-    graph = _solve_graph(grown, options=options, initial=initial)
+    graph = _solve_graph(grown, options=options, diagnosis_options=diagnosis_options, initial=initial)
     return options, grown, graph
 
 
@@ -454,25 +467,24 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     problem = build_problem(experiment, options=options)
     options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
     say(f"declared model: {problem.model.layout.size} parameters, {problem.model.n_keyframes} keyframes; "
-        "factor graph ...")
-    graph = _solve_graph(problem, options=options)
+        f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
+    graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis)
     return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=truth,
-                      max_added=diagnosis.max_added, kf_x=None, t_start=t_start, say=say)
+                      max_added=diagnosis.max_added, starts_x=None, t_start=t_start, say=say)
 
 
-def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), attitudes=None, kf_start=None,
+def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), attitudes=None, starts=None,
                   max_added=None, progress=None):
     """The closed loop continued on a model grown from outside, warm-started from a smaller model's solution.
 
     What a campaign runs after its pooled score test adopted an effect in this experiment
     (:mod:`graph_calib.campaign.pooled`): ``options`` hold the model the experiment's own loop chose plus the
-    adopted effect(s), ``start`` that model's factor-graph solution.  The grown model is solved by the factor
-    graph from ``start`` (the new parameters zero; the keyframe attitudes that solution's own, else
-    dead-reckoned from the alignment with that calibration, which keeps them within the alignment's error, so
-    no attitude-only fit), then the
-    rounds of :func:`diagnose` run on it (at most ``max_added`` further effects).  The filter, when it is one
-    of ``diagnosis.solvers``, starts from ``kf_start`` (its own solution of the smaller model) with the
-    graph's attitudes: the two solvers keep their own fixed points, fewer passes reach them.
+    adopted effect(s), ``start`` that model's solution by the primary solver (the first of
+    ``diagnosis.solvers``).  The grown model is solved by the primary solver from ``start`` (the new
+    parameters zero; the keyframe attitudes that solution's own, else dead-reckoned from the alignment with
+    that calibration, which keeps them within the alignment's error, so no attitude-only fit), then the rounds of :func:`diagnose` run on it (at most ``max_added`` further effects).  Each further solver of
+    ``diagnosis.solvers`` starts from its own solution of the smaller model (``starts``) with the primary's
+    attitudes: the solvers keep their own fixed points, fewer passes reach them.
 
     Parameters
     ----------
@@ -480,13 +492,14 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), a
     options : CalibrationOptions
         The grown model; its ``t_ref_degC`` the smaller model's (one ``T_ref`` for every model).
     start : dict
-        ``{flat element name: value}`` (SI) of the smaller model's factor-graph solution
+        ``{flat element name: value}`` (SI) of the smaller model's primary solution
         (:attr:`graph_calib.records.experiment.Result.values`); elements not given start at zero.
     diagnosis : DiagnosisOptions
     attitudes : ndarray (K+1, 3, 3), optional
         The keyframe attitudes ``C_nb`` of the ``start`` solution (ignored when their shape does not fit).
-    kf_start : dict, optional
-        The same of its filter solution (default: the filter starts from the prior calibration).
+    starts : dict, optional
+        ``{solver: {flat element name: value}}``, the same of the further solvers' solutions (default: each
+        starts from the prior calibration).
     max_added : int, optional
         Further effects the rounds may add (default ``diagnosis.max_added``).
     progress : callable, optional
@@ -505,16 +518,18 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), a
         R0 = np.asarray(attitudes, dtype=float)
     else:
         R0 = model.propagate(model.segment_priors(problem.q_nb0), model.preintegrate(x0), x0)
-    say(f"grown model: {model.layout.size} parameters, warm start; factor graph ...")
-    graph = _solve_graph(problem, options=options, initial=(R0, x0))
-    kf_x = None if kf_start is None else model.layout.from_dict(kf_start)
+    say(f"grown model: {model.layout.size} parameters, warm start; "
+        f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
+    graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis, initial=(R0, x0))
+    starts_x = {s: model.layout.from_dict(v) for s, v in (starts or {}).items() if s in diagnosis.solvers[1:]}
     return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=None,
-                      max_added=diagnosis.max_added if max_added is None else max_added, kf_x=kf_x,
+                      max_added=diagnosis.max_added if max_added is None else max_added, starts_x=starts_x,
                       t_start=t_start, say=say)
 
 
-def _loop_from(experiment, problem, graph, *, options, diagnosis, truth, max_added, kf_x, t_start, say):
-    """The rounds from ``problem`` solved by the graph (``graph``) until nothing is added: the :class:`Diagnosis`."""
+def _loop_from(experiment, problem, graph, *, options, diagnosis, truth, max_added, starts_x, t_start, say):
+    """The rounds from ``problem`` solved by the primary solver (``graph``) until nothing is added: the
+    :class:`Diagnosis`."""
     candidates = tuple(diagnosis.candidates or effects.FURTHER_EFFECTS)
     declared = problem.model
     sums = DriverSums.of(declared, n_segments=diagnosis.time_segments)   # the record's: one for every round
@@ -530,15 +545,17 @@ def _loop_from(experiment, problem, graph, *, options, diagnosis, truth, max_add
         say(f"round {rnd.index}: {rnd.decision}")
         if before is None:      # the starting model's stage, its residuals from the first round's linearisation
             before = _make_stage(problem, graph, options=options, diagnosis_options=diagnosis, truth=truth,
-                                 kf_x=kf_x, linearised=lin, context=context, say=say)
+                                 starts_x=starts_x, linearised=lin, context=context, say=say)
             fixed = {s: r.sigmas for s, r in before.results.items()}
         if rnd.added is None:
             break
         added.append(rnd.added)
         options, problem, graph = _add_effect(rnd.added, options=options, problem=problem, graph=graph, lin=lin,
-                                              say=say)
+                                              diagnosis_options=diagnosis, say=say)
     after = before if not added else _make_stage(problem, graph, options=options, diagnosis_options=diagnosis,
-                                                 truth=truth, fixed_sigmas=fixed, kf_from=before.kf,
+                                                 truth=truth, fixed_sigmas=fixed,
+                                                 starts_from={n: o for n, o in before.outputs.items()
+                                                              if n != before.primary},
                                                  linearised=lin, context=context, say=say)
     signature = sorted((d for d in rounds[-1].drivers if d.significant), key=lambda d: d.log10_p)
     source = experiment.source.rsplit("/", 1)[-1] if experiment.source else ""

@@ -162,7 +162,7 @@ _COMPONENTS = {"rotation": "xyz (body)", "gravity": "ENU", "gravity_body": "xyz 
 
 
 def residual_statistics(stage, *, top=5, lags=10, context=None):
-    """Whiteness and driver relations of the residuals of both solvers.
+    """Whiteness and driver relations of the residuals of every solver of the stage.
 
     Parameters
     ----------
@@ -200,19 +200,16 @@ def residual_statistics(stage, *, top=5, lags=10, context=None):
         fg[kind] = one(d["w"], d["key"], _COMPONENTS[kind])
         if kind == "gravity":
             fg["gravity_body"] = one(d["w_body"], d["key"], _COMPONENTS["gravity_body"], static=d["static"])
-    out["factor-graph"] = fg
-    if stage.innovations:
-        kf = {}
-        for kind, d in stage.innovations.items():
-            kf[kind] = one(d["w"], d["key"], _COMPONENTS[kind])
-        out["sqrt-kf"] = kf
+    out[stage.primary] = fg
+    for solver, series in stage.innovations.items():
+        out[solver] = {kind: one(d["w"], d["key"], _COMPONENTS[kind]) for kind, d in series.items()}
     return out
 
 
 def residual_rms(stage):
     """``{solver: {kind: [rms of the whitened residuals per component]}}`` plus SI figures.
 
-    ``stage`` is a :class:`~graph_calib.diagnosis.rounds.Stage`; the factor graph's entry also has
+    ``stage`` is a :class:`~graph_calib.diagnosis.rounds.Stage`; the primary solver's entry also has
     ``"overall"`` and ``"si"`` (RMS in SI per kind; gravity over the static keyframes only).
     """
     out = {}
@@ -229,12 +226,13 @@ def residual_rms(stage):
                 r = v["r"] if sel is None else v["r"][sel]
                 si[k] = {"rms": np.sqrt(np.mean(r**2, axis=0)).tolist(), "unit": unit}
         fg["si"] = si
-        out["factor-graph"] = fg
-    if stage.innovations:
-        kf = {k: np.sqrt(np.mean(v["w"] ** 2, axis=0)).tolist() for k, v in stage.innovations.items()}
-        kf["overall"] = float(np.sqrt(np.mean(np.concatenate([v["w"].ravel() for v in stage.innovations.values()])
-                                              ** 2)))
-        out["sqrt-kf"] = kf
+        out[stage.primary] = fg
+    for solver, series in stage.innovations.items():
+        if not series:
+            continue
+        kf = {k: np.sqrt(np.mean(v["w"] ** 2, axis=0)).tolist() for k, v in series.items()}
+        kf["overall"] = float(np.sqrt(np.mean(np.concatenate([v["w"].ravel() for v in series.values()]) ** 2)))
+        out[solver] = kf
     return out
 
 

@@ -19,6 +19,8 @@ from graph_calib.diagnosis.residuals import residual_rms
 from graph_calib.records.experiment import Result
 from graph_calib.records.problem import Problem
 from graph_calib.solvers.interface import SolverOutput
+from graph_calib.solvers.registry import DEFAULT_SOLVERS, primary_first
+from graph_calib.solvers.verdict import Verdict
 
 
 @dataclass(frozen=True)
@@ -44,7 +46,9 @@ class DiagnosisOptions:
     candidates : tuple of str or None
         Effects to test (default every further effect of model.md).
     solvers : tuple of str
-        Solvers run before and after (``"factor-graph"`` always; ``"sqrt-kf"`` optional).
+        Solvers run before and after, registered names: the first solves every model the rounds test
+        (the rounds linearise at its solution), the others are run on the declared and the final model
+        (default: the registry's default solvers, its primary solver first).
     encompassing : bool
         Check each accepted candidate against the generic drivers (a candidate that only
         mimics a driver signature the catalogue lacks is not added).
@@ -57,7 +61,7 @@ class DiagnosisOptions:
     driver_min_eig: float = 1e-3
     max_added: int = 4
     candidates: tuple[str, ...] | None = None
-    solvers: tuple[str, ...] = ("factor-graph", "sqrt-kf")
+    solvers: tuple[str, ...] = primary_first(DEFAULT_SOLVERS)
     encompassing: bool = True
     time_segments: int = TIME_SEGMENTS
 
@@ -234,32 +238,43 @@ class Stage:
     ----------
     layout : tuple of str
     problem : graph_calib.records.problem.Problem
-    graph : graph_calib.solvers.interface.SolverOutput
-        The factor graph's output.
+    primary : str
+        The solver whose solution the rounds linearise at (the first of ``DiagnosisOptions.solvers``).
+    outputs : dict of str to graph_calib.solvers.interface.SolverOutput
+        ``{solver: output}``, the primary's first.
     results : dict of str to graph_calib.records.experiment.Result
         ``{solver: Result}``.
-    kf : graph_calib.solvers.interface.SolverOutput or None
-        The filter's output.
+    comparison : dict or None
+        ``comparison.json`` of the first two solvers in comparison order, the verdict included.
+    verdict : graph_calib.solvers.verdict.Verdict or None
     residuals : dict
-        Per factor kind: ``t``, ``key``, ``r`` (SI), ``w`` (whitened; gravity also in body axes)
-        (:func:`~graph_calib.diagnosis.residuals.factor_residuals`).
+        The primary solution's factor residuals per kind: ``t``, ``key``, ``r`` (SI), ``w`` (whitened;
+        gravity also in body axes) (:func:`~graph_calib.diagnosis.residuals.factor_residuals`).
     innovations : dict
-        Filter innovations per kind (``t``, ``key``, ``w`` (F, 3)); empty without the filter.
+        ``{solver: {kind: {"t", "key", "w" (F, 3)}}}``: each further solver's own residual series (the
+        filter's normalised innovations) with their keyframes; empty with one solver.
     statistics : dict
-        :func:`~graph_calib.diagnosis.residuals.residual_statistics` of both solvers.
+        :func:`~graph_calib.diagnosis.residuals.residual_statistics` of every solver.
     error : dict or None
         ``{solver: error_against_truth(...)}`` (plus ``rms_z_fixed``) when a truth is given.
     """
 
     layout: tuple[str, ...]
     problem: Problem
-    graph: SolverOutput
+    primary: str
+    outputs: dict[str, SolverOutput]
     results: dict[str, Result]
-    kf: SolverOutput | None = None
+    comparison: dict | None = None
+    verdict: Verdict | None = None
     residuals: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
-    innovations: dict[str, dict[str, np.ndarray]] = field(default_factory=dict)
+    innovations: dict[str, dict[str, dict[str, np.ndarray]]] = field(default_factory=dict)
     statistics: dict = field(default_factory=dict)
     error: dict[str, dict] | None = None
+
+    @property
+    def solution(self):
+        """The primary solver's output (the solution the rounds linearise at)."""
+        return self.outputs[self.primary]
 
 
 @dataclass(frozen=True)

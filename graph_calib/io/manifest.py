@@ -21,16 +21,24 @@ else:  # Python 3.10: the tomli backport, declared in pyproject.toml for it
 from graph_calib.sensors import effects, params
 from graph_calib.errors import InputError
 from graph_calib.io.checks import _is_int, _is_real, _show
+import graph_calib.solvers.registry as registry
+
+
+
+def _solver_choice_problem(value):
+    """Why ``value`` is not a ``[solver] solvers`` value the registry accepts, or None."""
+    try:
+        registry.parse_choice(value, campaign=True)
+    except ValueError as exc:
+        return str(exc)
+    return None
+
 
 #: Options of the ``[solver]`` table: name -> (description, check returning an error text or None).
-#: Values of ``[solver] solvers`` (graph_calib.campaign.tasks.SOLVER_CHOICES).
-_SOLVER_VALUES = ("both", "per-subrange", "sqrt-kf", "factor-graph", "factor-graph+joint", "joint")
-
 SOLVER_OPTIONS = {
-    "solvers": ("which solvers run: 'both' (both per-subrange solvers and the joint one), 'per-subrange', "
-                "'sqrt-kf', 'factor-graph', 'factor-graph+joint' or 'joint'",
-                lambda v: None if v in _SOLVER_VALUES
-                else "must be one of " + ", ".join(repr(c) for c in _SOLVER_VALUES)),
+    "solvers": ("which solvers run (graph_calib.solvers.registry.parse_choice): 'both' (the default solvers and "
+                "every campaign solver), 'per-subrange' (the default solvers), or registered solver names joined "
+                "by '+'", _solver_choice_problem),
     "keyframe_s": ("length of one keyframe (preintegration interval), s",
                    lambda v: None if _is_real(v) and math.isfinite(v) and v > 0 else "must be a positive number"),
     "max_iterations": ("largest number of solver iterations",

@@ -158,7 +158,7 @@ class Result:
     source : str
         Experiment file name.
     solver : str
-        ``"sqrt-kf"``, ``"factor-graph"`` or ``"truth"``.
+        a registered solver's name (:mod:`graph_calib.solvers.registry`) or ``"truth"``.
     t_ref_degC : float
         Reference temperature of the temperature-dependent parameters.
     temperature_range_degC : tuple of float

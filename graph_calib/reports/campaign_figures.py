@@ -16,11 +16,12 @@ import numpy as np
 from graph_calib import constants as c
 from graph_calib.sensors import effects
 from graph_calib import io
+from graph_calib.solvers.registry import SOLVER_LABELS, comparison_order
 
 _COLORS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2", "#7f7f7f", "#bcbd22",
            "#17becf")
 _AXIS_COLORS = ("#1f77b4", "#2ca02c", "#d62728")
-SOLVER_LABEL = {"factor-graph": "factor graph", "sqrt-kf": "square-root KF"}
+SOLVER_LABEL = SOLVER_LABELS
 
 
 def _plt():
@@ -161,12 +162,13 @@ def fig_parameter(parameter, stitched, *, other=None, truth_cal=None, model="cub
 
 def fig_solver_comparison(run):
     plt = _plt()
-    names = [n for n in run.results if "sqrt-kf" in run.results[n] and "factor-graph" in run.results[n]]
+    pair = comparison_order(run.document.get("solvers", ()))[:2]
+    names = [n for n in run.results if len(pair) == 2 and all(s in run.results[n] for s in pair)]
     if not names:
         return None
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.4))
     for i, n in enumerate(names):
-        a, b = run.results[n]["sqrt-kf"], run.results[n]["factor-graph"]
+        a, b = run.results[n][pair[0]], run.results[n][pair[1]]
         d, ratio = [], []
         for el in a.values:
             if el in b.values:
@@ -176,15 +178,16 @@ def fig_solver_comparison(run):
         jit = (np.random.default_rng(i).uniform(-0.25, 0.25, len(d)))
         axes[0].plot(i + jit, d, ".", ms=4, color=_COLORS[i % len(_COLORS)])
         axes[1].plot(i + jit, ratio, ".", ms=4, color=_COLORS[i % len(_COLORS)])
-    for ax, title, lines in ((axes[0], "(graph - filter) / larger sigma", (-0.1, 0.1)),
-                             (axes[1], "sigma(graph) / sigma(filter)", (0.9, 1.1))):
+    la, lb = (SOLVER_LABELS.get(s, s) for s in pair)
+    for ax, title, lines in ((axes[0], f"({lb} - {la}) / larger sigma", (-0.1, 0.1)),
+                             (axes[1], f"sigma({lb}) / sigma({la})", (0.9, 1.1))):
         ax.set_xticks(range(len(names)))
         ax.set_xticklabels(names, rotation=20, fontsize=7)
         for y in lines:
             ax.axhline(y, color="r", lw=0.8, ls="--")
         ax.set_title(title, fontsize=9)
         ax.grid(alpha=0.3)
-    fig.suptitle("Filter against graph, every parameter of every subrange (dashed: agreement limits)", fontsize=9)
+    fig.suptitle(f"{la} against {lb}, every parameter of every subrange (dashed: agreement limits)", fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -254,14 +257,17 @@ def fig_validation(v):
     return fig
 
 
-def _load_residuals(path):
+def _load_residuals(path, quantities=None):
     """``{kind: (t (F,) s, values (F, 3))}`` of a residual-series file (:func:`graph_calib.io.read_residuals`).
 
-    Kinds sorted by name, empty kinds left out; ``{}`` when the file is missing.
+    Kinds sorted by name, empty kinds left out; ``{}`` when the file is missing.  ``quantities``, a list,
+    receives the file's residual quantity (whitened residual or normalised innovation).
     """
     if not Path(path).is_file():
         return {}
-    _, series = io.read_residuals(path)
+    attrs, series = io.read_residuals(path)
+    if quantities is not None and attrs.get("quantity"):
+        quantities.append(str(attrs["quantity"]))
     return {kd: series[kd] for kd in sorted(series) if series[kd][1].size}
 
 
@@ -270,8 +276,9 @@ def fig_residuals(run, solver):
     names = [n for n in run.results if solver in run.results[n]]
     # beside each experiment's result file (its own folder, or a pooled wave's, campaign.json's results.file)
     files = {e["name"]: ((e.get("results") or {}).get(solver) or {}).get("file") for e in run.document["experiments"]}
-    data = {n: _load_residuals(run.out / Path(files.get(n) or f"{n}/{solver}.json").parent / f"{solver}.residuals.h5")
-            for n in names}
+    quantities = []
+    data = {n: _load_residuals(run.out / Path(files.get(n) or f"{n}/{solver}.json").parent / f"{solver}.residuals.h5",
+                               quantities) for n in names}
     kinds = []
     for d in data.values():
         for k in d:
@@ -303,7 +310,7 @@ def fig_residuals(run, solver):
                 ax.set_xlabel("time, h", fontsize=7)
     if axes.size:
         axes[0, 0].legend(fontsize=6, markerscale=6, loc="lower left")
-    what = "whitened residuals" if solver == "factor-graph" else "normalised innovations"
+    what = f"{quantities[0]}s" if quantities else "residuals"
     fig.suptitle(f"{SOLVER_LABEL.get(solver, solver)}: {what} per subrange (N(0,1) when the model fits)", fontsize=9)
     fig.tight_layout()
     return fig

@@ -29,6 +29,7 @@ from graph_calib.reports.campaign_figures import (
     report_unit,
 )
 from graph_calib.solvers.results import sigma_ratio_range_text
+from graph_calib.solvers.joint.solver import JOINT
 from graph_calib.evaluation.validation import TruthCurves, validation_text
 
 
@@ -435,7 +436,7 @@ def build_report(run, *, figures_dir=None):
         f'<li><a href="#{a}">{t}</a></li>' for a, t in (
             ("summary", "Summary"), ("reading", "How to read the figures"), ("parameters", "Stitched parameters"),
             ("bench", "Bench parameters"), ("loop", "The closed loop"), ("solvers", "Filter against graph"), ("boundaries", "Boundaries"),
-            ("validation", "Validation"), ("residuals", "Residuals"), ("joint", "Joint solver"))) + "</ul></nav>")
+            ("validation", "Validation"), ("residuals", "Residuals"), (JOINT, "Joint solver"))) + "</ul></nav>")
     return H.page(f"Thermal calibration campaign: {doc['imu_id']}", nav, *parts,
                   H.paragraph("Written by graph-calib campaign. Units: SI in the files; here deg/h, ppm, arcsec, "
                               "micro-g (1 micro-g = 9.80665e-6 m/s^2), mm, ms.", cls="note"))

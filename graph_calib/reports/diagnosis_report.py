@@ -194,9 +194,11 @@ def statistics_figure(rnd):
     return fig
 
 
-def error_figure(before, after, solver="factor-graph"):
-    """RMS of ``(estimate - truth) / sigma`` per declared parameter, before and after."""
+def error_figure(before, after, solver=None):
+    """RMS of ``(estimate - truth) / sigma`` per declared parameter, before and after (``solver``: the
+    stages' primary solver by default)."""
     plt = _plt()
+    solver = before.primary if solver is None else solver
     eb = before.error[solver]["groups"]
     ea = after.error[solver]["groups"]
     names = [n for n in eb if n in ea]
@@ -304,7 +306,7 @@ def _error_table(diag):
                      f"{_fmt(b['max_abs_z'])} ({b['worst']})", f"{_fmt(a['max_abs_z'])} ({a['worst']})"])
     t1 = html.table(["solver", "RMS z before", "RMS z after", "RMS z after (before's sigmas)",
                      "max |z| before", "max |z| after"], rows, left=(0, 4, 5))
-    solver = "factor-graph"
+    solver = diag.before.primary
     gb, ga = diag.before.error[solver]["groups"], diag.after.error[solver]["groups"]
     rows = [[n, _fmt(gb[n]["rms_z"]), _fmt(ga[n]["rms_z"]), _fmt(gb[n]["rms_abs"]), _fmt(ga[n]["rms_abs"]),
              gb[n]["report_unit"]] for n in gb if n in ga]

@@ -14,9 +14,11 @@ import numpy as np
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.reports import html as H
 from graph_calib.reports.campaign_figures import _plt, report_unit
+from graph_calib.solvers.joint.solver import JOINT
+from graph_calib.solvers.registry import PRIMARY_SOLVER, primary_first
 
-#: Markers of the per-subrange solvers in the figures.
-_MARKERS = {"factor-graph": ("o", "C0"), "sqrt-kf": ("s", "C1")}
+#: Markers of the per-subrange solvers in the figures, the primary solver's first.
+_MARKERS = (("o", "C0"), ("s", "C1"), ("^", "C2"), ("D", "C3"))
 
 
 def fig_joint_family(run, parameter, cal):
@@ -35,12 +37,12 @@ def fig_joint_family(run, parameter, cal):
         v, s = cv.evaluate(T)
         ax.fill_between(T, (v - s) * k, (v + s) * k, color="0.8", label="joint, 1 sigma")
         ax.plot(T, v * k, "k-", lw=1.2, label="joint curve")
-        for i, solver in enumerate(("factor-graph", "sqrt-kf")):
+        for i, solver in enumerate(primary_first(run.document.get("solvers", ()))):
             pts = [(r[solver].t_ref_degC, r[solver].values[name], r[solver].sigmas[name])
                    for r in run.results.values() if solver in r and name in r[solver].values]
             if pts:
                 t, y, e = (np.array(c) for c in zip(*pts))
-                m, col = _MARKERS[solver]
+                m, col = _MARKERS[i % len(_MARKERS)]
                 ax.errorbar(t + 0.4 * i, y * k, yerr=e * k, fmt=m, color=col, ms=4, capsize=2,
                             mfc=col if i == 0 else "none", label=f"{solver} per subrange")
         if curves is not None and name in curves:
@@ -68,7 +70,7 @@ def _cross_table(entry):
 
 
 def _full_table(entry):
-    cc = entry.get("cross_check", {}).get("factor-graph")
+    cc = entry.get("cross_check", {}).get(PRIMARY_SOLVER)
     if not cc:
         return H.Raw("")
     exps = list(cc["experiments"])
@@ -81,7 +83,7 @@ def joint_sections(run, fig):
     """The report's joint-solver section (a list, empty when the joint solver did not run)."""
     if run.joint is None:
         return []
-    entry = (run.document.get("joint") or {}).get("joint", {})
+    entry = (run.document.get(JOINT) or {}).get(JOINT, {})
     cal = JointCalibration.from_result(run.joint)
     blocks = []
     for p in ("gyro.bias", "gyro.scale", "accel.bias", "accel.scale"):
@@ -112,7 +114,7 @@ def joint_sections(run, fig):
         *blocks,
         H.section("Joint at each T_ref minus the per-subrange estimate, in sigma of the per-subrange estimate",
                   _cross_table(entry), _full_table(entry), level=3),
-        anchor="joint")]
+        anchor=JOINT)]
 
 
 __all__ = ["joint_sections", "fig_joint_family"]

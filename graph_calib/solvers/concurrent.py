@@ -2,7 +2,7 @@
 
 ``graph-calib calibrate`` runs the filter and the factor graph on the same problem; they share nothing
 while they run, so on a machine with a second free core the filter's time can hide behind the graph's
-(docs/performance.md, "calibrate on the Xsens session").  :func:`solve_pair` does that and keeps what a
+(docs/performance.md, "``calibrate`` on the Xsens session").  :func:`solve_pair` does that and keeps what a
 run one after the other gives:
 
 - the outputs are the ones :func:`graph_calib.solvers.registry.solve` returns in this process, bit for
@@ -15,8 +15,7 @@ run one after the other gives:
   second is raised after the first has finished, as in a sequential run.
 
 Each of the two runs with BLAS on one thread (``threadpoolctl``): they share the cores, and OpenBLAS's
-threads, two per process on a 2-core machine, spin against each other (the filter on the Xsens session:
-1.6 s of CPU with them, 1.3 s without).
+threads, two per process on a 2-core machine, spin against each other (docs/performance.md).
 
 Without ``fork`` (not on Linux), inside a daemonic worker process or with other threads running
 (:func:`fork_available`), the two run one after the other.

@@ -121,7 +121,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
 
 
 class FactorGraphSolver:
-    """The factor graph behind the solver interface (registered as ``"factor-graph"``)."""
+    """The factor graph behind the solver interface (registered under its ``name``)."""
 
     name = "factor-graph"
 

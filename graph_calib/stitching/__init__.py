@@ -62,7 +62,7 @@ Examples
 >>> from graph_calib.records.experiment import Result
 >>> def sub(t_ref, a, b):
 ...     names = ("gyro.bias.x", "gyro.bias_tc.x")
-...     return Result(source="s", solver="factor-graph", t_ref_degC=t_ref,
+...     return Result(source="s", solver="any", t_ref_degC=t_ref,
 ...                   temperature_range_degC=(t_ref - 4, t_ref + 4), effects=("gyro.bias", "gyro.bias_tc"),
 ...                   values=dict(zip(names, (a, b))), sigmas=dict(zip(names, (1e-8, 1e-9))),
 ...                   covariance_names=names, covariance=np.diag([1e-16, 1e-18]))

@@ -19,6 +19,9 @@ from graph_calib import io
 from graph_calib.campaign import CampaignOptions, run_campaign
 from graph_calib.cli import main
 
+#: Every test here shares a simulated six-subrange campaign (minutes to simulate and run).
+pytestmark = pytest.mark.slow
+
 HOURS = 0.3
 SEED = 11
 
@@ -150,9 +153,9 @@ def test_task_seconds_leave_numba_compiling_out(simulated, tmp_path, monkeypatch
     """A task that compiles a kernel reports the compile time apart: its ``seconds`` are calibration time."""
     import numba
 
-    from graph_calib.campaign import execution
+    from graph_calib.solvers import orchestration
 
-    real_solve = execution.solve
+    real_solve = orchestration.solve
     seen = {}
 
     def solve_after_compiling(name, problem, **kw):
@@ -171,7 +174,7 @@ def test_task_seconds_leave_numba_compiling_out(simulated, tmp_path, monkeypatch
         seen.setdefault("solve", time.perf_counter() - t0)
         return out
 
-    monkeypatch.setattr(execution, "solve", solve_after_compiling)
+    monkeypatch.setattr(orchestration, "solve", solve_after_compiling)
     manifest = _small_manifest(simulated, tmp_path / "m")
     # the declared model's path (set-up, then each solver), whose solve is patched here; with the loop (the
     # default) the job is one diagnosis, its compiling measured the same way around it

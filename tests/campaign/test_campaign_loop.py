@@ -18,6 +18,9 @@ from graph_calib.cli import main
 from graph_calib.errors import InputError
 from graph_calib.simulation import simulate
 
+#: Whole campaigns with the closed loop on every experiment.
+pytestmark = pytest.mark.slow
+
 SEED = 11
 CUBIC_SCALE = 6.0
 

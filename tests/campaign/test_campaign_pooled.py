@@ -17,6 +17,9 @@ from graph_calib import io
 from graph_calib.campaign import CampaignOptions, run_campaign
 from graph_calib.simulation import simulate
 
+#: Whole campaigns with the pooled score test's waves.
+pytestmark = pytest.mark.slow
+
 SEED = 11
 OPTS = CampaignOptions(workers=0, progress=False, report=False, solvers="per-subrange")
 

@@ -69,6 +69,7 @@ def test_the_common_value_test_adds_the_scores_coherently():
     assert [t.kind for t in pooled_tests({"a": {"x": a}}, alpha=0.01)] == ["sum"]
 
 
+@pytest.mark.montecarlo
 def test_false_adoption_rate_under_the_null_is_at_most_alpha():
     """Six experiments, 14 candidates of 1-6 dimensions each, every score drawn under the null (``u ~ N(0, S)``
     with an experiment's own information ``S``): the pooled decision (sum and common tests, Bonferroni over

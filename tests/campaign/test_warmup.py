@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numba
 import numpy as np
+import pytest
 
 from graph_calib.campaign import warmup
 
@@ -59,6 +60,7 @@ def test_compile_clock_counts_compiling_only():
 _SIGNATURES = """
 import json, tempfile
 import numpy as np
+import pytest
 from graph_calib.campaign import warmup
 from graph_calib.compensation.calibration import correct_record, prepare, triad_errors
 from graph_calib.model import CalibrationModel
@@ -83,6 +85,7 @@ print(json.dumps({k: len(d.signatures) for k, d in warmup.kernels().items()}))
 """
 
 
+@pytest.mark.slow
 def test_one_signature_per_kernel():
     """The call sites pass every kernel the same numba types (C-contiguous, writable float64 and int64 arrays,
     no literal flags), read-only inputs included, so each kernel compiles once (docs/performance.md)."""

@@ -54,7 +54,7 @@ def test_calibrate_ends_with_a_verdict_line(experiment_file, tmp_path, capsys):
 
 
 def test_calibrate_exit_3_when_the_solvers_disagree(experiment_file, tmp_path, monkeypatch):
-    import graph_calib.calibrate as calibrate_module
+    import graph_calib.solvers.orchestration as calibrate_module
 
     real_compare = calibrate_module.compare
 

@@ -80,6 +80,7 @@ SMALL = BenchProgram(
 )
 
 
+@pytest.mark.slow
 def test_design_command_on_a_relaxed_spec(tmp_path):
     spec = tmp_path / "spec.toml"
     spec.write_text("[spec]\ngyro_target_radps = %r\nspan_degC = 2.0\nstations = [3]\n" % (0.05 * c.DH_TO_RS))

@@ -43,6 +43,7 @@ def nav_subrange():
     return se, problem, predict(problem), _graph(problem, opts)
 
 
+@pytest.mark.slow
 def test_predicted_sigmas_match_the_factor_graph_on_the_subrange(nav_subrange):
     se, problem, pred, res = nav_subrange
     assert pred.names == list(res.values)
@@ -52,6 +53,7 @@ def test_predicted_sigmas_match_the_factor_graph_on_the_subrange(nav_subrange):
     assert len(ratio) >= 39
 
 
+@pytest.mark.slow
 def test_predicted_bound_on_the_subrange(nav_subrange):
     se, problem, pred, res = nav_subrange
     b = pred.bound.summary()
@@ -89,7 +91,7 @@ def monte_carlo():
     return pred.names, res.effects, np.array(z)
 
 
-@pytest.mark.slow
+@pytest.mark.montecarlo
 def test_monte_carlo_errors_match_the_predicted_sigma(monte_carlo):
     names, groups, z = monte_carlo
     assert z.shape == (20, len(names)) and len(groups) >= 12

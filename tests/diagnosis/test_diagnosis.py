@@ -104,6 +104,7 @@ def test_score_statistic_is_one_gauss_newton_step_of_the_extended_graph():
     assert sc.statistic == pytest.approx(gn, rel=0.01)
 
 
+@pytest.mark.slow
 def test_diagnose_command_writes_the_files_of_cli_md(tmp_path):
     """CLI end to end on a 3-minute record with both solvers; the truth file beside it is picked up."""
     from graph_calib import io

@@ -9,6 +9,7 @@ out here.  Three seeds of 18 min subranges at 50 Hz (about 30 s); the 20-seed co
 from dataclasses import replace
 
 import numpy as np
+import pytest
 
 from graph_calib.campaign import CampaignOptions, calibration_options
 from graph_calib.campaign.loop import loop_options
@@ -32,6 +33,7 @@ def campaign_loop_options():
     return campaign, replace(opts, solvers=("factor-graph",))
 
 
+@pytest.mark.slow
 def test_the_loop_adds_nothing_on_clean_subranges():
     campaign, dopts = campaign_loop_options()
     copts = calibration_options(campaign)

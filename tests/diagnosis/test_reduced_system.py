@@ -90,6 +90,7 @@ def _dense_system(model, R, x, *, q_nb0, null_names, sums):
     return A, b
 
 
+@pytest.mark.slow
 def test_linearise_equals_the_dense_system_with_explicit_driver_columns(solved):
     p, gr, ext, x_ext = solved
     sums = DriverSums.of(ext)

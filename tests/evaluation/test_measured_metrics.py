@@ -73,6 +73,7 @@ def test_imu_tk_detector_on_the_xsens_session(xsens, intervals):
     assert np.all(iv[:, 1] - iv[:, 0] >= mm.MIN_INTERVAL)
 
 
+@pytest.mark.measured
 def test_imu_tk_fit_reproduces_the_published_figures(xsens, intervals):
     fit, iv = mm.imu_tk_fit(xsens)
     fig = mm.transition_figures(xsens, fit, intervals=iv)
@@ -88,7 +89,7 @@ def _defaults(exp, effects=()):
     return solve_problem(build_problem(exp, options=opts), options=opts)
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_xsens_defaults_in_sample_and_hold_out(xsens, intervals):
     iv, _ = intervals
     run = _defaults(xsens)
@@ -117,7 +118,7 @@ def test_xsens_defaults_in_sample_and_hold_out(xsens, intervals):
         assert rms <= 0.180, rms
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 @pytest.mark.parametrize("rows", [26103, 27591, 28455, 30000])
 def test_shortened_xsens_records_converge_and_agree_or_fail_the_verdict(xsens, rows):
     """The cuts on which the factor graph once returned nonsense with exit 0 (issue #13); the sweep every
@@ -128,7 +129,7 @@ def test_shortened_xsens_records_converge_and_agree_or_fail_the_verdict(xsens, r
         assert all(c < 2.0 for c in v.fit_chi2.values())
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_xsens_loop_takes_the_transitions_below_two_tenths_of_a_degree(xsens, intervals):
     """``graph-calib diagnose`` with no options (the grade chosen from the data): the calibration the loop
     ends with, both solvers, transitions RMS at most 0.2 deg (issue #13's target; the figure is in

@@ -60,7 +60,7 @@ def _agree(s):
     assert 0.9 <= lo and hi <= 1.1, (lo, hi)
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_xsens_static_force_spread_falls_to_millimetres(xsens):
     raw_norm, _ = xsens["raw"]
     cal_norm, _ = xsens["cal"]
@@ -69,7 +69,7 @@ def test_xsens_static_force_spread_falls_to_millimetres(xsens):
     assert np.std(cal_norm) < 3e-3                  # a few millimetres after
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_xsens_gyro_and_accelerometer_attitude_changes_match(xsens):
     _, raw_mis = xsens["raw"]
     _, cal_mis = xsens["cal"]
@@ -78,7 +78,7 @@ def test_xsens_gyro_and_accelerometer_attitude_changes_match(xsens):
     assert rms(cal_mis) < 1.5                       # the declared model; gyro.g_sensitivity takes it to 0.2 deg
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_xsens_scales_at_datasheet_level(xsens):
     v = xsens["graph"].values
     for triad in ("gyro", "accel"):
@@ -86,12 +86,12 @@ def test_xsens_scales_at_datasheet_level(xsens):
         assert np.all(np.abs(s) < 1e-2), (triad, s)  # the MTi's factory scales are good to well under 1 %
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_xsens_solvers_agree(xsens):
     _agree(xsens)
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_mpu6050_near_the_authors_reference(mpu):
     ref = mpu6050_reference_calibration(require_real(MPU / "reference_params_acc.csv"))
     v = mpu["graph"].values
@@ -103,12 +103,13 @@ def test_mpu6050_near_the_authors_reference(mpu):
     assert np.std(cal_norm) < 0.1 * np.std(raw_norm)
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_mpu6050_solvers_agree(mpu):
     _agree(mpu)
 
 
 @pytest.mark.parametrize("rows", [26_103, 28_455])
+@pytest.mark.measured
 def test_shortened_xsens_records_converge_in_both_solvers_and_agree(rows):
     """The measured Xsens session cut short, the grade chosen from the data: the factor graph used to walk
     into accel.scale.x = 21 on these cuts (chi2/dof 1,263) while the filter converged.  Now both converge and

@@ -174,6 +174,7 @@ def program_predictions():
     return nominal, out
 
 
+@pytest.mark.slow
 def test_program_prediction_takes_the_noise_about_the_programs_axes(program_predictions):
     nominal, out = program_predictions
     axes = nominal.table.axes_f

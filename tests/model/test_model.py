@@ -335,6 +335,7 @@ def test_boundary_rate_exact_for_cubics_and_ramp_starts():
 
 
 @pytest.mark.parametrize("extra, keyframe_s", [((), 0.37), (FURTHER_EFFECTS, 0.37), (FURTHER_EFFECTS, 1.0)])
+@pytest.mark.slow
 def test_preintegration_kernel_matches_direct_recursion(extra, keyframe_s):
     rng = np.random.default_rng(11)
     exp = wobbly_experiment(rng=rng, n=700, rate_scale=1.5)

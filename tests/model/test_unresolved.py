@@ -99,6 +99,7 @@ def test_only_a_record_without_heading_reference_lists_the_drift(ferraris4):
     assert no_g.unresolved_directions(no_g.layout.zeros())[1].shape[0] == 0
 
 
+@pytest.mark.slow
 def test_ferraris_session_with_g_sensitivity_is_within_3_sigma(ferraris4, tmp_path):
     se = ferraris4
     problem, opts = _problem(se, "consumer")

@@ -262,6 +262,7 @@ def _set_attr(where, name, value):
 @examples(150)
 @given(muts=st.lists(h5_mutation(), min_size=1, max_size=3))
 @example(muts=[_set_attr("/", "version", np.full(4, 1e8j))])     # found: numpy's repr of an array on two lines
+@pytest.mark.slow
 def test_read_experiment_refuses_mutated_files_with_one_line(muts):
     with scratch() as d:
         path = d / "exp.h5"

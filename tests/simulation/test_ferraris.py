@@ -74,6 +74,7 @@ def test_the_whole_session_is_calibrated_within_3_sigma_by_both_solvers(whole):
     assert np.max(np.abs([se.truth.values[n] for n in names]) / prior) > 0.5       # far from the zero start
 
 
+@pytest.mark.slow
 def test_the_cut_session_leaves_the_uninformed_to_the_prior_and_predicts_its_hold_out_tilts():
     cut = simulate("consumer-ferraris", rng=np.random.default_rng(SEED), cut=True).run()[0]
     full = simulate("consumer-ferraris", rng=np.random.default_rng(SEED)).run()[0]    # the same session, uncut

@@ -50,6 +50,7 @@ def test_the_scenario_sways_the_pivot_at_the_asked_level(swaying):
     assert np.linalg.norm(hand["pivot_to_sensor_b_m"]) == pytest.approx(0.1)
 
 
+@pytest.mark.slow
 def test_a_swaying_hand_fails_the_verdict_on_its_residuals_by_default(swaying):
     problem, run, names, z = _run(swaying)
     assert problem.model.options.sway_sigma is None
@@ -60,6 +61,7 @@ def test_a_swaying_hand_fails_the_verdict_on_its_residuals_by_default(swaying):
     assert run.verdict.fit_chi2["sqrt-kf"] > RESIDUAL_CHI2_LIMIT, run.verdict.text()
 
 
+@pytest.mark.slow
 def test_the_sway_estimated_from_the_static_intervals_makes_the_fit_honest(swaying):
     problem, run, names, z = _run(swaying, sway_sigma="estimate")
     sway = problem.model.options.sway_sigma

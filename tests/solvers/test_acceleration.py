@@ -54,7 +54,7 @@ def test_first_step_is_plain_and_reset_forgets():
     assert acc.depth == 0 and np.array_equal(acc.next(u, f), u + f)
 
 
-@pytest.mark.slow
+@pytest.mark.measured
 def test_xsens_session_both_solvers_mixed_converge_fast_to_one_point():
     exp = import_xsens(require_real(XSENS / "xsens_acc.mat"), require_real(XSENS / "xsens_gyro.mat"))
     opts = CalibrationOptions(model=ModelOptions(grade=choose_grade(exp).grade))

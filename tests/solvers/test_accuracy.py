@@ -106,7 +106,7 @@ def monte_carlo():
     return r.effects, names, {s: np.array(v) for s, v in z.items()}, np.array(between)
 
 
-@pytest.mark.slow
+@pytest.mark.montecarlo
 @pytest.mark.parametrize("solver", SOLVERS)
 def test_monte_carlo_sigmas_are_consistent(monte_carlo, solver):
     groups, names, z_all, _ = monte_carlo
@@ -119,7 +119,7 @@ def test_monte_carlo_sigmas_are_consistent(monte_carlo, solver):
         assert 0.7 <= rms <= 1.3, (g, rms)
 
 
-@pytest.mark.slow
+@pytest.mark.montecarlo
 def test_monte_carlo_solvers_on_the_same_estimate(monte_carlo):
     *_, between = monte_carlo
     assert between.max() < 1e-3, between

@@ -15,9 +15,18 @@ from graph_calib.solvers.interface import ProgressEvent
 
 @pytest.fixture(autouse=True)
 def forking():
-    """Each test here needs the worker: a platform that forks and a test process without other threads."""
-    if not concurrent.fork_available():
-        pytest.skip("solve_pair runs sequentially here: no fork, or other threads running (fork_available)")
+    """Each test here needs the worker: a platform that forks and a test process without other threads.
+
+    Only a platform without fork skips; a thread an earlier test left running fails the test, naming it (the
+    suite's conftest stops those a campaign leaves, ``no_threads_left_behind``)."""
+    import multiprocessing
+
+    from conftest import other_threads
+
+    if "fork" not in multiprocessing.get_all_start_methods():
+        pytest.skip("solve_pair runs sequentially on a platform without fork")
+    assert other_threads() == [], f"threads left running by earlier tests: {other_threads()}"
+    assert concurrent.fork_available()
 
 
 @pytest.fixture(scope="module")

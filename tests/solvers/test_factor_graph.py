@@ -40,7 +40,7 @@ def test_noise_free_recovery_within_a_tenth_of_sigma():
     assert np.all(sig[gr.layout.slice("gyro.bias")] < 0.01 * NAV.prior_sigma["gyro.bias"])
 
 
-@pytest.mark.slow
+@pytest.mark.montecarlo
 def test_monte_carlo_sigmas_are_consistent():
     """20 seeds: per parameter group RMS of (estimate - truth)/sigma in [0.7, 1.3]; 95 % within 3 sigma."""
     z_all = []

@@ -32,6 +32,7 @@ def _solve(problem, opts, monkeypatch, judge_tol):
     return gr, calls["n"]
 
 
+@pytest.mark.slow
 def test_first_order_judging_keeps_every_iteration_and_spares_preintegrations(problem, monkeypatch):
     prob, opts = problem
     exact, n_exact = _solve(prob, opts, monkeypatch, 0.0)        # every far trial preintegrated exactly

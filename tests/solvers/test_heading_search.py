@@ -22,6 +22,7 @@ def problem(xsens_consumer):
     return xsens_consumer
 
 
+@pytest.mark.slow
 def test_the_heading_search_reaches_the_same_point_in_fewer_iterations(problem, monkeypatch):
     prob, opts = problem
     searched = factor_graph.solve(prob.model, q_nb0=prob.q_nb0, options=opts.graph)
@@ -37,6 +38,7 @@ def test_the_heading_search_reaches_the_same_point_in_fewer_iterations(problem, 
     assert np.all(np.diff(searched.cost_history) <= 0)
 
 
+@pytest.mark.slow
 def test_the_filter_reaches_the_same_point_in_fewer_passes(problem, monkeypatch):
     prob, opts = problem
     searched = solve("sqrt-kf", prob, options=opts)
@@ -49,6 +51,7 @@ def test_the_filter_reaches_the_same_point_in_fewer_passes(problem, monkeypatch)
     np.testing.assert_allclose(np.sqrt(np.diag(searched.covariance)), sigma, rtol=1e-4)
 
 
+@pytest.mark.slow
 def test_records_cut_into_segments_are_left_to_the_iterations(monkeypatch):
     """Several segments: their headings are tied through the calibration, so neither solver turns them
     (graph_calib.solvers.heading): the results are those of a grid holding only the present heading."""

@@ -2,7 +2,7 @@ r"""What an export projects: the full calibration over temperature, its range, i
 
 :func:`load_source` reads a result file (one experiment's calibration with its
 temperature coefficients about its reference) or a campaign folder (its stitched
-curves, or the joint solver's with ``solver="joint"``) through
+curves, or the joint solver's with ``solver=JOINT``) through
 :func:`graph_calib.compensation.apply.read_compensation`, and gives an
 :class:`ExportSource`: :meth:`ExportSource.errors` is the full model's sensor error
 ``measure(signal) - signal`` at a temperature (every sensor at that temperature),

@@ -3,7 +3,7 @@
 - :mod:`graph_calib.solvers.joint.unknowns`: the curves and shared elements, the set-ups, each experiment's
   calibration vector as an exact affine map of them;
 - :mod:`graph_calib.solvers.joint.solver`: the graph, its Levenberg-Marquardt loop, the degree chosen by evidence
-  (``JointSolver``, registered as ``"joint"``);
+  (``JointSolver``, registered as :data:`JOINT`);
 - the loop, the reduced factor per experiment and the unknowns' covariance are the project's least-squares
   driver's (:mod:`graph_calib.solvers.least_squares`), the factor graph's too.
 """

@@ -20,6 +20,7 @@ from graph_calib.sensors.effects import EFFECTS
 from graph_calib.errors import InputError
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
 from graph_calib.records.experiment import Result
+from graph_calib.solvers.joint.solver import JOINT
 from graph_calib.solvers.joint.unknowns import family_member
 from graph_calib.sensors.params import split_element_name
 from graph_calib.solvers.results import residual_block
@@ -99,7 +100,7 @@ def joint_result(output, *, source, experiments, t_refs, sensor_ranges):
                     temperature_range_degC=(lo, hi), effects=_effects(z_elements),
                     values=dict(zip(z_elements, output.theta[:nz].tolist())),
                     sigmas=dict(zip(z_elements, sig[:nz].tolist())), covariance_names=tuple(z_elements),
-                    covariance=output.covariance[:nz, :nz].copy(), residuals=residuals, extra={"joint": block})
+                    covariance=output.covariance[:nz, :nz].copy(), residuals=residuals, extra={JOINT: block})
     # the verdict fields every result's verdict carries (converged; residuals consistent with the noise model)
     result.extra["verdict"] = verdict_of({result.solver: result}).to_json()
     return result
@@ -112,7 +113,7 @@ def joint_element_at(result, flat, t_ref_degC, *, experiment=None):
     coefficient at ``t_ref_degC``, with its sigma from the coefficients' covariance; a shared element is
     the joint estimate; a set-up element is ``experiment``'s.  None when the joint does not hold it.
     """
-    block = result.extra["joint"]
+    block = result.extra[JOINT]
     p, el = split_element_name(flat)
     eff = EFFECTS[p]
     base = eff.temperature_of or p
@@ -158,10 +159,10 @@ def read_joint_result(path):
         whose coefficients or covariance do not match its degree.
     """
     r = io.read_result(path)
-    block = r.extra.get("joint")
+    block = r.extra.get(JOINT)
     if not isinstance(block, dict):
         raise InputError("not a joint result (no 'joint' block: a per-experiment result?)", path=path,
-                         dataset="joint")
+                         dataset=JOINT)
     v = block.get("version")
     if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= JOINT_BLOCK_VERSION:
         raise InputError(f"version {v!r} is not one this graph-calib reads (up to {JOINT_BLOCK_VERSION})",

@@ -292,7 +292,7 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
 
 
 class JointSolver:
-    """The joint campaign solver behind the solver interface (registered as ``"joint"``).
+    """The joint campaign solver behind the solver interface (registered as :data:`JOINT`).
 
     :meth:`solve_campaign` solves a campaign; :meth:`solve` (the per-experiment interface) solves one
     experiment as a campaign of one and returns its view (its extended layout, the curves' coefficients
