@@ -151,6 +151,7 @@ def small(tmp_path_factory):
     return d
 
 
+@pytest.mark.slow
 def test_a_campaign_whose_validation_is_not_met_exits_3_and_says_which(small, tmp_path, capsys):
     rc = main(["campaign", str(small / "two.toml"), "--out", str(tmp_path / "out"), "--workers", "0", "--quiet",
                "--no-report", "--no-diagnose", "--validate", str(small / "sweep.h5")])

@@ -22,7 +22,7 @@ from graph_calib.importers import import_xsens
 from graph_calib.options import CalibrationOptions, ModelOptions
 from graph_calib.navigation.rotations import exp_so3
 
-from conftest import REAL_DATA, require_real
+from _shared import REAL_DATA, require_real
 
 XSENS = REAL_DATA / "imu_tk_xsens"
 

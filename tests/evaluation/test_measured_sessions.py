@@ -22,7 +22,7 @@ from graph_calib.model import ModelOptions
 from graph_calib.navigation.static_detection import detect_static
 from graph_calib.evaluation.validation import static_pose_consistency
 
-from conftest import REAL_DATA, require_real
+from _shared import REAL_DATA, require_real
 
 XSENS = REAL_DATA / "imu_tk_xsens"
 MPU = REAL_DATA / "mpu6050_uncuyo"

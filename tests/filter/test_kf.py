@@ -393,7 +393,7 @@ def test_the_filter_is_converged_only_at_the_batch_cost(monkeypatch):
     """On the measured MPU-6050 session (consumer grade) the step rule alone (every element moved by less
     than 1e-3 sigma) stops the filter above the batch minimum's cost; judged by the cost as the factor graph
     is, the filter goes on to the graph's cost before it says converged."""
-    from conftest import REAL_DATA, require_real
+    from _shared import REAL_DATA, require_real
 
     from graph_calib.importers.mpu6050 import import_mpu6050
     from graph_calib.options import CalibrationOptions

@@ -10,7 +10,7 @@ from graph_calib.records.grade_choice import choose_grade
 from graph_calib.importers import import_mpu6050, import_xsens
 from graph_calib.simulation import simulate
 
-from conftest import REAL_DATA, require_real
+from _shared import REAL_DATA, require_real
 
 
 def _sim(name, **kw):

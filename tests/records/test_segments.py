@@ -182,7 +182,7 @@ def test_the_measured_sessions_are_not_taken_for_cut_records():
     saturate (390 deg/s) and whose window means come near gravity by chance; it is not a cut."""
     from graph_calib.importers import import_mpu6050, import_xsens
 
-    from conftest import REAL_DATA, require_real
+    from _shared import REAL_DATA, require_real
 
     xsens = import_xsens(require_real(REAL_DATA / "imu_tk_xsens" / "xsens_acc.mat"),
                          require_real(REAL_DATA / "imu_tk_xsens" / "xsens_gyro.mat"))

@@ -21,7 +21,7 @@ from graph_calib.records.problem import sway_from_static
 from graph_calib.simulation import simulate
 from graph_calib.solvers.verdict import RESIDUAL_CHI2_LIMIT
 
-from conftest import make_experiment
+from _shared import make_experiment
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ from graph_calib.options import CalibrationOptions, ModelOptions
 from graph_calib.solvers import solve
 from graph_calib.solvers.acceleration import Anderson
 
-from conftest import REAL_DATA, require_real
+from _shared import REAL_DATA, require_real
 
 XSENS = REAL_DATA / "imu_tk_xsens"
 

@@ -21,7 +21,7 @@ def forking():
     suite's conftest stops those a campaign leaves, ``no_threads_left_behind``)."""
     import multiprocessing
 
-    from conftest import other_threads
+    from _shared import other_threads
 
     if "fork" not in multiprocessing.get_all_start_methods():
         pytest.skip("solve_pair runs sequentially on a platform without fork")
@@ -31,7 +31,7 @@ def forking():
 
 @pytest.fixture(scope="module")
 def problem():
-    from conftest import make_experiment
+    from _shared import make_experiment
     return build_problem(make_experiment(n=3000, seed=4), options=CalibrationOptions())
 
 
