@@ -78,3 +78,18 @@ def test_a_record_without_a_rest_cannot_tell_its_grade():
     dth = exp.dtheta + 0.05 * np.cos(2 * np.pi * 0.6 * t)[:, None] * exp.dt[:, None]
     with pytest.raises(InputError, match=r"--grade.*cannot choose the IMU grade: no rest"):
         choose_grade(replace(exp, dv=dv, dtheta=dth))
+
+
+def test_hand_held_record_without_a_rest_is_refused_not_crashed(tmp_path, capsys):
+    # the hand sways the unit throughout and no pose lasts 2 s: the grade choice once carried NaN figures
+    # into the result file, and the JSON writer ended the run with an internal error (exit 1)
+    from graph_calib import io
+    se = simulate("consumer-handheld", rng=np.random.default_rng(1), initial_static_s=1.0, hold_s=(1.0, 1.8),
+                  hand_accel_mps2=0.3, pivot_m=0.1).run()[0]
+    h5 = tmp_path / "hh.h5"
+    io.write_experiment(se.experiment, h5)
+    rc = main(["calibrate", str(h5), "--out", str(tmp_path / "cal")])
+    err = capsys.readouterr().err
+    assert rc == 2
+    assert "--grade" in err and "no rest" in err
+    assert not (tmp_path / "cal").exists()
