@@ -53,6 +53,30 @@ def residual_block(output):
     return block
 
 
+def noise_block(model):
+    """The result's ``noise`` block (data-format.md): the densities the solve used and where each came from.
+
+    ``gyro_rad_per_sqrt_s``, ``accel_mps_per_sqrt_s``, ``encoder_rad``, ``sway_mps2``; ``source`` per sensor
+    (``identified`` from the record, ``declared`` by the user, or the ``grade``'s); and, where the record
+    showed them, ``identified``: per sensor the IEEE terms with their sigmas and the channels that support
+    them, the keyframe density with its sigma and the rest time behind it (docs/model.md, "Noise from the
+    record").
+    """
+    o = model.options
+    sway = o.sway_sigma
+    src = {"gyro": "grade", "accel": "grade", "encoder": "grade"}
+    for k in src:
+        if getattr(o, f"{k}_noise") is not None:
+            src[k] = "declared"
+    src.update(o.noise_source or {})
+    out = {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
+           "encoder_rad": model.encoder_noise, "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0,
+           "source": src}
+    if o.noise_identified:
+        out["identified"] = o.noise_identified
+    return out
+
+
 #: An element whose posterior sigma is above this fraction of its prior sigma is prior-dominated: the data
 #: bring less than half its information (``(sigma / prior)^2 > 1/2``), so its estimate is mostly the prior's.
 PRIOR_DOMINATED_RATIO = 0.7
@@ -88,9 +112,7 @@ def to_result(model, output, *, extra=None):
     sway = model.options.sway_sigma
     ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
           "prior_dominated": prior_dominated(model, output),
-          "noise": {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
-                    "encoder_rad": model.encoder_noise,
-                    "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0}}
+          "noise": noise_block(model)}
     unresolved, U = model.unresolved_directions(output.x)
     if unresolved:      # only then, so that every other result file stays as it was
         ex["unresolved"] = {name: {n: float(v) for n, v in zip(names, u) if v != 0.0}
@@ -165,5 +187,5 @@ def compare(a, b):
     }
 
 
-__all__ = ["residual_block", "to_result", "compare", "sigma_ratio_range_text", "comparison_text",
+__all__ = ["residual_block", "noise_block", "to_result", "compare", "sigma_ratio_range_text", "comparison_text",
            "AGREE_DIFFERENCE_SIGMA", "AGREE_SIGMA_RATIO"]
