@@ -22,6 +22,7 @@ from graph_calib.solvers.concurrent import solve_pair
 from graph_calib.solvers.interface import SolverOutput
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
 from graph_calib.solvers.results import compare, to_result
+from graph_calib.solvers.variance import estimate_variance_components
 from graph_calib.solvers.verdict import Verdict, verdict_of
 
 
@@ -71,6 +72,11 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     CalibrationRun
     """
     solvers = tuple(solvers)
+    if options.variance_components:
+        vce_solver = "factor-graph" if "factor-graph" in solvers else solvers[0]
+        problem = estimate_variance_components(problem, options=options, solver=vce_solver,
+                                               fixed=tuple(problem.model.options.variance_factors or ()),
+                                               progress=progress).problem
     if concurrent and len(solvers) == 2:
         outputs = dict(zip(solvers, solve_pair(solvers, problem, options=options, progress=progress)))
     else:

@@ -80,6 +80,10 @@ class CalibrationOptions:
         The square-root filter's passes and tolerances.
     t_ref_degC : float or None
         Reference temperature; None for the mean sensor temperature.
+    variance_components : bool
+        :func:`graph_calib.calibrate.solve_problem` estimates one variance factor per measurement kind
+        before the solvers' final run (:mod:`graph_calib.solvers.variance`); False: the identified noise as
+        it is (and any ``ModelOptions.variance_factors`` set).
 
     Examples
     --------
@@ -92,6 +96,7 @@ class CalibrationOptions:
     graph: GraphOptions = field(default_factory=GraphOptions)
     filter: FilterOptions = field(default_factory=FilterOptions)
     t_ref_degC: float | None = None
+    variance_components: bool = True
 
 
 __all__ = ["GraphOptions", "FilterOptions", "CalibrationOptions", "ModelOptions"]

@@ -42,6 +42,10 @@ class ModelOptions:
         "grade"}`` (:func:`graph_calib.records.problem.noise_options`); empty: not said.
     noise_identified : dict
         What the record showed of its noise (JSON-ready figures for the result's ``noise`` block).
+    variance_factors : dict
+        ``{kind: factor}``: each measurement kind's (``rotation``, ``gravity``, ``encoder``) covariance
+        multiplied by its factor (variance components, :mod:`graph_calib.solvers.variance`); a kind not
+        named keeps 1.
     """
 
     keyframe_s: float = 1.0
@@ -58,3 +62,4 @@ class ModelOptions:
     n_newton: int = 2
     noise_source: dict = field(default_factory=dict)
     noise_identified: dict = field(default_factory=dict)
+    variance_factors: dict = field(default_factory=dict)
