@@ -87,6 +87,7 @@ def _truth(args, path):
 
 def run(args):
     from graph_calib import io
+    from graph_calib.calibrate import build_problem, solve_problem
     from graph_calib.diagnosis import diagnose, residual_rms
     from graph_calib.reports.diagnosis_report import write_report
 
@@ -116,6 +117,15 @@ def run(args):
     # the calibration the loop ends with, as calibrate writes it: each solver's result, the comparison, the verdict
     final = dict(diag.after.results)
     solvers = [s for s in DEFAULT_SOLVERS if s in final]
+    if calibration_options.variance_components:
+        # the final model solved again with one variance factor per measurement kind (solvers/variance.py), as
+        # calibrate does: the loop itself tests on the identified noise, unscaled
+        say("the final model with variance components ...")
+        fm = replace(calibration_options.model,
+                     extra_effects=tuple(calibration_options.model.extra_effects) + tuple(diag.added))
+        run = solve_problem(build_problem(exp, options=replace(calibration_options, model=fm)),
+                            options=replace(calibration_options, model=fm), solvers=solvers, concurrent=True)
+        final = {s: run.results[s] for s in solvers}
     comparison = compare(final[solvers[0]], final[solvers[1]]) if len(solvers) == 2 else None
     verdict = verdict_of(final, comparison)
     extra = {"verdict": verdict.to_json(), "diagnosis": {"added": list(diag.added)}}
