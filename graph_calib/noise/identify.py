@@ -53,8 +53,8 @@ TERMS = (
 SUPPORT_SIGMAS = 2.0
 #: Least pooled rest time for an identification, s (the white term needs some hundred averages).
 MIN_REST_S = 2.0
-#: Smallest table-reading noise identified, rad (0.1 arcsec): a table whose readings show no scatter still
-#: wobbles about its axes by errors a dwell cannot show.
+#: Smallest table-reading noise identified, rad (0.1 arcsec): readings that scatter less (noise-free simulated
+#: ones, encoders quantised coarser than their noise) say nothing of the noise, and none is identified.
 ENCODER_NOISE_FLOOR = 0.1 * np.pi / 180.0 / 3600.0
 #: Fewest dwells' readings (summed degrees of freedom) for the table noise to count as identified.
 MIN_DWELL_DOF = 20
@@ -165,7 +165,11 @@ def fit_terms(allan, channel):
     powers = np.array([p for _, p, _ in TERMS])
     factor = np.array([f for _, _, f in TERMS])
     A = factor[None, :] * tau[:, None] ** powers[None, :]
-    w = 1.0 / np.maximum(2.0 * allan.rel_sigma * y, np.finfo(float).tiny)     # 1 / sd(sigma^2)
+    if not (np.all(np.isfinite(y)) and np.max(y, initial=0.0) > 0):          # a noise-free record shows nothing
+        zero = {name: 0.0 for name, _, _ in TERMS}
+        return (ChannelTerms(values=dict(zero), sigmas=dict(zero), supported=()),
+                np.zeros((len(TERMS), len(TERMS))), np.zeros(len(TERMS)))
+    w = 1.0 / (2.0 * allan.rel_sigma * np.maximum(y, 1e-12 * np.max(y)))     # 1 / sd(sigma^2)
     scale = np.max(np.abs(A * w[:, None]), axis=0)
     scale[scale == 0] = 1.0
     c_s, _ = nnls(A * w[:, None] / scale, y * w)
@@ -222,7 +226,7 @@ def table_noise(scatter):
 
     ``scatter`` is a :class:`graph_calib.model.encoder_noise.DwellScatter`; its covariances carry the
     factor ``(n - 1) / (n - 5)`` that unbiases their inverse, taken off here.  The pooled trace over
-    twice the pooled degrees of freedom (two encoder axes), floored at :data:`ENCODER_NOISE_FLOOR`.
+    twice the pooled degrees of freedom (two encoder axes); None below :data:`ENCODER_NOISE_FLOOR`.
     """
     n = np.asarray(scatter.size, dtype=float)
     if n.size == 0:
@@ -233,7 +237,9 @@ def table_noise(scatter):
     if total < MIN_DWELL_DOF:
         return None, int(total)
     var = float(np.sum(dof * tr)) / (2.0 * total)
-    return max(float(np.sqrt(max(var, 0.0))), ENCODER_NOISE_FLOOR), int(total)
+    if not var >= ENCODER_NOISE_FLOOR**2:          # readings that do not scatter say nothing of their noise
+        return None, int(total)
+    return float(np.sqrt(var)), int(total)
 
 
 def identify_noise(experiment, *, keyframe_s, rests=None):

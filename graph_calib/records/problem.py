@@ -182,8 +182,8 @@ def sway_from_static(experiment, static, *, keyframe_s, accel_noise):
     return float(np.sqrt(var - white)) if var > SWAY_VARIANCE_FACTOR * white else 0.0
 
 
-#: An identified density is never taken below this fraction of the grade's: a record simulated without
-#: noise shows none, and a weight without bound would make the priors and the kinds' balance meaningless.
+#: A density identified below this fraction of the grade's is not taken (the grade's is): a record simulated
+#: without noise shows none, and a weight without bound would make the priors and the kinds' balance meaningless.
 IDENTIFIED_FLOOR_FRACTION = 0.1
 
 
@@ -205,9 +205,10 @@ def noise_options(identified, model_options):
     """The model options with the white-noise densities the solvers use, and where each came from.
 
     A density set in the options is ``declared`` and kept; otherwise the one the record shows
-    (:func:`graph_calib.noise.identify_noise`, the density that governs a keyframe) is ``identified``,
-    never below :data:`IDENTIFIED_FLOOR_FRACTION` of the grade's; a record whose rests are too short
-    to show it takes the grade's (``grade``).  The table readings' noise is identified later, from the
+    (:func:`graph_calib.noise.identify_noise`, the density that governs a keyframe) is ``identified``;
+    a record whose rests are too short to show it, or that shows less than
+    :data:`IDENTIFIED_FLOOR_FRACTION` of the grade's (noise-free simulated data), takes the grade's
+    (``grade``).  The table readings' noise is identified later, from the
     prepared record's dwells (:func:`build_problem`).
 
     Parameters
@@ -229,8 +230,8 @@ def noise_options(identified, model_options):
             figures[sensor] = _terms_json(sn)
         if declared is not None:
             values[sensor], source[sensor] = float(declared), "declared"
-        elif sn is not None:
-            values[sensor], source[sensor] = max(sn.density, IDENTIFIED_FLOOR_FRACTION * floor), "identified"
+        elif sn is not None and sn.density >= IDENTIFIED_FLOOR_FRACTION * floor:
+            values[sensor], source[sensor] = sn.density, "identified"
         else:
             values[sensor], source[sensor] = floor, "grade"
     source["encoder"] = "declared" if model_options.encoder_noise is not None else "grade"
