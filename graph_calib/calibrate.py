@@ -18,6 +18,7 @@ from typing import Mapping
 from graph_calib.records.experiment import Result
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import Problem, build_problem
+from graph_calib.diagnosis.structure import structure_tests
 from graph_calib.solvers.concurrent import solve_pair
 from graph_calib.solvers.interface import SolverOutput
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
@@ -84,7 +85,11 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     results = {name: to_result(problem.model, out) for name, out in outputs.items()}
     names = list(results)
     comparison = compare(results[names[0]], results[names[1]]) if len(names) >= 2 else None
-    verdict = verdict_of(results, comparison)
+    structure = ()
+    if options.structure_tests:
+        batch = "factor-graph" if "factor-graph" in outputs else names[0]
+        structure = structure_tests(problem, outputs[batch])
+    verdict = verdict_of(results, comparison, structure=structure)
     results = {s: replace(r, extra={**r.extra, "verdict": verdict.to_json()}) for s, r in results.items()}
     if comparison is not None:
         comparison = {**comparison, "verdict": verdict.to_json()}

@@ -143,6 +143,7 @@ class Verdict:
     problems: tuple = ()
     notes: tuple = ()
     kinds: Mapping[str, dict] = field(default_factory=dict)
+    structure: tuple = ()
 
     def text(self):
         """The verdict line, in words."""
@@ -159,6 +160,10 @@ class Verdict:
         return f"{head}: {conv}; {agree}; {resid}" + "".join(f"; note: {n}" for n in self.notes)
 
     def _residual_text(self):
+        carried = [t for t in self.structure if t["significant"]]
+        if carried:
+            return ("RESIDUALS CARRY AN EFFECT THE MODEL LACKS: " + ", ".join(
+                f"{t['effect']} (score {t['statistic']:.3g} > {t['threshold']:.3g})" for t in carried))
         bad_kinds = {s: [k for k, f in ks.items() if not f["low"] <= f["chi2_per_redundancy"] <= f["high"]
                          or not 1.0 / VARIANCE_FACTOR_LIMIT <= f["variance_factor"] <= VARIANCE_FACTOR_LIMIT]
                      for s, ks in self.kinds.items()}
@@ -182,12 +187,19 @@ class Verdict:
                 "agree": self.agree, "max_difference_in_sigma": self.max_difference_sigma,
                 "fit_chi2_per_dof": dict(self.fit_chi2), "residual_chi2_limit": RESIDUAL_CHI2_LIMIT,
                 "kinds": {s: dict(k) for s, k in self.kinds.items()}, "residual_alpha": RESIDUAL_ALPHA,
+                "structure": [dict(t) for t in self.structure],
                 "variance_factor_limit": VARIANCE_FACTOR_LIMIT,
                 "problems": list(self.problems), "notes": list(self.notes), "text": self.text()}
 
 
-def verdict_of(results, comparison=None):
-    """The :class:`Verdict` of solver results (``{solver: Result}``) and their comparison (``comparison.json``)."""
+def verdict_of(results, comparison=None, *, structure=()):
+    """The :class:`Verdict` of solver results (``{solver: Result}``) and their comparison (``comparison.json``).
+
+    ``structure``: the score tests of the candidates the model lacks at the solution
+    (:func:`graph_calib.diagnosis.structure.structure_tests`, each with ``to_json``, or its dicts); a
+    significant one fails the residual part, named.
+    """
+    structure = tuple(t if isinstance(t, dict) else t.to_json() for t in structure)
     converged = {s: bool(r.residuals.get("converged", False)) for s, r in results.items()}
     fit, kinds = {}, {}
     problems, notes = [], []
@@ -219,8 +231,13 @@ def verdict_of(results, comparison=None):
                             f"assumed (wrong grade?); sigmas are optimistic by about {v ** 0.5:.1f}x")
         elif v < RESIDUAL_CHI2_LOW:
             notes.append(f"{s}: residuals well inside the noise model (chi2/dof {v:.2f}): sigmas conservative")
+    for t in structure:
+        if t["significant"]:
+            problems.append(f"the residuals carry {t['effect']}: score statistic {t['statistic']:.3g} > threshold "
+                            f"{t['threshold']:.3g} ({t['dof']} dof): the model lacks it (graph-calib diagnose adds it)")
     return Verdict(converged=converged, agree=agree, max_difference_sigma=maxdiff, fit_chi2=fit,
-                   passed=not problems, problems=tuple(problems), notes=tuple(notes), kinds=kinds)
+                   passed=not problems, problems=tuple(problems), notes=tuple(notes), kinds=kinds,
+                   structure=structure)
 
 
 __all__ = ["Verdict", "verdict_of", "judge_kinds", "kind_limits", "fit_chi2_per_dof", "fit_chi2_per_redundancy",
