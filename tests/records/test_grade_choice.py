@@ -93,3 +93,4 @@ def test_hand_held_record_without_a_rest_is_refused_not_crashed(tmp_path, capsys
     assert rc == 2
     assert "--grade" in err and "no rest" in err
     assert not (tmp_path / "cal").exists()
+

@@ -83,3 +83,14 @@ def test_calibrate_exits_three_when_a_kind_does_not_fit(tmp_path, capsys, monkey
     assert rc == 3
     assert "verdict: FAIL" in out and "RESIDUALS INCONSISTENT WITH THE NOISE MODEL" in out
     assert (tmp_path / "cal" / "factor-graph.json").exists()
+
+
+def test_a_significant_score_test_fails_the_residual_part_naming_the_effect():
+    res = _result({"gravity": (1.0, 900.0, 1.0)})
+    quiet = {"effect": "gyro.g_sensitivity", "statistic": 10.0, "threshold": 26.1, "dof": 9, "significant": False}
+    assert verdict_of({"factor-graph": res}, structure=[quiet]).passed
+    loud = dict(quiet, statistic=1313.0, significant=True)
+    v = verdict_of({"factor-graph": res}, structure=[loud])
+    assert not v.passed
+    assert "the residuals carry gyro.g_sensitivity: score statistic 1.31e+03 > threshold 26.1" in v.problems[0]
+    assert "RESIDUALS CARRY AN EFFECT THE MODEL LACKS: gyro.g_sensitivity" in v.text()
