@@ -18,7 +18,6 @@ from typing import Mapping
 from graph_calib.records.experiment import Result
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import Problem, build_problem
-from graph_calib.diagnosis.structure import structure_tests
 from graph_calib.solvers.concurrent import solve_pair
 from graph_calib.solvers.interface import SolverOutput
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, solve
@@ -87,6 +86,9 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     comparison = compare(results[names[0]], results[names[1]]) if len(names) >= 2 else None
     structure = ()
     if options.structure_tests:
+        # the diagnosis package only when it is used: `calibrate --help` and a run without the tests import none of it
+        from graph_calib.diagnosis.structure import structure_tests
+
         batch = "factor-graph" if "factor-graph" in outputs else names[0]
         structure = structure_tests(problem, outputs[batch])
     verdict = verdict_of(results, comparison, structure=structure)

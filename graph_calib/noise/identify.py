@@ -36,7 +36,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import nnls
 
 from graph_calib.noise.allan import AllanDeviation, overlapping_allan
 from graph_calib.noise.rests import find_rests
@@ -172,6 +171,8 @@ def fit_terms(allan, channel):
     w = 1.0 / (2.0 * allan.rel_sigma * np.maximum(y, 1e-12 * np.max(y)))     # 1 / sd(sigma^2)
     scale = np.max(np.abs(A * w[:, None]), axis=0)
     scale[scale == 0] = 1.0
+    from scipy.optimize import nnls        # scipy.optimize loads scipy.sparse: only when a record is identified
+
     c_s, _ = nnls(A * w[:, None] / scale, y * w)
     c = c_s / scale
     active = c > 0
