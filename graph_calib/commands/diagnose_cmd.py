@@ -125,7 +125,7 @@ def run(args):
                      extra_effects=tuple(calibration_options.model.extra_effects) + tuple(diag.added))
         run = solve_problem(build_problem(exp, options=replace(calibration_options, model=fm)),
                             options=replace(calibration_options, model=fm), solvers=solvers, concurrent=True)
-        final = {s: run.results[s] for s in solvers}
+        final = {s: run.results[s] for s in final}          # the loop's order of the files
     comparison = compare(final[solvers[0]], final[solvers[1]]) if len(solvers) == 2 else None
     verdict = verdict_of(final, comparison)
     extra = {"verdict": verdict.to_json(), "diagnosis": {"added": list(diag.added)}}
