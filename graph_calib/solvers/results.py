@@ -136,6 +136,7 @@ def to_result(model, output, *, extra=None):
     for kind, entry in residuals["kinds"].items():
         if kind in statistics.kinds:
             entry["variance_factor"] = float(factors.get(kind, 1.0))
+    residuals["variance_components"] = bool(factors)
     return Result(
         source=model.experiment.source.rsplit("/", 1)[-1] if model.experiment.source else "",
         solver=output.solver, t_ref_degC=model.t_ref_degC,

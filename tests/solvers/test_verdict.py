@@ -9,8 +9,8 @@ from graph_calib.records.experiment import Result
 from graph_calib.solvers.verdict import (VARIANCE_FACTOR_LIMIT, kind_limits, verdict_of)
 
 
-def _result(kinds, *, solver="factor-graph", converged=True, source=None):
-    block = {"converged": converged, "kinds": {}}
+def _result(kinds, *, solver="factor-graph", converged=True, source=None, scaled=True):
+    block = {"converged": converged, "kinds": {}, "variance_components": scaled}
     for kind, (v, nu, vf) in kinds.items():
         block["kinds"][kind] = {"count": 10, "chi2": v * nu, "redundancy": nu, "chi2_per_redundancy": v,
                                 "variance_factor": vf}
@@ -94,3 +94,11 @@ def test_a_significant_score_test_fails_the_residual_part_naming_the_effect():
     assert not v.passed
     assert "the residuals carry gyro.g_sensitivity: score statistic 1.31e+03 > threshold 26.1" in v.problems[0]
     assert "RESIDUALS CARRY AN EFFECT THE MODEL LACKS: gyro.g_sensitivity" in v.text()
+
+
+def test_without_variance_components_a_kind_below_its_limit_is_a_note():
+    lo, _ = kind_limits(3000.0)
+    res = _result({"encoder": (0.67, 3000.0, 1.0)}, scaled=False)
+    v = verdict_of({"factor-graph": res})
+    assert v.passed and "encoder chi2/redundancy 0.67" in v.notes[0] and lo > 0.67
+    assert not verdict_of({"factor-graph": _result({"encoder": (0.67, 3000.0, 1.0)})}).passed
