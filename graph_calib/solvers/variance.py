@@ -7,7 +7,9 @@ the table's best-read direction; a hand's sway reaches the gravity factors).  He
 variance component estimation rescales each kind's covariance by its ``chi2 / redundancy``
 (:func:`graph_calib.model.redundancy.fit_statistics`) and solves again, until every factor has settled:
 each kind's ``chi2 / redundancy`` is then 1 and the sigmas follow from the data, neither optimistic nor
-pessimistic.
+pessimistic.  A kind whose residuals the free attitudes partly absorb answers a factor ``f`` as
+``c / f^a`` with ``a < 1`` (the rotation kind): after the first Helmert step ``a`` is taken from the last
+two solves (a secant in logarithms, ``a`` in ``[MIN_EXPONENT, 1]``), so that two or three solves do.
 
 This is an outer iteration around any registered solver (solve, rescale, re-solve from the previous
 solution), so that it does not depend on a solver's internals; the factors live in the model's
@@ -33,7 +35,9 @@ MIN_REDUNDANCY = 10.0
 #: The iteration stops when no kind's chi2 / redundancy is further than this from 1.
 TOLERANCE = 0.05
 #: At most this many solves.
-MAX_SOLVES = 6
+MAX_SOLVES = 5
+#: Smallest exponent of a kind's response to its factor used for the step (module doc of the iteration).
+MIN_EXPONENT = 0.25
 
 
 @dataclass(frozen=True)
@@ -95,6 +99,7 @@ def estimate_variance_components(problem, *, options, solver="factor-graph", fix
     history = []
     initial = None
     converged = False
+    previous = {}                      # kind -> (log factor, log ratio) of the previous solve
     n = 0
     for n in range(1, max_solves + 1):
         out = solve(solver, problem, options=options, progress=progress, initial=initial)
@@ -105,8 +110,16 @@ def estimate_variance_components(problem, *, options, solver="factor-graph", fix
         history.append(dict(ratios))
         converged = all(abs(v - 1.0) <= tolerance for v in ratios.values())
         for k, v in ratios.items():
-            if np.isfinite(v):
-                factors[k] = factors.get(k, 1.0) * v
+            if not np.isfinite(v):
+                continue
+            lf, lr = np.log(factors.get(k, 1.0)), np.log(v)
+            # chi2 / redundancy ~ c / factor^a: a kind whose residuals the attitudes partly absorb (a < 1) needs
+            # a larger step than Helmert's (a = 1); a from the last two solves (secant in logs), within bounds
+            a = 1.0
+            if k in previous and abs(lf - previous[k][0]) > 0.05:      # a step large enough to read a from
+                a = float(np.clip(-(lr - previous[k][1]) / (lf - previous[k][0]), MIN_EXPONENT, 1.0))
+            previous[k] = (lf, lr)
+            factors[k] = float(np.exp(lf + lr / a))
         # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
         problem = with_variance_factors(problem, factors)
         if converged:
