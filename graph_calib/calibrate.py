@@ -13,9 +13,12 @@ alignment) is built once and solved by each (:func:`graph_calib.solvers.orchestr
 from __future__ import annotations
 
 from graph_calib.options import CalibrationOptions
+from dataclasses import replace
+
 from graph_calib.records.problem import build_problem
-from graph_calib.solvers.orchestration import CalibrationRun, run_solvers
-from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER
+from graph_calib.solvers.orchestration import CalibrationRun, judge, run_solvers
+from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER, primary_of
+from graph_calib.solvers.variance import estimate_variance_components
 
 
 def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None,
@@ -39,7 +42,22 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     -------
     CalibrationRun
     """
-    return run_solvers(problem, options=options, solvers=solvers, progress=progress, concurrent=concurrent)
+    solvers = tuple(solvers)
+    if options.variance_components:
+        # one variance factor per measurement kind, estimated with the primary solver (solvers/variance.py)
+        problem = estimate_variance_components(problem, options=options, solver=primary_of(solvers),
+                                               fixed=tuple(problem.model.options.variance_factors or ()),
+                                               progress=progress).problem
+    run = run_solvers(problem, options=options, solvers=solvers, progress=progress, concurrent=concurrent,
+                      stamp=not options.structure_tests)
+    if not options.structure_tests:
+        return run
+    # the diagnosis package only when it is used: `calibrate --help` and a run without the tests import none of it
+    from graph_calib.diagnosis.structure import structure_tests
+
+    structure = structure_tests(problem, run.outputs[primary_of(tuple(run.outputs))])
+    results, comparison, verdict = judge(run.results, order=solvers, structure=structure)
+    return replace(run, results=results, comparison=comparison, verdict=verdict)
 
 
 def calibrate(experiment, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None):

@@ -80,6 +80,14 @@ class CalibrationOptions:
         The square-root filter's passes and tolerances.
     t_ref_degC : float or None
         Reference temperature; None for the mean sensor temperature.
+    variance_components : bool
+        :func:`graph_calib.calibrate.solve_problem` estimates one variance factor per measurement kind
+        before the solvers' final run (:mod:`graph_calib.solvers.variance`); False: the identified noise as
+        it is (and any ``ModelOptions.variance_factors`` set).
+    structure_tests : bool
+        :func:`graph_calib.calibrate.solve_problem` runs the closed loop's score tests of the effects the
+        model lacks at the solution (:mod:`graph_calib.diagnosis.structure`; no adoption): a significant
+        one fails the verdict, named.
 
     Examples
     --------
@@ -92,6 +100,8 @@ class CalibrationOptions:
     graph: GraphOptions = field(default_factory=GraphOptions)
     filter: FilterOptions = field(default_factory=FilterOptions)
     t_ref_degC: float | None = None
+    variance_components: bool = True
+    structure_tests: bool = True
 
 
 __all__ = ["GraphOptions", "FilterOptions", "CalibrationOptions", "ModelOptions"]

@@ -94,7 +94,8 @@ class CalibrationModel:
         self.accel_noise = float(options.accel_noise if options.accel_noise is not None else self.grade.accel_noise)
         self.encoder_noise = float(options.encoder_noise if options.encoder_noise is not None
                                    else self.grade.encoder_noise)
-        self.noise = factors.Noise(gyro=self.gyro_noise, accel=self.accel_noise, encoder=self.encoder_noise)
+        self.noise = factors.Noise(gyro=self.gyro_noise, accel=self.accel_noise, encoder=self.encoder_noise,
+                                   variance_factors=dict(options.variance_factors or {}))
         # what the record can inform decides the layout
         self.auto_excluded = self._unobservable()
         exclude = tuple(sorted(set(options.exclude) | set(self.auto_excluded)))
@@ -307,17 +308,18 @@ class CalibrationModel:
 
     def rotation_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.rotation_factors` of this model."""
-        return factors.rotation_factors(self.record, R, preint, x, noise=self.noise)
+        return self.noise.scaled("rotation", factors.rotation_factors(self.record, R, preint, x, noise=self.noise))
 
     def gravity_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.gravity_factors` of this model."""
-        return factors.gravity_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise,
-                                       moving_sigma=self.options.moving_sigma,
-                                       sway_sigma=self.options.sway_sigma)
+        return self.noise.scaled("gravity", factors.gravity_factors(
+            self.record, R, preint, x, layout=self.layout, noise=self.noise, moving_sigma=self.options.moving_sigma,
+            sway_sigma=self.options.sway_sigma))
 
     def encoder_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.encoder_factors` of this model."""
-        return factors.encoder_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise)
+        return self.noise.scaled("encoder", factors.encoder_factors(self.record, R, preint, x, layout=self.layout,
+                                                                     noise=self.noise))
 
 
 __all__ = ["CalibrationModel", "gyrocompass_attitude_sigma", "TABLE_ALIGNMENT_SIGMA", "HEADING_UNRESOLVED_SIGMA"]

@@ -65,7 +65,7 @@ Segments (``/imu/segment``: a record cut together from pieces)
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -86,11 +86,21 @@ class Noise:
     encoder : float
         Declared table reading noise, rad (one sigma per axis): the readings' noise where no static
         dwell shows it, and the scale of the floor where one does (:mod:`graph_calib.model.encoder_noise`).
+    variance_factors : dict
+        ``{kind: factor}`` multiplying each kind's covariance (variance components; 1 where absent).
     """
 
     gyro: float
     accel: float
     encoder: float
+    variance_factors: dict = field(default_factory=dict)
+
+    def scaled(self, kind, res):
+        """``res`` (:class:`Residuals` of ``kind``) with its covariance times the kind's variance factor."""
+        v = float(self.variance_factors.get(kind, 1.0))
+        if v == 1.0:
+            return res
+        return replace(res, sigma=res.sigma * (v if res.sigma.ndim == 3 else np.sqrt(v)))
 
 
 @dataclass(frozen=True)

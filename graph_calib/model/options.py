@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 
 
@@ -37,6 +37,15 @@ class ModelOptions:
         intervals (:func:`graph_calib.records.problem.sway_from_static`, docs/model.md).
     n_newton : int
         Newton steps of the sensor-model inversion.
+    noise_source : dict
+        Where each white-noise level came from, ``{"gyro" | "accel" | "encoder": "identified" | "declared" |
+        "grade"}`` (:func:`graph_calib.records.problem.noise_options`); empty: not said.
+    noise_identified : dict
+        What the record showed of its noise (JSON-ready figures for the result's ``noise`` block).
+    variance_factors : dict
+        ``{kind: factor}``: each measurement kind's (``rotation``, ``gravity``, ``encoder``) covariance
+        multiplied by its factor (variance components, :mod:`graph_calib.solvers.variance`); a kind not
+        named keeps 1.
     """
 
     keyframe_s: float = 1.0
@@ -51,3 +60,6 @@ class ModelOptions:
     moving_sigma: float | None = None
     sway_sigma: float | str | None = None
     n_newton: int = 2
+    noise_source: dict = field(default_factory=dict)
+    noise_identified: dict = field(default_factory=dict)
+    variance_factors: dict = field(default_factory=dict)

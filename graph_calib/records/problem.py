@@ -11,12 +11,15 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
+from graph_calib.noise import find_rests, identify_noise, table_noise
+from graph_calib.noise.identify import TERMS
+from graph_calib.noise.rests import segment_thresholds
 from graph_calib.options import CalibrationOptions
 from graph_calib.sensors.params import grade
 from graph_calib.navigation.alignment import Alignment, alignment
 from graph_calib.errors import InputError
 from graph_calib.records.plausibility import check_record
-from graph_calib.navigation.static_detection import accelerometer_threshold, detect_static
+from graph_calib.navigation.static_detection import detect_static
 
 
 @dataclass(frozen=True)
@@ -34,12 +37,15 @@ class Problem:
     segment_alignments : tuple of graph_calib.navigation.alignment.Alignment
         How each segment's was found (``(alignment,)`` for one segment); the intervals are sample
         indices of the whole record.
+    noise : graph_calib.noise.NoiseIdentification or None
+        What the record showed of its noise (:func:`graph_calib.noise.identify_noise`).
     """
 
     model: CalibrationModel
     q_nb0: np.ndarray
     alignment: Alignment
     segment_alignments: tuple = ()
+    noise: object = None
 
     def with_effects(self, extra_effects):
         """The same record, static intervals and alignment, with ``extra_effects`` as the further effects."""
@@ -71,14 +77,11 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     """
     check_record(experiment)
     model_options = options.model
-    bounds = experiment.segment_bounds()
-    pieces = [experiment.slice(a, b) if len(bounds) > 1 else experiment for a, b in bounds]
-    if len(pieces) > 1:
-        th = [accelerometer_threshold(piece) for piece in pieces]
-        th = min((v for v in th if v is not None), default=None)
-        static_per = [detect_static(piece, threshold=th) for piece in pieces]
-    else:
-        static_per = [detect_static(experiment)]
+    # each segment its own threshold: its first seconds' unless they are loud (graph_calib.noise.rests)
+    segs = segment_thresholds(experiment)
+    bounds = [(a, b) for a, b, _, _ in segs]
+    pieces = [p for _, _, p, _ in segs]
+    static_per = [detect_static(p, threshold=th) for _, _, p, th in segs]
     static = np.concatenate([np.asarray(st, dtype=np.int64).reshape(-1, 2) + a
                              for st, (a, _) in zip(static_per, bounds)])
     static_mask = None
@@ -88,9 +91,8 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             static_mask[a:b] = True
         if model_options.moving_sigma is None:
             model_options = replace(model_options, moving_sigma=1.0)
-    interval = tuple(static[0]) if len(static) else None
-    if interval is not None:
-        model_options = _noise_from_static(experiment, interval, model_options)
+    identified = identify_noise(experiment, keyframe_s=model_options.keyframe_s, rests=find_rests(experiment))
+    model_options = noise_options(identified, model_options)
     if isinstance(model_options.sway_sigma, str):
         if model_options.sway_sigma != "estimate":
             raise InputError(f"sway_sigma must be a number of m/s^2, 'estimate' or None, not "
@@ -113,8 +115,16 @@ def build_problem(experiment, *, options=CalibrationOptions()):
                 model_options, latitude_rad=experiment.latitude_rad))
         aligned.append(replace(al, interval=(al.interval[0] + a, al.interval[1] + a)) if a else al)
     model = CalibrationModel(experiment, options=model_options, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
+    enc, enc_dof = table_noise(model.record.reading_scatter)
+    identified = replace(identified, encoder=enc, encoder_dof=enc_dof)
+    if enc is not None and model_options.encoder_noise is None:
+        model_options = replace(model_options, encoder_noise=enc, noise_source={
+            **model_options.noise_source, "encoder": "identified"},
+            noise_identified={**model_options.noise_identified, "encoder": {"sigma_rad": enc, "dof": enc_dof}})
+        model = CalibrationModel.from_record(model.record, options=model_options)
     q_nb0 = aligned[0].q_nb0 if len(aligned) == 1 else np.array([al.q_nb0 for al in aligned])
-    return Problem(model=model, q_nb0=q_nb0, alignment=aligned[0], segment_alignments=tuple(aligned))
+    return Problem(model=model, q_nb0=q_nb0, alignment=aligned[0], segment_alignments=tuple(aligned),
+                   noise=identified)
 
 
 def _align(experiment, *, interval, method):
@@ -172,28 +182,62 @@ def sway_from_static(experiment, static, *, keyframe_s, accel_noise):
     return float(np.sqrt(var - white)) if var > SWAY_VARIANCE_FACTOR * white else 0.0
 
 
-def _noise_from_static(experiment, interval, model_options):
-    """White-noise densities: the grade's, raised to what the first static interval shows.
+#: A density identified below this fraction of the grade's is not taken (the grade's is): a record simulated
+#: without noise shows none, and a weight without bound would make the priors and the kinds' balance meaningless.
+IDENTIFIED_FLOOR_FRACTION = 0.1
 
-    The density is the per-sample standard deviation of the rate (force) times
-    ``sqrt(dt)``, averaged over the axes.  Options set explicitly are kept.  The
-    grade's value is a floor, so noise-free data keep a sensible weighting.
+
+def _terms_json(sn):
+    """The compact figures of a :class:`graph_calib.noise.SensorNoise` for the result's ``noise`` block."""
+    out = {"density": sn.density, "density_sigma": sn.density_sigma, "keyframe_s": sn.keyframe_s,
+           "rest_s": sn.allan.rest_s}
+    for name, _, _ in TERMS:
+        out[name] = {"value": sn.term(name),
+                     "sigma": float(np.sqrt(np.mean([c.sigmas[name] ** 2 for c in sn.channels]))),
+                     "supported": [ax for ax, c in zip("xyz", sn.channels) if name in c.supported],
+                     "channels": [c.values[name] for c in sn.channels]}
+    out["allan"] = {"tau_s": sn.allan.tau.tolist(), "adev": sn.allan.adev.tolist(),
+                    "rel_sigma": sn.allan.rel_sigma.tolist()}
+    return out
+
+
+def noise_options(identified, model_options):
+    """The model options with the white-noise densities the solvers use, and where each came from.
+
+    A density set in the options is ``declared`` and kept; otherwise the one the record shows
+    (:func:`graph_calib.noise.identify_noise`, the density that governs a keyframe) is ``identified``;
+    a record whose rests are too short to show it, or that shows less than
+    :data:`IDENTIFIED_FLOOR_FRACTION` of the grade's (noise-free simulated data), takes the grade's
+    (``grade``).  The table readings' noise is identified later, from the
+    prepared record's dwells (:func:`build_problem`).
+
+    Parameters
+    ----------
+    identified : graph_calib.noise.NoiseIdentification
+    model_options : graph_calib.model.ModelOptions
+
+    Returns
+    -------
+    graph_calib.model.ModelOptions
+        With ``gyro_noise``, ``accel_noise``, ``noise_source`` and ``noise_identified`` set.
     """
-    a, b = int(interval[0]), int(interval[1])
-    if b - a < 50:
-        return model_options
     g = grade(model_options.grade)
-    dt = experiment.dt[a:b, None]
-    w = experiment.dtheta[a:b] / dt
-    f = experiment.dv[a:b] / dt
-    h = float(np.median(dt))
-    est_g = float(np.sqrt(np.mean(np.var(w, axis=0)) * h))
-    est_a = float(np.sqrt(np.mean(np.var(f, axis=0)) * h))
-    return replace(
-        model_options,
-        gyro_noise=model_options.gyro_noise if model_options.gyro_noise is not None else max(g.gyro_noise, est_g),
-        accel_noise=model_options.accel_noise if model_options.accel_noise is not None else max(g.accel_noise, est_a),
-    )
+    source, figures, values = {}, {}, {}
+    for sensor, declared, floor in (("gyro", model_options.gyro_noise, g.gyro_noise),
+                                    ("accel", model_options.accel_noise, g.accel_noise)):
+        sn = getattr(identified, sensor)
+        if sn is not None:
+            figures[sensor] = _terms_json(sn)
+        if declared is not None:
+            values[sensor], source[sensor] = float(declared), "declared"
+        elif sn is not None and sn.density >= IDENTIFIED_FLOOR_FRACTION * floor:
+            values[sensor], source[sensor] = sn.density, "identified"
+        else:
+            values[sensor], source[sensor] = floor, "grade"
+    source["encoder"] = "declared" if model_options.encoder_noise is not None else "grade"
+    return replace(model_options, gyro_noise=values["gyro"], accel_noise=values["accel"], noise_source=source,
+                   noise_identified=figures)
 
 
-__all__ = ["Problem", "SWAY_VARIANCE_FACTOR", "build_problem", "sway_from_static"]
+__all__ = ["Problem", "SWAY_VARIANCE_FACTOR", "IDENTIFIED_FLOOR_FRACTION", "build_problem", "noise_options",
+           "sway_from_static"]

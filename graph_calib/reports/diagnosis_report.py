@@ -216,6 +216,68 @@ def error_figure(before, after, solver=None):
     return fig
 
 
+#: The IEEE terms of an Allan variance: name, power of tau, coefficient (graph_calib.noise.identify.TERMS).
+_ALLAN_TERMS = (("quantization", -2, 3.0), ("white", -1, 1.0), ("bias_instability", 0, 2.0 * np.log(2.0) / np.pi),
+                ("rate_random_walk", 1, 1.0 / 3.0), ("rate_ramp", 2, 0.5))
+
+
+def allan_figure(noise):
+    """Allan deviation of each gyro and accelerometer channel over the rests, with the fitted IEEE terms.
+
+    ``noise`` is a result's ``noise`` block; its ``identified`` figures hold the curve and the terms
+    (None when nothing was identified).
+    """
+    ident = (noise or {}).get("identified") or {}
+    sensors = [s for s in ("gyro", "accel") if "allan" in ident.get(s, {})]
+    if not sensors:
+        return None
+    plt = _plt()
+    f, axes = plt.subplots(1, len(sensors), figsize=(5.2 * len(sensors), 3.8), squeeze=False)
+    unit = {"gyro": "rad/s", "accel": "m/s^2"}
+    for ax, s in zip(axes[0], sensors):
+        d = ident[s]
+        tau = np.asarray(d["allan"]["tau_s"])
+        adev = np.asarray(d["allan"]["adev"])
+        tt = np.geomspace(tau.min(), tau.max(), 100)
+        for c, (name, color) in enumerate(zip("xyz", ("#c0392b", "#27ae60", "#1f5fa8"))):
+            ax.loglog(tau, adev[:, c], "o", ms=3, color=color, label=f"{name}")
+            var = sum(k * d[t]["channels"][c] ** 2 * tt**p for t, p, k in _ALLAN_TERMS)
+            ax.loglog(tt, np.sqrt(var), "-", lw=1, color=color)
+        for t, p, k in _ALLAN_TERMS:
+            v = d[t]["value"]
+            if v > 0 and d[t]["supported"]:
+                ax.loglog(tt, np.sqrt(k * v**2 * tt**p), "--", lw=0.8, color="0.4")
+                ax.annotate(t.replace("_", " "), (tt[len(tt) // 2], np.sqrt(k * v**2 * tt[len(tt) // 2] ** p)),
+                            fontsize=7, color="0.3")
+        ax.set_xlabel("tau [s]")
+        ax.set_ylabel(f"Allan deviation [{unit[s]}]")
+        ax.set_title(f"{s}: density {d['density']:.3g} (keyframe {d['keyframe_s']:g} s), rests {d['rest_s']:.0f} s",
+                     fontsize=8)
+        ax.legend(fontsize=7)
+        ax.grid(True, which="both", alpha=0.3)
+    f.tight_layout()
+    return f
+
+
+def _noise_section(diag, fig):
+    """The noise the solve used and, where identified, its Allan plot."""
+    res = next(iter(diag.before.results.values()), None) if getattr(diag.before, "results", None) else None
+    noise = (res.extra or {}).get("noise") if res is not None else None
+    if not noise:
+        return None
+    src = noise.get("source", {})
+    rows = [["gyro", f"{noise['gyro_rad_per_sqrt_s']:.4g} rad/sqrt(s)", src.get("gyro", "")],
+            ["accelerometer", f"{noise['accel_mps_per_sqrt_s']:.4g} m/s/sqrt(s)", src.get("accel", "")],
+            ["table readings", f"{noise['encoder_rad']:.4g} rad", src.get("encoder", "")]]
+    items = [html.table(["sensor", "white-noise density used", "source"], rows, left=(0, 2))]
+    f = allan_figure(noise)
+    if f is not None:
+        items.append(fig(f, "Overlapping Allan deviation of each channel over every rest (points), the fitted "
+                            "IEEE 952/1293 terms per channel (lines) and each term the data support (dashed).",
+                         "allan"))
+    return html.section("Noise identified from the record", *items, anchor="noise")
+
+
 def _fmt(v, digits=3):
     if v is None:
         return ""
@@ -278,6 +340,20 @@ def profile_figure(stage, drivers, *, limit=4):
     ax.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+#: A residual series whose Ljung-Box p-value is below this is not called free of structure.
+WHITENESS_ALPHA = 1e-3
+
+
+def _whiteness_failures(stage):
+    """``["solver kind", ...]`` of the stage's residual series whose Ljung-Box test rejects whiteness."""
+    out = []
+    for solver, series in (getattr(stage, "statistics", None) or {}).items():
+        for kind, s in series.items():
+            if min(s["ljung_box"]["p"], default=1.0) < WHITENESS_ALPHA:
+                out.append(f"{solver} {kind}")
+    return out
 
 
 def _residual_table(diag):
@@ -349,8 +425,14 @@ def write_report(diag, path, *, figures_dir=None):
     ctx = diag.context
     parts = []
     verdict = (f"added {', '.join(diag.added)}" if diag.added else "nothing added")
-    verdict += "; residual structure remains that no candidate explains" if diag.unexplained else \
-        "; no residual structure left"
+    white = _whiteness_failures(diag.after)
+    if diag.unexplained:
+        verdict += "; residual structure remains that no candidate explains"
+    elif white:
+        verdict += (f"; no candidate or driver test finds structure, but the residuals are not white ("
+                    f"Ljung-Box p below {WHITENESS_ALPHA:g}: {', '.join(white)})")
+    else:
+        verdict += "; no residual structure left"
     parts.append(html.section(
         "Summary",
         html.table(["", ""], [
@@ -416,6 +498,9 @@ def write_report(diag, path, *, figures_dir=None):
                                           title=f"unexplained: {d.group} as a bias on {d.axis}"),
                          f"Residuals of the final model against {DRIVER_LABEL.get(key, key)}.", "unexplained"))
         parts.append(html.section("Unexplained residual structure", *items, anchor="unexplained"))
+    noise = _noise_section(diag, fig)
+    if noise is not None:
+        parts.append(noise)
     parts.append(html.section("Residual statistics before and after", _residual_table(diag),
                               html.paragraph("Ljung-Box over 10 lags per component; driver relations are F-tests "
                                              "of keyframe means (descriptive: successive residuals are not "
@@ -432,5 +517,5 @@ def write_report(diag, path, *, figures_dir=None):
     return path
 
 
-__all__ = ["EFFECT_VIEW", "DRIVER_LABEL", "residual_view", "binned", "signature_figure", "time_figure",
+__all__ = ["EFFECT_VIEW", "DRIVER_LABEL", "allan_figure", "residual_view", "binned", "signature_figure", "time_figure",
            "statistics_figure", "error_figure", "profile_figure", "write_report"]

@@ -26,7 +26,7 @@ from graph_calib.navigation.rotations import exp_so3, log_so3, quat_to_dcm
 from graph_calib.simulation.design import rotation_program
 from graph_calib.simulation.ferraris import ferraris_motion
 from graph_calib.simulation.handheld import HandheldMotion
-from graph_calib.simulation.imu import SignalModel, simulate_increments
+from graph_calib.simulation.imu import SensorNoiseSpec, SignalModel, add_sensor_noise, simulate_increments
 from graph_calib.simulation.thermal import ThermalModel, ramp_chamber
 from graph_calib.simulation.truth import curvature_fit_offsets
 from graph_calib.simulation.turntable import TurntableMotion, encoder_readings, rot_z
@@ -137,12 +137,21 @@ def _truth_result(*, file_name, imu, t_ref, T_rec_sensors, tl, x_truth, unmodell
 def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, start_degC, span_degC,
                            design, latitude_rad, gravity_mps2, noise, valid, encoder_rate_hz, azimuth_rad,
                            description, tag, program=None, thermal=None, channels=NAV_CHANNELS,
-                           temperature_map=NAV_TEMPERATURE_MAP):
+                           temperature_map=NAV_TEMPERATURE_MAP, noise_factor=1.0, encoder_noise_rad=None,
+                           gyro_quantization_rad=0.0, start_in_motion=False):
     """``program`` and ``thermal`` (a bench program's, :mod:`graph_calib.simulation.program`) replace the
     rotation design's programme and the ramped chamber; ``design``, ``duration_s``, ``start_degC`` and
-    ``span_degC`` are then unused."""
+    ``span_degC`` are then unused.
+
+    ``noise_factor`` multiplies the grade's gyro and accelerometer densities, ``encoder_noise_rad`` replaces
+    its table-reading noise, ``gyro_quantization_rad`` adds a ring-laser gyro's angle quantization
+    (:class:`graph_calib.simulation.imu.SensorNoiseSpec`), and ``start_in_motion`` cuts the record so that it
+    begins one second into the first motion (its initial rest gone)."""
     g = params.grade(imu.grade)
     r_prog, r_therm, r_noise = _child_rngs(seed, 3)
+    spec = SensorNoiseSpec(gyro=g.gyro_noise * noise_factor, accel=g.accel_noise * noise_factor,
+                           gyro_quantization=float(gyro_quantization_rad))
+    enc_sigma = g.encoder_noise if encoder_noise_rad is None else float(encoder_noise_rad)
     if program is None:
         program = rotation_program(rate_hz, duration_s, rng=r_prog, design=design)
 
@@ -179,11 +188,15 @@ def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, d
                                         t_ref=t_ref, temperature_map=tmap)
     dt = 1.0 / rate_hz
     if noise:
-        dtheta += g.gyro_noise * np.sqrt(dt) * r_noise.standard_normal(dtheta.shape)
-        dv += g.accel_noise * np.sqrt(dt) * r_noise.standard_normal(dv.shape)
+        add_sensor_noise(dtheta, dv, spec, dt=dt, rng=r_noise, rng_quantization=np.random.default_rng([seed, 2]))
     lag = float(sl.get(x_sim, "time_lag.table", np.zeros(1))[0])
     tt, q_nf, ok = encoder_readings(motion, t_end=t[-1], rate_hz=encoder_rate_hz, time_lag=lag,
-                                    noise_rad=g.encoder_noise if noise else 0.0, rng=r_noise, valid=valid)
+                                    noise_rad=enc_sigma if noise else 0.0, rng=r_noise, valid=valid)
+    if start_in_motion:
+        k0 = _first_motion_sample(motion, t) + int(round(rate_hz))
+        t, dtheta, dv, T_rec = t[k0:], dtheta[k0:], dv[k0:], T_rec[k0:]
+        keep_r = tt > t[0] - dt
+        tt, q_nf, ok = tt[keep_r], q_nf[keep_r], ok[keep_r]
     experiment = Experiment(
         t=t, dtheta=dtheta, dv=dv, temperature=T_rec, temperature_names=names,
         temperature_map=tmap.copy(), rate_hz=float(rate_hz), latitude_rad=float(latitude_rad),
@@ -192,8 +205,10 @@ def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, d
     )
     info = {
         "scenario": scenario, "tag": tag, "grade": imu.grade, "effects_on": list(imu.effects),
-        "noise": {"gyro_noise": g.gyro_noise if noise else 0.0, "accel_noise": g.accel_noise if noise else 0.0,
-                  "encoder_noise_rad": g.encoder_noise if noise else 0.0, "temperature_noise_degC": sig_T},
+        "noise": {"gyro_noise": spec.gyro if noise else 0.0, "accel_noise": spec.accel if noise else 0.0,
+                  "encoder_noise_rad": enc_sigma if noise else 0.0, "temperature_noise_degC": sig_T,
+                  "gyro_quantization_rad": spec.gyro_quantization if noise else 0.0},
+        "start_in_motion": bool(start_in_motion),
         "table": {"outer_axis": "horizontal, base x (azimuth from East)", "azimuth_rad": float(azimuth_rad),
                   "encoder_rate_hz": float(encoder_rate_hz), "valid": valid},
         "chamber": {"t_s": _as_list(thermal.chamber_t), "T_degC": _as_list(thermal.chamber_T)},
@@ -203,6 +218,16 @@ def _make_table_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, d
                           x_truth=x_truth, unmodelled=unmodelled, info=info)
     return SimulatedExperiment(file_name=file_name, experiment=experiment, truth=truth, signals=signals,
                                thermal=thermal, layout=sl, x=x_sim)
+
+
+def _first_motion_sample(motion, t):
+    """The first sample whose true rate against the level frame is not zero (0 when none is)."""
+    for a in range(0, t.size, 65536):
+        w = np.linalg.norm(motion.kinematics(t[a:a + 65536]).omega_nb_b, axis=1)
+        hit = np.flatnonzero(w > 1e-9)
+        if hit.size:
+            return a + int(hit[0])
+    return 0
 
 
 def _random_rotation(rng):
@@ -269,8 +294,9 @@ def _random_poses(r_prog, *, rate_hz, duration_s, n_poses, initial_static_s, hol
 def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, n_poses,
                               initial_static_s, hold_s, turn_s, translation_m, latitude_rad, gravity_mps2,
                               noise, description, tag, cut=False, pivot_m=0.0, hand_accel_mps2=0.0,
-                              program="poses"):
+                              program="poses", noise_factor=1.0):
     g = params.grade(imu.grade)
+    spec = SensorNoiseSpec(gyro=g.gyro_noise * noise_factor, accel=g.accel_noise * noise_factor)
     r_prog, r_therm, r_noise = _child_rngs(seed, 3)
     if program == "ferraris":
         motion, full_turns = ferraris_motion(rate_hz, rng=r_prog, initial_static_s=initial_static_s)
@@ -320,8 +346,7 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
                                         t_ref=t_ref, temperature_map=tmap)
     dt = 1.0 / rate_hz
     if noise:
-        dtheta += g.gyro_noise * np.sqrt(dt) * r_noise.standard_normal(dtheta.shape)
-        dv += g.accel_noise * np.sqrt(dt) * r_noise.standard_normal(dv.shape)
+        add_sensor_noise(dtheta, dv, spec, dt=dt, rng=r_noise)
     if cut:
         t, dtheta, dv, T_rec = t[: keep.sum()], dtheta[keep], dv[keep], T_rec[keep]
     experiment = Experiment(
@@ -331,7 +356,7 @@ def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz
     )
     info = {
         "scenario": scenario, "tag": tag, "grade": imu.grade, "effects_on": list(imu.effects),
-        "noise": {"gyro_noise": g.gyro_noise if noise else 0.0, "accel_noise": g.accel_noise if noise else 0.0,
+        "noise": {"gyro_noise": spec.gyro if noise else 0.0, "accel_noise": spec.accel if noise else 0.0,
                   "temperature_noise_degC": sig_T},
         "poses": k, "translation_m": float(translation_m),
         "segments": 1 if segment is None else int(segment[-1]) + 1,

@@ -38,6 +38,8 @@ inside one analytic piece and the quadrature error is at the level of rounding
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from graph_calib.constants import omega_ie_n
@@ -204,4 +206,42 @@ def simulate_increments(signal_model, thermal, *, rate_hz, n_samples, layout, x,
     return t, dtheta, dv
 
 
-__all__ = ["SignalModel", "simulate_increments", "CHUNK"]
+@dataclass(frozen=True)
+class SensorNoiseSpec:
+    """The white noise a simulated record gets.
+
+    Attributes
+    ----------
+    gyro : float
+        Angle random walk, rad/sqrt(s).
+    accel : float
+        Velocity random walk, m/s/sqrt(s).
+    gyro_quantization : float
+        A white error of the angle itself (a ring-laser gyro's pulse quantization, dither-randomised), one
+        sigma, rad: each increment gets the difference of two consecutive such errors (IEEE Std 952 ``Q``).
+    accel_quantization : float
+        The same for the velocity, m/s.
+    """
+
+    gyro: float
+    accel: float
+    gyro_quantization: float = 0.0
+    accel_quantization: float = 0.0
+
+
+def add_sensor_noise(dtheta, dv, spec, *, dt, rng, rng_quantization=None):
+    """Add ``spec``'s noise to the increments in place.
+
+    The white noise is drawn from ``rng`` exactly as before quantization existed (gyro, then
+    accelerometer), so a record without quantization keeps its draws; the quantization errors come
+    from ``rng_quantization`` (needed when any is set).
+    """
+    dtheta += spec.gyro * np.sqrt(dt) * rng.standard_normal(dtheta.shape)
+    dv += spec.accel * np.sqrt(dt) * rng.standard_normal(dv.shape)
+    for inc, q in ((dtheta, spec.gyro_quantization), (dv, spec.accel_quantization)):
+        if q > 0:
+            e = q * rng_quantization.standard_normal((inc.shape[0] + 1, inc.shape[1]))
+            inc += np.diff(e, axis=0)
+
+
+__all__ = ["SignalModel", "simulate_increments", "SensorNoiseSpec", "add_sensor_noise", "CHUNK"]

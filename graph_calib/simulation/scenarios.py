@@ -25,6 +25,7 @@ from typing import Callable
 import numpy as np
 
 from graph_calib.sensors import effects
+from graph_calib.constants import ARCSEC_TO_RAD
 from graph_calib.errors import InputError
 from graph_calib.simulation.design import NAV_DESIGN, SHORT_DESIGN
 from graph_calib.simulation.experiments import (
@@ -148,10 +149,30 @@ def _check_common(hours, rate_hz, effect_scale, effect_names):
             raise InputError(f"unknown effect {e!r}; known: {', '.join(effects.FURTHER_EFFECTS)}")
 
 
+#: Noise options of the table scenarios (True noise at a multiple of the grade's, the table readings' own
+#: noise, a ring-laser gyro's quantization, a record that begins in motion).
+NOISE_OPTIONS = ("noise_factor", "encoder_noise_arcsec", "gyro_quantization_arcsec", "start_in_motion")
+
+
+def _noise_keywords(*, noise_factor, encoder_noise_arcsec=None, gyro_quantization_arcsec=0.0):
+    """The builders' noise keywords from the scenario options (refused with InputError when bad)."""
+    if not (np.isfinite(noise_factor) and noise_factor >= 0):
+        raise InputError(f"noise_factor must be a non-negative number, got {noise_factor!r}")
+    for nm, v in (("encoder_noise_arcsec", encoder_noise_arcsec), ("gyro_quantization_arcsec", gyro_quantization_arcsec)):
+        if v is not None and not (np.isfinite(v) and v >= 0):
+            raise InputError(f"{nm} must be a non-negative number of arcsec, got {v!r}")
+    kw = {"noise_factor": float(noise_factor), "gyro_quantization_rad": float(gyro_quantization_arcsec) * ARCSEC_TO_RAD}
+    kw["encoder_noise_rad"] = None if encoder_noise_arcsec is None else float(encoder_noise_arcsec) * ARCSEC_TO_RAD
+    return kw
+
+
 def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, noise, errors, rate_hz, effects,
                     effect_scale, curvature, latitude_deg, gravity_mps2, table_valid, encoder_rate_hz, tag,
-                    file_stem, cubic_scale=0.0, scale_cubic_scale=0.0, channels=None):
+                    file_stem, cubic_scale=0.0, scale_cubic_scale=0.0, channels=None, noise_factor=1.0,
+                    encoder_noise_arcsec=None, gyro_quantization_arcsec=0.0, start_in_motion=False):
     _check_common(hours, rate_hz, effect_scale, effects)
+    noise_kw = _noise_keywords(noise_factor=noise_factor, encoder_noise_arcsec=encoder_noise_arcsec,
+                               gyro_quantization_arcsec=gyro_quantization_arcsec)
     if not (np.isfinite(cubic_scale) and cubic_scale >= 0):
         raise InputError(f"--cubic-scale must be a non-negative number, got {cubic_scale!r}")
     if not (np.isfinite(scale_cubic_scale) and scale_cubic_scale >= 0):
@@ -182,7 +203,7 @@ def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, n
             rate_hz=float(rate_hz), duration_s=float(hours) * 3600.0, start_degC=start, span_degC=span,
             design=design, latitude_rad=np.radians(latitude_deg), gravity_mps2=float(gravity_mps2), noise=noise,
             valid=table_valid, encoder_rate_hz=float(encoder_rate_hz), azimuth_rad=azimuth, description=desc,
-            tag=tag, **thermal_keywords,
+            tag=tag, start_in_motion=bool(start_in_motion), **noise_kw, **thermal_keywords,
         )
         plans.append(ExperimentPlan(file_name=f"{stem}.h5", make=make,
                                     summary=f"subrange {lo:g}..{hi:g} degC, {hours:g} h"))
@@ -195,7 +216,8 @@ def _table_scenario(name, *, rng, subranges, hours, span_degC, design, imu_id, n
 
 def nav_subrange(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                  curvature=True, cubic_scale=0.0, subrange=(20.0, 30.0), span_degC=8.0, latitude_deg=DEFAULT_LATITUDE_DEG,
-                 gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag=""):
+                 gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag="",
+                 noise_factor=1.0, encoder_noise_arcsec=None, gyro_quantization_arcsec=0.0, start_in_motion=False):
     """One navigation-grade experiment: 1.5 h at 100 Hz, sensors drifting 8 degC through 20..30 degC.
 
     15 min static alignment, then rotations at 10-30 deg/s about each instrument
@@ -206,20 +228,25 @@ def nav_subrange(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effe
                            errors=errors, rate_hz=rate_hz, effects=tuple(effects), effect_scale=effect_scale,
                            curvature=curvature, latitude_deg=latitude_deg, gravity_mps2=gravity_mps2,
                            table_valid=table_valid, encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=None,
-                           cubic_scale=cubic_scale)
+                           cubic_scale=cubic_scale, noise_factor=noise_factor,
+                           encoder_noise_arcsec=encoder_noise_arcsec, gyro_quantization_arcsec=gyro_quantization_arcsec,
+                           start_in_motion=start_in_motion)
 
 
 def nav_subrange_short(*, rng, hours=0.3, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                        curvature=True, cubic_scale=0.0, subrange=(20.0, 25.0), span_degC=5.0, latitude_deg=DEFAULT_LATITUDE_DEG,
                        gravity_mps2=DEFAULT_GRAVITY_MPS2, table_valid="static", encoder_rate_hz=10.0, tag="",
-                       _name="nav-subrange-short", _stem=None):
+                       noise_factor=1.0, encoder_noise_arcsec=None, gyro_quantization_arcsec=0.0,
+                       start_in_motion=False, _name="nav-subrange-short", _stem=None):
     """The nav-subrange design in 18 min (3 min alignment, 15-25 s static positions), sensors drifting 5 degC."""
     return _table_scenario(_name, rng=rng, subranges=(tuple(subrange),), hours=hours, span_degC=span_degC,
                            design=SHORT_DESIGN, imu_id="SIM-NAV 0001", noise=noise, errors=errors,
                            rate_hz=rate_hz, effects=tuple(effects), effect_scale=effect_scale, curvature=curvature,
                            latitude_deg=latitude_deg, gravity_mps2=gravity_mps2, table_valid=table_valid,
                            encoder_rate_hz=encoder_rate_hz, tag=tag, file_stem=_stem,
-                           cubic_scale=cubic_scale)
+                           cubic_scale=cubic_scale, noise_factor=noise_factor,
+                           encoder_noise_arcsec=encoder_noise_arcsec, gyro_quantization_arcsec=gyro_quantization_arcsec,
+                           start_in_motion=start_in_motion)
 
 
 def nav_campaign(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
@@ -254,19 +281,22 @@ def nav_campaign_cubic(*, rng, hours=1.5, noise=True, errors=True, rate_hz=100.0
 
 def effect_scenario(effect, *, rng, hours=0.3, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                     curvature=True, cubic_scale=0.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
-                    table_valid="static", encoder_rate_hz=10.0, tag=""):
+                    table_valid="static", encoder_rate_hz=10.0, tag="", noise_factor=1.0, encoder_noise_arcsec=None,
+                    gyro_quantization_arcsec=0.0, start_in_motion=False):
     """nav-subrange-short with the further effect ``effect`` switched on (size from ``EFFECT_SIZES``)."""
     return nav_subrange_short(rng=rng, hours=hours, noise=noise, errors=errors, rate_hz=rate_hz,
                               effects=(effect,) + tuple(e for e in effects if e != effect),
                               effect_scale=effect_scale, curvature=curvature, cubic_scale=cubic_scale,
                               latitude_deg=latitude_deg, gravity_mps2=gravity_mps2, table_valid=table_valid, encoder_rate_hz=encoder_rate_hz,
-                              tag=tag, _name=f"effect-{effect}", _stem=f"effect_{effect.replace('.', '_')}")
+                              tag=tag, noise_factor=noise_factor, encoder_noise_arcsec=encoder_noise_arcsec,
+                              gyro_quantization_arcsec=gyro_quantization_arcsec, start_in_motion=start_in_motion,
+                              _name=f"effect-{effect}", _stem=f"effect_{effect.replace('.', '_')}")
 
 
 def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                       n_poses=30, initial_static_s=20.0, hold_s=(3.0, 10.0), turn_s=(1.0, 2.5), translation_m=0.05,
                       latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2, cut=False, pivot_m=0.0,
-                      hand_accel_mps2=0.0, tag=""):
+                      hand_accel_mps2=0.0, tag="", noise_factor=1.0):
     """A consumer MEMS IMU turned by hand, no table: 20 s static, then 30 poses of 3-10 s.
 
     Between poses the hand turns the unit smoothly (1-2.5 s, to a random
@@ -297,6 +327,7 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
         translation_m=float(translation_m), latitude_rad=np.radians(latitude_deg),
         gravity_mps2=float(gravity_mps2), noise=noise, description=desc, tag=tag, cut=bool(cut),
         pivot_m=float(pivot_m), hand_accel_mps2=float(hand_accel_mps2),
+        noise_factor=_noise_keywords(noise_factor=noise_factor)["noise_factor"],
     )
     plan = ExperimentPlan(file_name="handheld.h5", make=make, summary="hand-held poses, no table"
                           + (", every second turn cut out" if cut else ""))
@@ -308,7 +339,7 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
 
 def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                       initial_static_s=20.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
-                      cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag=""):
+                      cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag="", noise_factor=1.0):
     """A Ferraris-style session of a consumer MEMS IMU by hand, no table (about 2.5 min).
 
     Six static faces (10 s each, the first 20 s) joined by hand turns, then a
@@ -335,6 +366,7 @@ def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
         initial_static_s=float(initial_static_s), hold_s=(10.0, 10.0), turn_s=(1.5, 2.5), translation_m=0.0,
         latitude_rad=np.radians(latitude_deg), gravity_mps2=float(gravity_mps2), noise=noise, description=desc,
         tag=tag, cut=bool(cut), pivot_m=float(pivot_m), hand_accel_mps2=float(hand_accel_mps2), program="ferraris",
+        noise_factor=_noise_keywords(noise_factor=noise_factor)["noise_factor"],
     )
     plan = ExperimentPlan(file_name="ferraris.h5", make=make, summary="six faces and three full turns by hand"
                           + (", cut together" if cut else ""))

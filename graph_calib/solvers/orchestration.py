@@ -46,7 +46,7 @@ class CalibrationRun:
     errors: Mapping[str, BaseException] = field(default_factory=dict)
 
 
-def judge(results, *, order=None, stamp=True):
+def judge(results, *, order=None, stamp=True, structure=()):
     """The comparison of the first two of ``results`` and the verdict, stamped into both.
 
     Parameters
@@ -56,6 +56,9 @@ def judge(results, *, order=None, stamp=True):
         Comparison order (default: the mapping's); names without a result are passed over.
     stamp : bool
         Write the verdict into each result (``extra["verdict"]``); the comparison always holds it.
+    structure : sequence, optional
+        Score tests of the known effects at the solution (:mod:`graph_calib.diagnosis.structure`), judged
+        by the verdict.
 
     Returns
     -------
@@ -67,7 +70,7 @@ def judge(results, *, order=None, stamp=True):
     """
     names = [n for n in (results if order is None else order) if n in results]
     comparison = compare(results[names[0]], results[names[1]]) if len(names) >= 2 else None
-    verdict = verdict_of(dict(results), comparison)
+    verdict = verdict_of(dict(results), comparison, structure=structure)
     stamped = ({s: replace(r, extra={**r.extra, "verdict": verdict.to_json()}) for s, r in results.items()}
                if stamp else dict(results))
     if comparison is not None:

@@ -10,24 +10,30 @@ from __future__ import annotations
 import numpy as np
 
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
+from graph_calib.model.redundancy import fit_statistics
 from graph_calib.records.experiment import Result
 
 
-def residual_block(output):
-    """The ``residuals`` block of a result file: the solver's fit statistics, one layout for all solvers.
+def residual_block(output, *, statistics=None):
+    """The ``residuals`` block of a result file: the fit statistics, one layout for all solvers.
 
     Parameters
     ----------
     output : graph_calib.solvers.interface.SolverOutput
+    statistics : graph_calib.model.redundancy.FitStatistics, optional
+        The model's statistics at the solution (:func:`graph_calib.model.redundancy.fit_statistics`).
 
     Returns
     -------
     dict
-        ``quantity`` (whitened residual or normalised innovation); per factor kind in ``kinds``:
-        ``count``, ``rms_axis`` (rms of each normalised component), ``rms``, ``chi2_per_dof``;
-        ``counts`` (factors per kind); ``chi2_per_dof`` over every measurement (gravity and encoder)
-        component; ``iterations``, ``converged``, ``final_cost``, ``seconds``; and the solver's own
-        ``figures``.
+        ``quantity`` (whitened residual or normalised innovation); per kind in ``kinds`` (data-format.md):
+        ``count``, ``chi2``, ``redundancy``, ``chi2_per_redundancy`` (from ``statistics``: the same figure
+        for every solver at the same solution), the variance factor the solve used
+        (``variance_factor``, 1 unless estimated or set), and the solver's own ``rms_axis`` (rms of each
+        normalised component of its series) and ``rms``; ``counts`` (factors per kind);
+        ``chi2_per_dof`` over every measurement component of the solver's series (kept for old readers);
+        ``n_unknowns`` and ``hat_trace``; ``iterations``, ``converged``, ``final_cost``, ``seconds``; and
+        the solver's own ``figures``.
     """
     kinds = {}
     measured = []
@@ -36,9 +42,12 @@ def residual_block(output):
         if v.size == 0:
             continue
         kinds[kind] = {"count": int(v.shape[0]), "rms_axis": np.sqrt(np.mean(v**2, axis=0)).tolist(),
-                       "rms": float(np.sqrt(np.mean(v**2))), "chi2_per_dof": float(np.mean(v**2))}
+                       "rms": float(np.sqrt(np.mean(v**2)))}
         if kind in MEASUREMENT_KINDS:
             measured.append(v.ravel())
+    if statistics is not None:
+        for kind, fit in statistics.kinds.items():
+            kinds[kind] = {**kinds.get(kind, {}), **fit.to_json()}
     all_measured = np.concatenate(measured) if measured else np.zeros(0)
     block = {
         "quantity": output.residual_quantity,
@@ -50,8 +59,35 @@ def residual_block(output):
         "final_cost": float(output.final_cost),
         "seconds": float(output.seconds),
     }
+    if statistics is not None:
+        block["n_unknowns"] = int(statistics.n_unknowns)
+        block["hat_trace"] = float(statistics.trace)
     block.update({k: float(v) for k, v in output.figures.items()})
     return block
+
+
+def noise_block(model):
+    """The result's ``noise`` block (data-format.md): the densities the solve used and where each came from.
+
+    ``gyro_rad_per_sqrt_s``, ``accel_mps_per_sqrt_s``, ``encoder_rad``, ``sway_mps2``; ``source`` per sensor
+    (``identified`` from the record, ``declared`` by the user, or the ``grade``'s); and, where the record
+    showed them, ``identified``: per sensor the IEEE terms with their sigmas and the channels that support
+    them, the keyframe density with its sigma and the rest time behind it (docs/model.md, "Noise from the
+    record").
+    """
+    o = model.options
+    sway = o.sway_sigma
+    src = {"gyro": "grade", "accel": "grade", "encoder": "grade"}
+    for k in src:
+        if getattr(o, f"{k}_noise") is not None:
+            src[k] = "declared"
+    src.update(o.noise_source or {})
+    out = {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
+           "encoder_rad": model.encoder_noise, "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0,
+           "source": src}
+    if o.noise_identified:
+        out["identified"] = o.noise_identified
+    return out
 
 
 #: An element whose posterior sigma is above this fraction of its prior sigma is prior-dominated: the data
@@ -86,17 +122,21 @@ def to_result(model, output, *, extra=None):
     names = output.layout.element_names()
     sig = output.sigma
     T = model.temperatures
-    sway = model.options.sway_sigma
     ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
           "prior_dominated": prior_dominated(model, output),
-          "noise": {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
-                    "encoder_rad": model.encoder_noise,
-                    "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0}}
+          "noise": noise_block(model)}
     unresolved, U = model.unresolved_directions(output.x)
     if unresolved:      # only then, so that every other result file stays as it was
         ex["unresolved"] = {name: {n: float(v) for n, v in zip(names, u) if v != 0.0}
                             for name, u in zip(unresolved, U)}
     ex.update(extra or {})
+    statistics = fit_statistics(model, output.attitudes, output.x)
+    factors = dict(model.options.variance_factors or {})
+    residuals = residual_block(output, statistics=statistics)
+    for kind, entry in residuals["kinds"].items():
+        if kind in statistics.kinds:
+            entry["variance_factor"] = float(factors.get(kind, 1.0))
+    residuals["variance_components"] = bool(factors)
     return Result(
         source=model.experiment.source.rsplit("/", 1)[-1] if model.experiment.source else "",
         solver=output.solver, t_ref_degC=model.t_ref_degC,
@@ -105,7 +145,7 @@ def to_result(model, output, *, extra=None):
         values=dict(zip(names, np.asarray(output.x, dtype=float).tolist())),
         sigmas=dict(zip(names, sig.tolist())),
         covariance_names=tuple(names), covariance=np.asarray(output.covariance, dtype=float),
-        residuals=residual_block(output), extra=ex,
+        residuals=residuals, extra=ex,
     )
 
 
@@ -166,5 +206,5 @@ def compare(a, b):
     }
 
 
-__all__ = ["residual_block", "to_result", "compare", "sigma_ratio_range_text", "comparison_text",
+__all__ = ["residual_block", "noise_block", "to_result", "compare", "sigma_ratio_range_text", "comparison_text",
            "AGREE_DIFFERENCE_SIGMA", "AGREE_SIGMA_RATIO"]

@@ -4,30 +4,111 @@ cli.md: every command that calibrates decides, and prints in words, whether each
 whether the solvers agree within their tolerance, and whether the residuals are consistent with the
 noise model; a failed verdict exits 3 with every file still written.
 
-The residual test is the batch fit's chi-square per degree of freedom,
-``2 F / (3 K_gravity + 3 M_encoder)``, with ``F`` the solver's final cost (half the sum of squared
-whitened residuals, priors included): the measurements are the gravity and encoder factors, and the
-rotation factors and priors bring as many equations as the attitudes and the calibration have
-unknowns.  It is near 1 when the noise model fits (0.66-0.71 on the simulated navigation-grade
-subranges: the simulator's two encoders read no noise about the direction perpendicular to both axes,
-and the model floors that component of every static reading at a quarter of the declared encoder noise,
-docs/model.md, so a third of the encoder components carry almost no chi-square), and it grows with what the model lacks (3.8 on the measured MPU-6050 session, 2.1-2.9
-on the measured Xsens session cut short; both lack the gyro g-sensitivity the diagnosis finds).  Above
-:data:`RESIDUAL_CHI2_LIMIT` the reported sigmas are too small by more than ``sqrt(2)``: the verdict
-fails.  Far below 1 the noise model is overstated and the sigmas are conservative: said, not failed.
+The residual test is made per measurement kind (rotation, gravity, encoder) on the result's
+``residuals.kinds`` (data-format.md): ``chi2 / redundancy``, whose expectation is 1 when the noise model
+is right (:mod:`graph_calib.model.redundancy`).  With redundancy ``nu`` the statistic ``chi2`` is
+chi-square with ``nu`` degrees of freedom, so a kind fails when its ``chi2 / nu`` lies outside the
+two-sided :data:`RESIDUAL_ALPHA` quantiles ``chi2_{alpha/2}(nu) / nu .. chi2_{1-alpha/2}(nu) / nu``:
+above, the kind's residuals are larger than its noise (the model lacks an effect, or the noise is
+larger than identified; the sigmas are optimistic); below, the noise model overstates them (the sigmas
+are pessimistic).  The limits narrow as the redundancy grows (about ``1 +- 3.3 sqrt(2 / nu)``).
+
+With variance components (:mod:`graph_calib.solvers.variance`) each kind's ``chi2 / redundancy`` is
+brought to 1 by a variance factor; the factor itself is then the test: a kind whose factor lies
+outside ``1 / VARIANCE_FACTOR_LIMIT .. VARIANCE_FACTOR_LIMIT`` of the noise identified from the record
+fails, naming the kind and the factor (its residuals are that many times, in variance, what the
+identified noise explains).  A kind whose sensor's noise was the grade's (nothing identified) is not
+judged by its factor: the grade's table value is no measurement.
+
+Without variance factors (``residuals.variance_components`` false: a campaign's tasks) a kind below
+its lower limit is a note, not a failure: the kinds' own approximations keep a right model's rotation
+and encoder kinds below 1 (docs/model.md).  A result without per-kind redundancies (a solver that does
+not give them) is judged as before, by its chi-square per measurement component against
+:data:`RESIDUAL_CHI2_LIMIT`.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Mapping
 
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
 
-#: Largest chi-square per degree of freedom of a fit that passes (sigmas optimistic by at most sqrt(2)).
+#: Largest chi-square per measurement component of a result without redundancies (the old statistic).
 RESIDUAL_CHI2_LIMIT = 2.0
-#: Below this the noise model is said to be overstated (sigmas conservative); the verdict still passes.
+#: Below this the old statistic says the noise model is overstated (sigmas conservative).
 RESIDUAL_CHI2_LOW = 0.25
+#: Two-sided probability of a right model's kind falling outside its limits.
+RESIDUAL_ALPHA = 1e-3
+#: A kind's variance factor beyond this (or below its inverse) fails the verdict.
+VARIANCE_FACTOR_LIMIT = 4.0
+#: The measurement kinds the verdict judges, and the sensor whose noise each is weighted by.
+JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder"}
+
+
+def kind_limits(redundancy, *, alpha=RESIDUAL_ALPHA):
+    """``(low, high)`` limits of ``chi2 / redundancy`` for a kind of that redundancy (module doc)."""
+    from scipy.special import gammaincinv    # scipy.stats is 0.3 s of every command's start: only the quantile here
+
+    nu = float(redundancy)
+    if not nu > 0:
+        return 0.0, float("inf")
+    # the chi-square quantile: chi2.ppf(p, nu) = 2 gammaincinv(nu / 2, p)
+    return (float(2.0 * gammaincinv(0.5 * nu, 0.5 * alpha) / nu),
+            float(2.0 * gammaincinv(0.5 * nu, 1.0 - 0.5 * alpha) / nu))
+
+
+def judge_kinds(result):
+    """``(figures, problems, notes)`` of one result's per-kind residual test.
+
+    ``figures``: ``{kind: {chi2_per_redundancy, redundancy, low, high, variance_factor}}`` of the kinds
+    judged (empty when the result gives no redundancies).
+    """
+    kinds = (result.residuals or {}).get("kinds") or {}
+    scaled = bool((result.residuals or {}).get("variance_components", True))
+    source = ((result.extra or {}).get("noise") or {}).get("source") or {}
+    figures, problems, notes = {}, [], []
+    for kind, sensor in JUDGED_KINDS.items():
+        k = kinds.get(kind)
+        if not k or k.get("redundancy") is None or k.get("chi2_per_redundancy") is None:
+            continue
+        v, nu = float(k["chi2_per_redundancy"]), float(k["redundancy"])
+        vf = float(k.get("variance_factor", 1.0))
+        lo, hi = kind_limits(nu)
+        figures[kind] = {"chi2_per_redundancy": v, "redundancy": nu, "low": lo, "high": hi, "variance_factor": vf}
+        what = f"{kind} chi2/redundancy {v:.3g} (redundancy {nu:.1f})"
+        if v > hi:
+            problems.append(f"{what} > {hi:.3g}: the {kind} residuals are larger than their noise model; the "
+                            f"model lacks an effect or the {sensor} noise is larger than assumed; sigmas "
+                            f"optimistic by about {v ** 0.5:.2g}x")
+        elif v < lo:
+            text = (f"{what} < {lo:.3g}: the {kind} residuals are smaller than their noise model; the "
+                    f"{sensor} noise is overstated; sigmas pessimistic by about {v ** -0.5:.2g}x")
+            # without variance factors the kinds' approximations (module doc) keep a right model below 1: said
+            (problems if scaled else notes).append(text + ("" if scaled else " (no variance components estimated)"))
+        if vf != 1.0:
+            if source.get(sensor) == "grade":
+                notes.append(f"{kind}: variance factor {vf:.3g} on the {sensor} noise of the grade (none identified)")
+            elif vf > VARIANCE_FACTOR_LIMIT:
+                problems.append(f"{kind} residuals need a variance factor {vf:.3g} > {VARIANCE_FACTOR_LIMIT:g} on "
+                                f"the {source.get(sensor, 'assumed')} {sensor} noise: the model lacks an effect "
+                                f"the {kind} measurements see")
+            elif vf < 1.0 / VARIANCE_FACTOR_LIMIT:
+                problems.append(f"{kind} residuals need a variance factor {vf:.3g} < 1/{VARIANCE_FACTOR_LIMIT:g} on "
+                                f"the {source.get(sensor, 'assumed')} {sensor} noise: that noise is overstated")
+    return figures, problems, notes
+
+
+def fit_chi2_per_redundancy(block):
+    """Chi-square over redundancy of the measurement kinds together (None without redundancies)."""
+    kinds = (block or {}).get("kinds") or {}
+    c = r = 0.0
+    for kind in JUDGED_KINDS:
+        k = kinds.get(kind) or {}
+        if k.get("redundancy") is not None and k.get("chi2") is not None:
+            c += float(k["chi2"])
+            r += float(k["redundancy"])
+    return c / r if r > 0 else None
 
 
 def fit_chi2_per_dof(block):
@@ -53,7 +134,10 @@ class Verdict:
     max_difference_sigma : float or None
         The comparison's largest difference, in sigmas.
     fit_chi2 : mapping of str to float
-        Per solver, the fit's chi-square per degree of freedom.
+        Per solver, the measurement kinds' chi-square over their redundancy together (the old chi-square
+        per component for a result without redundancies).
+    kinds : mapping of str to dict
+        Per solver, each judged kind's figures and limits (:func:`judge_kinds`).
     passed : bool
     problems : tuple of str
         What failed, in words (empty when passed).
@@ -68,6 +152,8 @@ class Verdict:
     passed: bool
     problems: tuple = ()
     notes: tuple = ()
+    kinds: Mapping[str, dict] = field(default_factory=dict)
+    structure: tuple = ()
 
     def text(self):
         """The verdict line, in words."""
@@ -79,28 +165,49 @@ class Verdict:
             agree = f"solvers agree (max {self.max_difference_sigma:.2g} sigma)"
         else:
             agree = f"SOLVERS DISAGREE (max {self.max_difference_sigma:.3g} sigma)"
-        chi = ", ".join(f"{s} {v:.2f}" for s, v in self.fit_chi2.items())
-        bad = [s for s, v in self.fit_chi2.items() if v > RESIDUAL_CHI2_LIMIT]
-        resid = (f"RESIDUALS INCONSISTENT WITH THE NOISE MODEL (chi2/dof {chi} > {RESIDUAL_CHI2_LIMIT:g})" if bad
-                 else f"residuals consistent (chi2/dof {chi})")
+        resid = self._residual_text()
         head = "verdict: pass" if self.passed else "verdict: FAIL"
         return f"{head}: {conv}; {agree}; {resid}" + "".join(f"; note: {n}" for n in self.notes)
+
+    def _residual_text(self):
+        carried = [t for t in self.structure if t["significant"]]
+        if carried:
+            return ("RESIDUALS CARRY AN EFFECT THE MODEL LACKS: " + ", ".join(
+                f"{t['effect']} (score {t['statistic']:.3g} > {t['threshold']:.3g})" for t in carried))
+        if self.kinds:
+            first = next(iter(self.kinds.values()))
+            figs = ", ".join(f"{k} {f['chi2_per_redundancy']:.2f}" + (f" (variance factor {f['variance_factor']:.2g})"
+                                                                      if f["variance_factor"] != 1.0 else "")
+                             for k, f in first.items())
+            bad = [k for k in JUDGED_KINDS if any(p.startswith(f"{k} ") or f": {k} " in p for p in self.problems)]
+            if bad:
+                return f"RESIDUALS INCONSISTENT WITH THE NOISE MODEL: {', '.join(bad)} (chi2/redundancy {figs})"
+            return f"residuals consistent (chi2/redundancy {figs})"
+        chi = ", ".join(f"{s} {v:.2f}" for s, v in self.fit_chi2.items())
+        bad = [s for s, v in self.fit_chi2.items() if v > RESIDUAL_CHI2_LIMIT]
+        return (f"RESIDUALS INCONSISTENT WITH THE NOISE MODEL (chi2/dof {chi} > {RESIDUAL_CHI2_LIMIT:g})" if bad
+                else f"residuals consistent (chi2/dof {chi})")
 
     def to_json(self):
         return {"passed": bool(self.passed), "converged": {k: bool(v) for k, v in self.converged.items()},
                 "agree": self.agree, "max_difference_in_sigma": self.max_difference_sigma,
                 "fit_chi2_per_dof": dict(self.fit_chi2), "residual_chi2_limit": RESIDUAL_CHI2_LIMIT,
+                "kinds": {s: dict(k) for s, k in self.kinds.items()}, "residual_alpha": RESIDUAL_ALPHA,
+                "structure": [dict(t) for t in self.structure],
+                "variance_factor_limit": VARIANCE_FACTOR_LIMIT,
                 "problems": list(self.problems), "notes": list(self.notes), "text": self.text()}
 
 
-def verdict_of(results, comparison=None):
-    """The :class:`Verdict` of solver results (``{solver: Result}``) and their comparison (``comparison.json``)."""
+def verdict_of(results, comparison=None, *, structure=()):
+    """The :class:`Verdict` of solver results (``{solver: Result}``) and their comparison (``comparison.json``).
+
+    ``structure``: the score tests of the candidates the model lacks at the solution
+    (:func:`graph_calib.diagnosis.structure.structure_tests`, each with ``to_json``, or its dicts); a
+    significant one fails the residual part, named.
+    """
+    structure = tuple(t if isinstance(t, dict) else t.to_json() for t in structure)
     converged = {s: bool(r.residuals.get("converged", False)) for s, r in results.items()}
-    fit = {}
-    for s, r in results.items():
-        v = fit_chi2_per_dof(r.residuals)
-        if v is not None:
-            fit[s] = v
+    fit, kinds = {}, {}
     problems, notes = [], []
     for s, c in converged.items():
         if not c:
@@ -112,15 +219,32 @@ def verdict_of(results, comparison=None):
         if not agree:
             problems.append(f"the solvers disagree: max |difference| {maxdiff:.3g} sigma, sigma ratio range "
                             f"{sm['sigma_ratio_range']}")
-    for s, v in fit.items():
+    for s, r in results.items():
+        figures, kp, kn = judge_kinds(r)
+        if figures:
+            kinds[s] = figures
+            fit[s] = fit_chi2_per_redundancy(r.residuals)
+            problems.extend(f"{s}: {p}" for p in kp)
+            notes.extend(f"{s}: {n}" for n in kn)
+            continue
+        v = fit_chi2_per_dof(r.residuals)
+        if v is None:
+            continue
+        fit[s] = v
         if v > RESIDUAL_CHI2_LIMIT:
             problems.append(f"{s}: residuals inconsistent with the noise model, chi2/dof {v:.2f} > "
                             f"{RESIDUAL_CHI2_LIMIT:g}: the model lacks an effect or the noise is larger than "
                             f"assumed (wrong grade?); sigmas are optimistic by about {v ** 0.5:.1f}x")
         elif v < RESIDUAL_CHI2_LOW:
             notes.append(f"{s}: residuals well inside the noise model (chi2/dof {v:.2f}): sigmas conservative")
+    for t in structure:
+        if t["significant"]:
+            problems.append(f"the residuals carry {t['effect']}: score statistic {t['statistic']:.3g} > threshold "
+                            f"{t['threshold']:.3g} ({t['dof']} dof): the model lacks it (graph-calib diagnose adds it)")
     return Verdict(converged=converged, agree=agree, max_difference_sigma=maxdiff, fit_chi2=fit,
-                   passed=not problems, problems=tuple(problems), notes=tuple(notes))
+                   passed=not problems, problems=tuple(problems), notes=tuple(notes), kinds=kinds,
+                   structure=structure)
 
 
-__all__ = ["Verdict", "verdict_of", "fit_chi2_per_dof", "RESIDUAL_CHI2_LIMIT", "RESIDUAL_CHI2_LOW"]
+__all__ = ["Verdict", "verdict_of", "judge_kinds", "kind_limits", "fit_chi2_per_dof", "fit_chi2_per_redundancy",
+           "RESIDUAL_CHI2_LIMIT", "RESIDUAL_CHI2_LOW", "RESIDUAL_ALPHA", "VARIANCE_FACTOR_LIMIT", "JUDGED_KINDS"]

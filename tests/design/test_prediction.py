@@ -11,6 +11,8 @@
 
 import json
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -33,6 +35,9 @@ def _problem(se, **model_options):
 
 
 def _graph(problem, opts):
+    # the noise identified from the record, as the prediction takes it: no variance factors estimated (they
+    # need a solve; with them calibrate's sigmas differ from the prediction by up to 14 % here)
+    opts = replace(opts, variance_components=False, structure_tests=False)
     return solve_problem(problem, options=opts, solvers=("factor-graph",)).results["factor-graph"]
 
 

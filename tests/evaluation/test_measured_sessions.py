@@ -126,5 +126,8 @@ def test_shortened_xsens_records_converge_in_both_solvers_and_agree(rows):
     assert v.agree and v.max_difference_sigma < 0.01, v.text()
     assert abs(run.results["factor-graph"].values["accel.scale.x"]) < 0.05
     # the verdict is consistent with its own figures: it fails exactly when a fit's chi2/dof passes the limit
-    from graph_calib.solvers.verdict import RESIDUAL_CHI2_LIMIT
-    assert v.passed == all(c <= RESIDUAL_CHI2_LIMIT for c in v.fit_chi2.values())
+    from graph_calib.solvers.verdict import VARIANCE_FACTOR_LIMIT
+    fits = all(f["low"] <= f["chi2_per_redundancy"] <= f["high"]
+               and 1 / VARIANCE_FACTOR_LIMIT <= f["variance_factor"] <= VARIANCE_FACTOR_LIMIT
+               for ks in v.kinds.values() for f in ks.values())
+    assert v.passed == (fits and not any(t["significant"] for t in v.structure)), v.text()

@@ -166,7 +166,8 @@ def test_the_diagnosis_linearises_a_segmented_fit_at_its_optimum(cut_run):
     graph's solution as the optimum: the Gauss-Newton step from there is a small fraction of a sigma."""
     from graph_calib.diagnosis import linearise
 
-    problem, run = cut_run
+    _, run = cut_run
+    problem = run.problem                   # the model solved: with its variance factors
     out = run.outputs["factor-graph"]
     model = problem.model
     rs, _ = linearise(model, out.attitudes, out.x, q_nb0=problem.q_nb0, null_names=model.layout.names,

@@ -30,9 +30,9 @@ def swaying():
                     hand_accel_mps2=0.2).run()[0]
 
 
-def _run(se, **model_options):
+def _run(se, variance_components=False, **model_options):
     opts = CalibrationOptions(model=ModelOptions(grade="consumer", **model_options), t_ref_degC=se.truth.t_ref_degC,
-                              filter=FilterOptions(max_passes=120))
+                              filter=FilterOptions(max_passes=120), variance_components=variance_components)
     problem = build_problem(se.experiment, options=opts)
     run = solve_problem(problem, options=opts, solvers=("sqrt-kf",))
     res = run.results["sqrt-kf"]
@@ -59,6 +59,17 @@ def test_a_swaying_hand_fails_the_verdict_on_its_residuals_by_default(swaying):
     # and here it is the residual test that says so: the sigmas are not to be trusted
     assert not run.verdict.passed
     assert run.verdict.fit_chi2["sqrt-kf"] > RESIDUAL_CHI2_LIMIT, run.verdict.text()
+    assert "gravity chi2/redundancy" in " ".join(run.verdict.problems)
+
+
+def test_variance_components_absorb_the_sway_and_the_sigmas_follow(swaying):
+    # the sway is no white noise the rests can show (no rest is white): the gravity kind's variance factor takes
+    # it, and the sigmas then hold the truth (or the verdict fails)
+    problem, run, names, z = _run(swaying, variance_components=True)
+    res = run.results["sqrt-kf"]
+    assert res.residuals["kinds"]["gravity"]["variance_factor"] > 10.0
+    assert abs(res.residuals["kinds"]["gravity"]["chi2_per_redundancy"] - 1.0) < 0.1
+    assert np.mean(np.abs(z) < 3.0) >= 0.95 or not run.verdict.passed
 
 
 @pytest.mark.slow

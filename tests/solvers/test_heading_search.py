@@ -29,7 +29,10 @@ def test_the_heading_search_reaches_the_same_point_in_fewer_iterations(problem, 
     monkeypatch.setattr(heading, "HEADING_GRID", np.zeros(1))
     crawled = factor_graph.solve(prob.model, q_nb0=prob.q_nb0, options=opts.graph)
     assert searched.converged and crawled.converged
-    assert searched.iterations <= 20 and crawled.iterations >= 30, (searched.iterations, crawled.iterations)
+    # (16 against 28 with the noise identified from the session's rests; 30 or more with the first rest's
+    # per-sample scatter)
+    assert searched.iterations <= 20 and crawled.iterations >= searched.iterations + 10, (searched.iterations,
+                                                                                          crawled.iterations)
     sigma = np.sqrt(np.diag(crawled.covariance))
     assert np.max(np.abs(searched.x - crawled.x) / sigma) < 1e-3
     np.testing.assert_allclose(np.sqrt(np.diag(searched.covariance)), sigma, rtol=1e-6)

@@ -1,0 +1,198 @@
+r"""The fit statistic with expectation 1: each measurement kind's chi-square over its redundancy.
+
+At a solution ``(R, x)`` (keyframe attitudes and calibration) the model's factors, whitened, give the
+stacked residual ``r`` and Jacobian ``J`` in every unknown: three per keyframe attitude and the ``P``
+calibration elements.  With ``N = J^T J`` (priors included as residuals) the whitened hat matrix is
+``J N^-1 J^T``; the redundancy number of a residual component is ``r_i = 1 - h_ii`` (``h_ii`` the
+diagonal of the hat matrix), and ``sum h_ii`` over every component, priors included, is the number of
+unknowns.  A kind's redundancy is the sum of its components' ``r_i``: the share of the fit's degrees of
+freedom (measurements minus unknowns) it carries, and ``E[chi2_kind] = redundancy_kind`` when the
+noise model is right (engineering-facts.md, "Noise and the fit statistic").
+
+Computed without a dense inverse of the whole system: the attitudes' information ``H_aa`` is block
+tridiagonal (:mod:`graph_calib.model.attitude_elimination`), so with ``W = H_aa^-1 H_ax`` and the
+calibration's covariance ``S = (H_xx - H_xa W)^-1``
+
+.. math::
+
+    N^{-1} = \begin{bmatrix} Z + W S W^T & -W S \\ -S W^T & S \end{bmatrix}, \qquad
+    J N^{-1} J^T = J_a Z J_a^T + (J_a W - J_x) S (J_a W - J_x)^T
+
+where only the diagonal and first off-diagonal 3 x 3 blocks of ``Z = H_aa^-1`` are needed (a factor
+touches keyframes ``k`` and ``k+1`` at most): a selected inversion of the block-tridiagonal band,
+linear in the number of keyframes.  The attitude priors enter the information with the Jacobian
+``I / sigma`` (their ``Jr^-1`` of an alignment error of at most degrees differs from ``I`` by its
+square) and are counted among the unknowns' total, not as a kind; the calibration prior is the kind
+``prior``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy.linalg import lapack
+
+from graph_calib.model.attitude_elimination import NormalEquations
+
+#: Factors handled at a time (bounds the (F, 3, P) temporaries).
+CHUNK = 8192
+
+
+@dataclass(frozen=True)
+class KindFit:
+    """One measurement kind's fit at a solution.
+
+    Attributes
+    ----------
+    count : int
+        Factors.
+    chi2 : float
+        Sum of their squared whitened residuals.
+    redundancy : float
+        Sum of their components' redundancy numbers ``1 - h_ii``.
+    """
+
+    count: int
+    chi2: float
+    redundancy: float
+
+    @property
+    def chi2_per_redundancy(self):
+        return self.chi2 / self.redundancy if self.redundancy > 0 else float("nan")
+
+    def to_json(self):
+        """``count``, ``chi2``, ``redundancy``, ``chi2_per_redundancy`` (data-format.md; null when none)."""
+        v = self.chi2_per_redundancy
+        return {"count": int(self.count), "chi2": float(self.chi2), "redundancy": float(self.redundancy),
+                "chi2_per_redundancy": float(v) if np.isfinite(v) else None}
+
+
+@dataclass(frozen=True)
+class FitStatistics:
+    """Every kind's :class:`KindFit`, and the check that the hat matrix's trace is the unknowns' number.
+
+    Attributes
+    ----------
+    kinds : dict of str to KindFit
+        ``rotation``, ``gravity``, ``encoder`` (when the record has valid readings) and ``prior``.
+    n_unknowns : int
+        ``3 (K+1) + P``.
+    trace : float
+        ``sum h_ii`` over every residual component, attitude priors included (``n_unknowns`` when the
+        system has full rank).
+    """
+
+    kinds: dict
+    n_unknowns: int
+    trace: float
+
+
+@numba.njit(cache=True)
+def _selected_inverse(D, B):
+    """Diagonal and super-diagonal 3 x 3 blocks of the inverse of a symmetric block-tridiagonal matrix.
+
+    ``D`` (n, 3, 3) diagonal blocks, ``B`` (n-1, 3, 3) blocks ``(k, k+1)``.  Block LDL^T forward, then the
+    backward recursion ``Z_{k,k+1} = -S_k^-1 B_k Z_{k+1,k+1}``,
+    ``Z_kk = S_k^-1 + S_k^-1 B_k Z_{k+1,k+1} B_k^T S_k^-1``.
+    """
+    n = D.shape[0]
+    S_inv = np.empty_like(D)
+    S_inv[0] = np.linalg.inv(D[0])
+    for k in range(1, n):
+        S = D[k] - B[k - 1].T @ S_inv[k - 1] @ B[k - 1]
+        S_inv[k] = np.linalg.inv(0.5 * (S + S.T))
+    Zd = np.empty_like(D)
+    Zo = np.empty_like(B)
+    Zd[n - 1] = S_inv[n - 1]
+    for k in range(n - 2, -1, -1):
+        G = S_inv[k] @ B[k]
+        Zo[k] = -G @ Zd[k + 1]
+        Zd[k] = S_inv[k] + G @ Zd[k + 1] @ G.T
+    return Zd, Zo
+
+
+def _kind_rows(model, R, x):
+    """``{kind: (r, key, A, B or None, X)}`` whitened, at ``(R, x)``."""
+    preint = model.preintegrate(x)
+    out = {}
+    kinds = [("rotation", model.rotation_factors(R, preint, x)), ("gravity", model.gravity_factors(R, preint, x))]
+    if model.record.has_valid_readings:
+        kinds.append(("encoder", model.encoder_factors(R, preint, x)))
+    for name, res in kinds:
+        if res.r.shape[0] == 0:
+            continue
+        r, A, B, X = res.whitened_system()
+        out[name] = (r, res.key, A, B, X)
+    return out
+
+
+def fit_statistics(model, attitudes, x):
+    """Each kind's count, chi-square and redundancy at the solution ``(attitudes, x)``.
+
+    Parameters
+    ----------
+    model : graph_calib.model.CalibrationModel
+    attitudes : ndarray, shape (K+1, 3, 3)
+        Keyframe attitudes ``C_nb`` of the solution.
+    x : ndarray, shape (P,)
+        Calibration of the solution.
+
+    Returns
+    -------
+    FitStatistics
+    """
+    R = np.asarray(attitudes, dtype=float)
+    x = np.asarray(x, dtype=float)
+    P = model.layout.size
+    n_keys = R.shape[0]
+    rows = _kind_rows(model, R, x)
+    ne = NormalEquations(n_keys, P)
+    for r, key, A, B, X in rows.values():
+        ne.add_rows(key, r, A, X, B=B)
+    s_att = float(model.initial_attitude_sigma)
+    for k in model.segment_keys:
+        ne.H_aa_diag[int(k)] += np.eye(3) / s_att**2
+    _, prior_sigma = model.prior()
+    ne.H_xx += np.diag(1.0 / prior_sigma**2)
+    schur, _, att = ne.eliminate()
+    if att.chol is not None:
+        W, info = lapack.dtbtrs(att.chol, np.asfortranarray(att.Y[:, :P]), uplo="L", trans="T")
+    else:
+        W = att.Y[:, :P]
+    W = np.asarray(W).reshape(n_keys, 3, P)
+    S = np.linalg.inv(schur)
+    S = 0.5 * (S + S.T)
+    Zd, Zo = _selected_inverse(np.ascontiguousarray(ne.H_aa_diag),
+                               np.ascontiguousarray(ne.H_aa_off) if n_keys > 1 else np.zeros((0, 3, 3)))
+    w, U = np.linalg.eigh(S)
+    L = U * np.sqrt(np.maximum(w, 0.0))          # S = L L^T
+    kinds = {}
+    trace = 0.0
+    for name, (r, key, A, B, X) in rows.items():
+        h = np.zeros(r.shape)
+        for a in range(0, r.shape[0], CHUNK):
+            b = min(r.shape[0], a + CHUNK)
+            k = key[a:b]
+            Ac = A[a:b]
+            V = Ac @ W[k] - X[a:b]
+            hz = np.einsum("fij,fjl,fil->fi", Ac, Zd[k], Ac)
+            if B is not None:
+                Bc = B[a:b]
+                V += Bc @ W[k + 1]
+                hz += 2.0 * np.einsum("fij,fjl,fil->fi", Ac, Zo[k], Bc)
+                hz += np.einsum("fij,fjl,fil->fi", Bc, Zd[k + 1], Bc)
+            h[a:b] = hz + np.sum((V @ L) ** 2, axis=2)
+        trace += float(h.sum())
+        kinds[name] = KindFit(count=int(r.shape[0]), chi2=float(np.sum(r**2)), redundancy=float(np.sum(1.0 - h)))
+    h_prior = np.diag(S) / prior_sigma**2
+    trace += float(h_prior.sum())
+    for k in model.segment_keys:
+        trace += float(np.trace(Zd[int(k)] + W[int(k)] @ S @ W[int(k)].T)) / s_att**2
+    prior_r = model.calibration_prior(x).r
+    kinds["prior"] = KindFit(count=P, chi2=float(prior_r @ prior_r), redundancy=float(np.sum(1.0 - h_prior)))
+    return FitStatistics(kinds=kinds, n_unknowns=3 * n_keys + P, trace=trace)
+
+
+__all__ = ["KindFit", "FitStatistics", "fit_statistics"]

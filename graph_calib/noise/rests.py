@@ -1,0 +1,140 @@
+"""Every rest of a record, wherever it lies: per-segment thresholds from the record's quietest windows.
+
+:func:`graph_calib.navigation.static_detection.detect_static` sets its threshold from the first
+``init_static_s`` seconds, which must be at rest.  A record need not start at rest (a session whose
+first seconds are the unit being put down, a section cut out of a longer one), and then that
+threshold is the motion's: motion is taken for rest, and the noise measured on it is the motion's.
+
+Here each segment's own noise level is the low quantile :data:`QUIET_QUANTILE` of its moving-window
+scatter (of the specific force, and of the rate): the quietest windows of a record are its rests,
+wherever they lie, as long as rests make up more than that fraction of it.  A segment's threshold
+is :data:`THRESHOLD_MULT` times that level; the one the first seconds set (``detect_static``'s
+default) is kept when it is not above :data:`START_LOUDER` times the quiet one, so that a record
+that does start at rest is cut into the same static intervals as before.  No segment's threshold
+exceeds :data:`SEGMENT_CAP` times the whole record's quiet one: a segment with no rest at all (a
+piece that only turns) has no quiet windows of its own to set it.
+
+A record that never rests (a hand that sways the unit throughout) has quiet windows too, its least
+swaying ones.  A rest is therefore also required to be *white*: over each window the scatter of
+``f`` (and of the rate) may be at most :data:`WHITE_RATIO` times what its sample-to-sample differences
+show (``var(f) ~ var(diff f) / 2`` for white noise; a motion of a few hertz or slower raises the first
+and barely the second).  That test needs no threshold from the record.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from graph_calib.navigation.static_detection import _moving_stats, _runs, accelerometer_threshold, detect_static
+
+#: The quantile of the moving-window scatter taken as a segment's resting noise level.
+QUIET_QUANTILE = 0.05
+#: A window is at rest below this multiple of the resting level.
+THRESHOLD_MULT = 2.0
+#: The first seconds' threshold is kept unless it is this much above the quiet windows' one.
+START_LOUDER = 1.5
+#: A segment's threshold is at most this multiple of the whole record's quiet threshold.
+SEGMENT_CAP = 2.0
+#: A window is white when its scatter is at most this multiple of what its first differences show.
+WHITE_RATIO = 2.0
+#: Moving window, s (detect_static's default).
+WINDOW_S = 1.0
+
+
+def quiet_threshold(f, *, rate_hz, window_s=WINDOW_S, quantile=QUIET_QUANTILE, mult=THRESHOLD_MULT):
+    """``mult`` times the ``quantile`` of the moving-window scatter of ``f`` (N, 3); None when too short."""
+    h = max(1, int(round(window_s * float(rate_hz) / 2.0)))
+    if f.shape[0] < 2 * h + 1:
+        return None
+    s = _moving_stats(f, h)[0]
+    s = s[np.isfinite(s)]
+    if not s.size:
+        return None
+    level = float(np.quantile(s, quantile))
+    return mult * level if level > 0 else float(np.finfo(float).tiny)
+
+
+def segment_threshold(piece):
+    """The accelerometer threshold of one segment: its first seconds' unless they are loud (module doc)."""
+    quiet = quiet_threshold(piece.dv / piece.dt[:, None], rate_hz=piece.rate_hz)
+    start = accelerometer_threshold(piece)
+    if start is None:
+        return quiet
+    if quiet is None:
+        return start
+    return start if start <= START_LOUDER * quiet else quiet
+
+
+def segment_thresholds(experiment):
+    """``[(start, stop, piece, accelerometer threshold or None)]`` of each segment (module doc)."""
+    bounds = experiment.segment_bounds()
+    pieces = [experiment.slice(a, b) if len(bounds) > 1 else experiment for a, b in bounds]
+    th = [segment_threshold(p) for p in pieces]
+    if len(bounds) > 1:
+        cap = quiet_threshold(experiment.dv / experiment.dt[:, None], rate_hz=experiment.rate_hz)
+        if cap is not None:
+            th = [None if v is None else min(v, SEGMENT_CAP * cap) for v in th]
+    return [(a, b, p, v) for (a, b), p, v in zip(bounds, pieces, th)]
+
+
+def white_windows(x, *, rate_hz, window_s=WINDOW_S, ratio=WHITE_RATIO):
+    """Sample centres whose window scatter of ``x`` (N, 3) is at most ``ratio`` times the white level (module doc)."""
+    h = max(1, int(round(window_s * float(rate_hz) / 2.0)))
+    n = x.shape[0]
+    if n < 2 * h + 2:
+        return np.zeros(n, dtype=bool)
+    s = _moving_stats(x, h)[0]
+    d = np.empty_like(x)
+    d[1:] = np.diff(x, axis=0)
+    d[0] = d[1]
+    sd = _moving_stats(d, h)[0]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        ok = (s**2 <= ratio * 0.5 * sd**2) & np.isfinite(s) & np.isfinite(sd)
+    ok[:h] = ok[h]                       # the record's edges: their first (last) window covers them
+    ok[n - h:] = ok[n - h - 1]
+    return ok
+
+
+def find_rests(experiment, *, min_duration_s=2.0, use_gyro=True):
+    """Every rest of ``experiment``, segment by segment, each with its own thresholds.
+
+    The specific force's window scatter must lie below :func:`segment_threshold` and (``use_gyro``)
+    the rate's below :data:`THRESHOLD_MULT` times its own quiet level, and both must be white
+    (:func:`white_windows`).
+
+    Parameters
+    ----------
+    experiment : graph_calib.records.experiment.Experiment
+    min_duration_s : float
+        Shortest rest kept, s.
+    use_gyro : bool
+        Also require a quiet gyro.
+
+    Returns
+    -------
+    ndarray of int, shape (P, 2)
+        ``(start, stop)`` sample indices of the whole record, stop exclusive, in time order.
+    """
+    out = []
+    for a, b, piece, th in segment_thresholds(experiment):
+        if th is None:
+            continue
+        th_g = None
+        if use_gyro:
+            th_g = quiet_threshold(piece.dtheta / piece.dt[:, None], rate_hz=piece.rate_hz)
+        st = detect_static(piece, threshold=th, use_gyro=use_gyro and th_g is not None,
+                           gyro_threshold=th_g, min_duration_s=min_duration_s)
+        mask = np.zeros(piece.n_samples, dtype=bool)
+        for s0, s1 in np.asarray(st, dtype=np.int64).reshape(-1, 2):
+            mask[s0:s1] = True
+        mask &= white_windows(piece.dv / piece.dt[:, None], rate_hz=piece.rate_hz)
+        if use_gyro:
+            mask &= white_windows(piece.dtheta / piece.dt[:, None], rate_hz=piece.rate_hz)
+        runs = _runs(mask)
+        keep = (runs[:, 1] - runs[:, 0]) >= int(round(min_duration_s * piece.rate_hz))
+        out.append(runs[keep].astype(np.int64) + a)
+    return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
+
+
+__all__ = ["find_rests", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
+           "START_LOUDER"]

@@ -1,0 +1,136 @@
+r"""Variance components: one variance factor per measurement kind, estimated with the solve.
+
+The noise the solvers use is identified from the record (:mod:`graph_calib.noise`), but each kind of
+factor approximates what that noise does to it (the rotation and encoder factors both carry the gyro's
+noise between a keyframe and a reading, and are treated as independent; a static dwell's scatter floors
+the table's best-read direction; a hand's sway reaches the gravity factors).  Helmert's and Forstner's
+variance component estimation rescales each kind's covariance by its ``chi2 / redundancy``
+(:func:`graph_calib.model.redundancy.fit_statistics`) and solves again, until every factor has settled:
+each kind's ``chi2 / redundancy`` is then 1 and the sigmas follow from the data, neither optimistic nor
+pessimistic.  A kind whose residuals the free attitudes partly absorb answers a factor ``f`` as
+``c / f^a`` with ``a < 1`` (the rotation kind): after the first Helmert step ``a`` is taken from the last
+two solves (a secant in logarithms, ``a`` in ``[MIN_EXPONENT, 1]``), so that two or three solves do.
+
+This is an outer iteration around any registered solver (solve, rescale, re-solve from the previous
+solution), so that it does not depend on a solver's internals; the factors live in the model's
+:class:`graph_calib.model.factors.Noise` (``ModelOptions.variance_factors``), so every solver that then
+solves the problem uses the same ones.  A kind whose redundancy is below :data:`MIN_REDUNDANCY` keeps its
+factor (too few degrees of freedom to estimate one), and so does a kind the caller fixes; no factor goes
+beyond :data:`FACTOR_BOUND` either way.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from graph_calib.model import CalibrationModel
+from graph_calib.model.redundancy import fit_statistics
+from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
+
+#: The kinds that get a factor.
+KINDS = ("rotation", "gravity", "encoder")
+#: Least redundancy of a kind whose factor is estimated.
+MIN_REDUNDANCY = 10.0
+#: The iteration stops when no kind's chi2 / redundancy is further than this from 1.
+TOLERANCE = 0.05
+#: At most this many solves.
+MAX_SOLVES = 5
+#: No factor beyond this (or below its inverse): a record without noise (a noise-free simulation) has no
+#: chi-square to scale by, and factors driven to zero would leave the solvers a singular system.
+FACTOR_BOUND = 100.0
+#: Smallest exponent of a kind's response to its factor used for the step (module doc of the iteration).
+MIN_EXPONENT = 0.25
+
+
+@dataclass(frozen=True)
+class VarianceComponents:
+    """The estimated factors and the problem that carries them.
+
+    Attributes
+    ----------
+    problem : graph_calib.records.problem.Problem
+        The problem with ``ModelOptions.variance_factors`` set.
+    factors : dict of str to float
+        Each kind's variance factor (1 where not estimated).
+    solves : int
+    converged : bool
+        Whether every estimated kind's ``chi2 / redundancy`` came within :data:`TOLERANCE` of 1.
+    history : tuple of dict
+        ``{kind: chi2 / redundancy}`` at each solve.
+    initial : tuple (R, x)
+        The last solution, to warm-start the solvers that follow.
+    """
+
+    problem: object
+    factors: dict
+    solves: int
+    converged: bool
+    history: tuple
+    initial: tuple
+
+
+def with_variance_factors(problem, factors):
+    """``problem`` whose model carries the variance ``factors`` (the same prepared record)."""
+    model = problem.model
+    options = replace(model.options, variance_factors=dict(factors))
+    return replace(problem, model=CalibrationModel.from_record(model.record, options=options))
+
+
+def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fixed=(), progress=None,
+                                 max_solves=MAX_SOLVES, tolerance=TOLERANCE):
+    """Estimate each kind's variance factor by solving, rescaling and solving again (module doc).
+
+    Parameters
+    ----------
+    problem : graph_calib.records.problem.Problem
+    options : graph_calib.options.CalibrationOptions
+    solver : str
+        The registered solver that iterates.
+    fixed : iterable of str
+        Kinds whose factor stays what the problem's options say.
+    progress : callable, optional
+    max_solves : int
+    tolerance : float
+
+    Returns
+    -------
+    VarianceComponents
+    """
+    factors = {k: float(v) for k, v in (problem.model.options.variance_factors or {}).items()}
+    fixed = set(fixed)
+    history = []
+    initial = None
+    converged = False
+    previous = {}                      # kind -> (log factor, log ratio) of the previous solve
+    n = 0
+    for n in range(1, max_solves + 1):
+        out = solve(solver, problem, options=options, progress=progress, initial=initial)
+        initial = (out.attitudes, out.x)
+        st = fit_statistics(problem.model, out.attitudes, out.x)
+        ratios = {k: f.chi2_per_redundancy for k, f in st.kinds.items()
+                  if k in KINDS and k not in fixed and f.redundancy >= MIN_REDUNDANCY and f.chi2 > 0}
+        history.append(dict(ratios))
+        converged = all(abs(v - 1.0) <= tolerance for v in ratios.values())
+        for k, v in ratios.items():
+            if not np.isfinite(v):
+                continue
+            lf, lr = np.log(factors.get(k, 1.0)), np.log(v)
+            # chi2 / redundancy ~ c / factor^a: a kind whose residuals the attitudes partly absorb (a < 1) needs
+            # a larger step than Helmert's (a = 1); a from the last two solves (secant in logs), within bounds
+            a = 1.0
+            if k in previous and abs(lf - previous[k][0]) > 0.05:      # a step large enough to read a from
+                a = float(np.clip(-(lr - previous[k][1]) / (lf - previous[k][0]), MIN_EXPONENT, 1.0))
+            previous[k] = (lf, lr)
+            factors[k] = float(np.clip(np.exp(lf + lr / a), 1.0 / FACTOR_BOUND, FACTOR_BOUND))
+        # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
+        problem = with_variance_factors(problem, factors)
+        if converged:
+            break
+    return VarianceComponents(problem=problem, factors={k: factors.get(k, 1.0) for k in KINDS}, solves=n,
+                              converged=converged, history=tuple(history), initial=initial)
+
+
+__all__ = ["VarianceComponents", "estimate_variance_components", "with_variance_factors", "KINDS",
+           "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_BOUND"]

@@ -1,0 +1,49 @@
+"""Redundancy numbers at a solution: the banded selected inversion against a dense hat matrix."""
+
+import numpy as np
+
+from graph_calib.model.redundancy import _kind_rows, fit_statistics
+from graph_calib.options import CalibrationOptions
+from graph_calib.records.problem import build_problem
+from graph_calib.simulation.scenarios import simulate
+from graph_calib.solvers import solve
+
+
+def test_redundancies_match_a_dense_hat_matrix_and_the_trace_is_the_unknowns():
+    se = simulate("nav-subrange-short", rng=np.random.default_rng(2), hours=0.03).run()[0]
+    opts = CalibrationOptions()
+    p = build_problem(se.experiment, options=opts)
+    out = solve("factor-graph", p, options=opts)
+    m, R, x = p.model, out.attitudes, out.x
+    fs = fit_statistics(m, R, x)
+    rows = _kind_rows(m, R, x)
+    nk, P = R.shape[0], m.layout.size
+    n = 3 * nk + P
+    blocks, names = [], []
+    for name, (r, key, A, B, X) in rows.items():
+        J = np.zeros((3 * r.shape[0], n))
+        for f in range(r.shape[0]):
+            J[3 * f:3 * f + 3, 3 * key[f]:3 * key[f] + 3] += A[f]
+            if B is not None:
+                J[3 * f:3 * f + 3, 3 * key[f] + 3:3 * key[f] + 6] += B[f]
+            J[3 * f:3 * f + 3, 3 * nk:] = X[f]
+        blocks.append(J)
+        names += [name] * (3 * r.shape[0])
+    for k in m.segment_keys:
+        J = np.zeros((3, n))
+        J[:, 3 * k:3 * k + 3] = np.eye(3) / m.initial_attitude_sigma
+        blocks.append(J)
+        names += ["attitude prior"] * 3
+    J = np.zeros((P, n))
+    J[:, 3 * nk:] = np.diag(1.0 / m.prior()[1])
+    blocks.append(J)
+    names += ["prior"] * P
+    J = np.vstack(blocks)
+    h = np.einsum("ij,ij->i", J @ np.linalg.inv(J.T @ J), J)
+    names = np.array(names)
+    assert fs.n_unknowns == n
+    assert abs(h.sum() - n) < 1e-6 * n
+    assert abs(fs.trace - n) < 1e-5 * n
+    for kind, fit in fs.kinds.items():
+        np.testing.assert_allclose(fit.redundancy, np.sum(1.0 - h[names == kind]), rtol=1e-5, atol=1e-6)
+    assert set(fs.kinds) == {"rotation", "gravity", "encoder", "prior"}

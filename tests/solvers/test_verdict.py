@@ -1,0 +1,104 @@
+"""The verdict on made-up results: each kind's limits from its redundancy, the variance factors, the words, exit 3."""
+
+import json
+
+import numpy as np
+import pytest
+
+from graph_calib.records.experiment import Result
+from graph_calib.solvers.verdict import (VARIANCE_FACTOR_LIMIT, kind_limits, verdict_of)
+
+
+def _result(kinds, *, solver="factor-graph", converged=True, source=None, scaled=True):
+    block = {"converged": converged, "kinds": {}, "variance_components": scaled}
+    for kind, (v, nu, vf) in kinds.items():
+        block["kinds"][kind] = {"count": 10, "chi2": v * nu, "redundancy": nu, "chi2_per_redundancy": v,
+                                "variance_factor": vf}
+    src = source or {"gyro": "identified", "accel": "identified", "encoder": "identified"}
+    return Result(source="x.h5", solver=solver, t_ref_degC=20.0, temperature_range_degC=(20.0, 21.0),
+                  effects=(), values={}, sigmas={}, residuals=block, extra={"noise": {"source": src}})
+
+
+def test_limits_follow_the_redundancy():
+    lo1, hi1 = kind_limits(50.0)
+    lo2, hi2 = kind_limits(5000.0)
+    assert lo1 < lo2 < 1.0 < hi2 < hi1
+    assert abs(hi2 - (1 + 3.29 * np.sqrt(2 / 5000))) < 0.01       # the normal approximation at large nu
+
+
+@pytest.mark.parametrize("kind", ["rotation", "gravity", "encoder"])
+@pytest.mark.parametrize("side", ["high", "low"])
+def test_each_kind_either_side_of_each_limit(kind, side):
+    nu = 800.0
+    lo, hi = kind_limits(nu)
+    edge = hi if side == "high" else lo
+    inside = {"rotation": (1.0, 60.0, 1.0), "gravity": (1.0, 900.0, 1.0), "encoder": (1.0, 3000.0, 1.0)}
+    ok = dict(inside, **{kind: (edge * (0.99 if side == "high" else 1.01), nu, 1.0)})
+    bad = dict(inside, **{kind: (edge * (1.01 if side == "high" else 0.99), nu, 1.0)})
+    assert verdict_of({"factor-graph": _result(ok)}).passed
+    v = verdict_of({"factor-graph": _result(bad)})
+    assert not v.passed
+    (problem,) = v.problems
+    assert problem.startswith(f"factor-graph: {kind} chi2/redundancy")
+    assert ("larger than their noise model" if side == "high" else "noise is overstated") in problem
+    assert "RESIDUALS INCONSISTENT WITH THE NOISE MODEL: " + kind in v.text()
+    assert v.text().startswith("verdict: FAIL")
+
+
+@pytest.mark.parametrize("vf, passes", [(VARIANCE_FACTOR_LIMIT * 0.99, True), (VARIANCE_FACTOR_LIMIT * 1.01, False),
+                                         (1 / VARIANCE_FACTOR_LIMIT * 1.01, True), (1 / VARIANCE_FACTOR_LIMIT * 0.99, False)])
+def test_a_variance_factor_far_from_the_identified_noise_fails_naming_the_kind(vf, passes):
+    res = _result({"gravity": (1.0, 900.0, vf), "rotation": (1.0, 60.0, 1.0)})
+    v = verdict_of({"factor-graph": res})
+    assert v.passed == passes, v.problems
+    if not passes:
+        assert "gravity residuals need a variance factor" in v.problems[0]
+        assert "accel" in v.problems[0]
+
+
+def test_a_factor_on_the_grades_noise_is_said_not_failed():
+    res = _result({"gravity": (1.0, 900.0, 50.0)}, source={"accel": "grade", "gyro": "grade", "encoder": "grade"})
+    v = verdict_of({"factor-graph": res})
+    assert v.passed and "variance factor 50" in v.notes[0]
+
+
+def test_the_verdict_of_a_huge_residual_limit_breach_alone_fails_and_exits_three(tmp_path):
+    # converged, one solver: only the residual part can fail it
+    res = _result({"gravity": (1e9, 900.0, 1.0)})
+    v = verdict_of({"factor-graph": res})
+    assert not v.passed and len(v.problems) == 1 and "gravity" in v.problems[0]
+    json.dumps(v.to_json())                      # every figure finite and writable
+
+
+def test_calibrate_exits_three_when_a_kind_does_not_fit(tmp_path, capsys, monkeypatch):
+    from graph_calib.cli import main
+    from graph_calib.solvers import verdict as verdict_module
+    data = tmp_path / "sim"
+    assert main(["simulate", "nav-subrange-short", "--seed", "3", "--hours", "0.05", "--out", str(data)]) == 0
+    (h5,) = data.glob("*.h5")
+    # the limit of every kind made impossible to meet: the same record must now fail, in words, with exit 3
+    monkeypatch.setattr(verdict_module, "kind_limits", lambda nu, **kw: (2.0, 3.0))
+    rc = main(["calibrate", str(h5), "--out", str(tmp_path / "cal"), "--solver", "factor-graph"])
+    out = capsys.readouterr().out
+    assert rc == 3
+    assert "verdict: FAIL" in out and "RESIDUALS INCONSISTENT WITH THE NOISE MODEL" in out
+    assert (tmp_path / "cal" / "factor-graph.json").exists()
+
+
+def test_a_significant_score_test_fails_the_residual_part_naming_the_effect():
+    res = _result({"gravity": (1.0, 900.0, 1.0)})
+    quiet = {"effect": "gyro.g_sensitivity", "statistic": 10.0, "threshold": 26.1, "dof": 9, "significant": False}
+    assert verdict_of({"factor-graph": res}, structure=[quiet]).passed
+    loud = dict(quiet, statistic=1313.0, significant=True)
+    v = verdict_of({"factor-graph": res}, structure=[loud])
+    assert not v.passed
+    assert "the residuals carry gyro.g_sensitivity: score statistic 1.31e+03 > threshold 26.1" in v.problems[0]
+    assert "RESIDUALS CARRY AN EFFECT THE MODEL LACKS: gyro.g_sensitivity" in v.text()
+
+
+def test_without_variance_components_a_kind_below_its_limit_is_a_note():
+    lo, _ = kind_limits(3000.0)
+    res = _result({"encoder": (0.67, 3000.0, 1.0)}, scaled=False)
+    v = verdict_of({"factor-graph": res})
+    assert v.passed and "encoder chi2/redundancy 0.67" in v.notes[0] and lo > 0.67
+    assert not verdict_of({"factor-graph": _result({"encoder": (0.67, 3000.0, 1.0)})}).passed
