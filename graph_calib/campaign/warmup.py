@@ -36,7 +36,7 @@ from numba.core.registry import CPUDispatcher
 KERNEL_MODULES = (
     "graph_calib.navigation.rotations", "graph_calib.sensors.sensor_model", "graph_calib.compensation.calibration", "graph_calib.navigation.strapdown",
     "graph_calib.navigation.static_detection", "graph_calib.model.kernel", "graph_calib.simulation.turntable",
-    "kf_reference.sqrt_kf",
+    "kf_reference.sqrt_kf", "graph_calib.model.redundancy",
 )
 
 #: Length of the warm-up experiment, s (long enough for every code path of the solvers, still tiny).

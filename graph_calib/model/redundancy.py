@@ -34,11 +34,7 @@ import numba
 import numpy as np
 from scipy.linalg import lapack
 
-from graph_calib.model.attitude_elimination import NormalEquations
-
-#: Factors handled at a time (bounds the (F, 3, P) temporaries).
-CHUNK = 8192
-
+from graph_calib.model.normal_equations import linearise
 
 @dataclass(frozen=True)
 class KindFit:
@@ -113,23 +109,13 @@ def _selected_inverse(D, B):
     return Zd, Zo
 
 
-def _kind_rows(model, R, x):
-    """``{kind: (r, key, A, B or None, X)}`` whitened, at ``(R, x)``."""
-    preint = model.preintegrate(x)
-    out = {}
-    kinds = [("rotation", model.rotation_factors(R, preint, x)), ("gravity", model.gravity_factors(R, preint, x))]
-    if model.record.has_valid_readings:
-        kinds.append(("encoder", model.encoder_factors(R, preint, x)))
-    for name, res in kinds:
-        if res.r.shape[0] == 0:
-            continue
-        r, A, B, X = res.whitened_system()
-        out[name] = (r, res.key, A, B, X)
-    return out
-
-
 def fit_statistics(model, attitudes, x):
     """Each kind's count, chi-square and redundancy at the solution ``(attitudes, x)``.
+
+    The information is the one builder's (:func:`graph_calib.model.normal_equations.linearise`: the residual
+    list, its one whitening, the priors as the residuals they are; the attitude priors taken at the solution's
+    own first-keyframe attitudes, whose Jacobian is then ``I / sigma``), its Schur complement the one
+    elimination (:meth:`~graph_calib.model.normal_equations.LinearSystem.reduce`).
 
     Parameters
     ----------
@@ -147,16 +133,15 @@ def fit_statistics(model, attitudes, x):
     x = np.asarray(x, dtype=float)
     P = model.layout.size
     n_keys = R.shape[0]
-    rows = _kind_rows(model, R, x)
-    ne = NormalEquations(n_keys, P)
-    for r, key, A, B, X in rows.values():
-        ne.add_rows(key, r, A, X, B=B)
-    s_att = float(model.initial_attitude_sigma)
-    for k in model.segment_keys:
-        ne.H_aa_diag[int(k)] += np.eye(3) / s_att**2
-    _, prior_sigma = model.prior()
-    ne.H_xx += np.diag(1.0 / prior_sigma**2)
-    schur, _, att = ne.eliminate()
+    rows = {}
+
+    def keep_rows(kind, res, sl, r, A, B, X, cols, ne):
+        rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X))
+
+    prior = model.calibration_prior(x)
+    system = linearise(model, model.preintegrate(x), R, x, R_prior=R[np.asarray(model.segment_keys, dtype=np.int64)],
+                       prior=(prior, np.arange(P)), on_kind=keep_rows)
+    schur, _, att = system.reduce(0.0, definite=False)
     if att.chol is not None:
         W, info = lapack.dtbtrs(att.chol, np.asfortranarray(att.Y[:, :P]), uplo="L", trans="T")
     else:
@@ -164,34 +149,34 @@ def fit_statistics(model, attitudes, x):
     W = np.asarray(W).reshape(n_keys, 3, P)
     S = np.linalg.inv(schur)
     S = 0.5 * (S + S.T)
-    Zd, Zo = _selected_inverse(np.ascontiguousarray(ne.H_aa_diag),
-                               np.ascontiguousarray(ne.H_aa_off) if n_keys > 1 else np.zeros((0, 3, 3)))
+    Zd, Zo = _selected_inverse(np.ascontiguousarray(system.H_aa_diag),
+                               np.ascontiguousarray(system.H_aa_off) if n_keys > 1 else np.zeros((0, 3, 3)))
     w, U = np.linalg.eigh(S)
     L = U * np.sqrt(np.maximum(w, 0.0))          # S = L L^T
     kinds = {}
     trace = 0.0
-    for name, (r, key, A, B, X) in rows.items():
-        h = np.zeros(r.shape)
-        for a in range(0, r.shape[0], CHUNK):
-            b = min(r.shape[0], a + CHUNK)
-            k = key[a:b]
-            Ac = A[a:b]
-            V = Ac @ W[k] - X[a:b]
-            hz = np.einsum("fij,fjl,fil->fi", Ac, Zd[k], Ac)
+    for name, blocks in rows.items():
+        chi2 = redundancy = 0.0
+        count = 0
+        for r, key, A, B, X in blocks:
+            V = A @ W[key] - X
+            h = np.einsum("fij,fjl,fil->fi", A, Zd[key], A)
             if B is not None:
-                Bc = B[a:b]
-                V += Bc @ W[k + 1]
-                hz += 2.0 * np.einsum("fij,fjl,fil->fi", Ac, Zo[k], Bc)
-                hz += np.einsum("fij,fjl,fil->fi", Bc, Zd[k + 1], Bc)
-            h[a:b] = hz + np.sum((V @ L) ** 2, axis=2)
-        trace += float(h.sum())
-        kinds[name] = KindFit(count=int(r.shape[0]), chi2=float(np.sum(r**2)), redundancy=float(np.sum(1.0 - h)))
-    h_prior = np.diag(S) / prior_sigma**2
+                V += B @ W[key + 1]
+                h += 2.0 * np.einsum("fij,fjl,fil->fi", A, Zo[key], B)
+                h += np.einsum("fij,fjl,fil->fi", B, Zd[key + 1], B)
+            h += np.sum((V @ L) ** 2, axis=2)
+            trace += float(h.sum())
+            chi2 += float(np.sum(r**2))
+            redundancy += float(np.sum(1.0 - h))
+            count += int(r.shape[0])
+        kinds[name] = KindFit(count=count, chi2=chi2, redundancy=redundancy)
+    h_prior = np.diag(S) * np.diag(prior.H) ** 2
     trace += float(h_prior.sum())
+    s_att = float(model.initial_attitude_sigma)
     for k in model.segment_keys:
         trace += float(np.trace(Zd[int(k)] + W[int(k)] @ S @ W[int(k)].T)) / s_att**2
-    prior_r = model.calibration_prior(x).r
-    kinds["prior"] = KindFit(count=P, chi2=float(prior_r @ prior_r), redundancy=float(np.sum(1.0 - h_prior)))
+    kinds["prior"] = KindFit(count=P, chi2=float(prior.r @ prior.r), redundancy=float(np.sum(1.0 - h_prior)))
     return FitStatistics(kinds=kinds, n_unknowns=3 * n_keys + P, trace=trace)
 
 
