@@ -316,7 +316,9 @@ def test_to_result_and_progress():
     assert res.temperature_range_degC == (pytest.approx(model.temperatures.min()),
                                           pytest.approx(model.temperatures.max()))
     assert res.effects == model.layout.names
-    assert res.residuals["iterations"] == 2 and set(res.residuals["counts"]) == {"gravity", "encoder"}
+    # every kind of the fit (data-format.md: count, chi2, redundancy), the filter's innovations per measurement kind
+    assert res.residuals["iterations"] == 2 and set(res.residuals["counts"]) == {"rotation", "gravity", "encoder", "prior"}
+    assert all(res.residuals["kinds"][k]["redundancy"] > 0 for k in ("rotation", "gravity", "encoder"))
     assert res.extra["priors"] == model.priors_used()
     with pytest.raises(ValueError, match="max_passes"):
         kf_reference.calibrate(model, q_nb0=Q_IDENTITY, max_passes=0)
