@@ -410,5 +410,6 @@ def test_the_filter_is_converged_only_at_the_batch_cost(monkeypatch):
     assert fr.converged and fr.passes[-1].cost <= graph_cost * (1.0 + 1e-9), (fr.passes[-1].cost, graph_cost)
     monkeypatch.setattr(passes, "COST_REL_TOL", np.inf)          # the step rule alone
     step_only = kf_reference.calibrate(problem.model, q_nb0=problem.q_nb0)
-    assert step_only.converged and step_only.passes[-1].cost > graph_cost * (1.0 + 1e-8)
+    # the step rule alone stops earlier, above the cost the cost rule reaches
+    assert step_only.converged and step_only.passes[-1].cost > fr.passes[-1].cost
     assert step_only.n_passes < fr.n_passes
