@@ -16,7 +16,7 @@ solution), so that it does not depend on a solver's internals; the factors live 
 :class:`graph_calib.model.factors.Noise` (``ModelOptions.variance_factors``), so every solver that then
 solves the problem uses the same ones.  A kind whose redundancy is below :data:`MIN_REDUNDANCY` keeps its
 factor (too few degrees of freedom to estimate one), and so does a kind the caller fixes; no factor goes
-beyond :data:`FACTOR_BOUND` either way.
+below :data:`FACTOR_MIN` or above :data:`FACTOR_MAX`.
 """
 
 from __future__ import annotations
@@ -37,9 +37,11 @@ MIN_REDUNDANCY = 10.0
 TOLERANCE = 0.05
 #: At most this many solves.
 MAX_SOLVES = 5
-#: No factor beyond this (or below its inverse): a record without noise (a noise-free simulation) has no
-#: chi-square to scale by, and factors driven to zero would leave the solvers a singular system.
-FACTOR_BOUND = 100.0
+#: No factor below this: a record without noise (a noise-free simulation) has no chi-square to scale by, and
+#: factors driven to zero would leave the solvers a singular system.
+FACTOR_MIN = 1e-2
+#: No factor above this (100 times the identified sigma): a swaying hand's gravity factors need about 190.
+FACTOR_MAX = 1e4
 #: Smallest exponent of a kind's response to its factor used for the step (module doc of the iteration).
 MIN_EXPONENT = 0.25
 
@@ -123,7 +125,7 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             if k in previous and abs(lf - previous[k][0]) > 0.05:      # a step large enough to read a from
                 a = float(np.clip(-(lr - previous[k][1]) / (lf - previous[k][0]), MIN_EXPONENT, 1.0))
             previous[k] = (lf, lr)
-            factors[k] = float(np.clip(np.exp(lf + lr / a), 1.0 / FACTOR_BOUND, FACTOR_BOUND))
+            factors[k] = float(np.clip(np.exp(lf + lr / a), FACTOR_MIN, FACTOR_MAX))
         # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
         problem = with_variance_factors(problem, factors)
         if converged:
@@ -133,4 +135,4 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
 
 
 __all__ = ["VarianceComponents", "estimate_variance_components", "with_variance_factors", "KINDS",
-           "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_BOUND"]
+           "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]
