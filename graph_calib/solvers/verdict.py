@@ -83,7 +83,8 @@ def judge_kinds(result):
                             f"optimistic by about {v ** 0.5:.2g}x")
         elif v < lo:
             text = (f"{what} < {lo:.3g}: the {kind} residuals are smaller than their noise model; the "
-                    f"{sensor} noise is overstated; sigmas pessimistic by about {v ** -0.5:.2g}x")
+                    f"{sensor} noise is overstated; " + (f"sigmas pessimistic by about {v ** -0.5:.2g}x" if v > 0 else
+                                                          "the residuals are zero (no noise at all)"))
             # without variance factors the kinds' approximations (module doc) keep a right model below 1: said
             (problems if scaled else notes).append(text + ("" if scaled else " (no variance components estimated)"))
         if vf != 1.0:

@@ -80,7 +80,10 @@ def test_python_calibrate_with_the_third_solver(third_solver, record):
     x, _ = run.problem.model.prior()
     assert list(run.results) == [NAME] and run.comparison is None
     assert np.allclose(list(run.results[NAME].values.values()), x)
-    assert run.verdict.passed and run.results[NAME].extra["verdict"]["passed"]
+    # the prior is no calibration of these data: the residual test says so, in the verdict and in the file
+    assert run.verdict.converged == {NAME: True} and not run.verdict.passed
+    assert run.results[NAME].extra["verdict"]["passed"] is False
+    assert any("chi2/redundancy" in p for p in run.verdict.problems), run.verdict.problems
     # beside the factor graph: compared with it (the prior is far from the data's answer: they disagree)
     both = calibrate(exp, options=CalibrationOptions(), solvers=registry.parse_choice(f"{NAME}+factor-graph")[0])
     assert both.comparison["solvers"] == ["factor-graph", NAME]
@@ -88,10 +91,11 @@ def test_python_calibrate_with_the_third_solver(third_solver, record):
 
 
 def test_calibrate_command_with_the_third_solver(third_solver, record, tmp_path, capsys):
-    assert main(["calibrate", str(record), "--out", str(tmp_path), "--solver", NAME]) == 0
+    # the work finishes (exit 3, not 1 or 2): its file written, its verdict failed on the residuals
+    assert main(["calibrate", str(record), "--out", str(tmp_path), "--solver", NAME]) == 3
     res = io.read_result(tmp_path / f"{NAME}.json")
     assert res.solver == NAME and not (tmp_path / "comparison.json").exists()
-    assert "verdict: pass" in capsys.readouterr().out
+    assert "verdict: FAIL" in capsys.readouterr().out
 
 
 def test_an_unregistered_solver_is_refused_with_exit_2(record, tmp_path, capsys):
@@ -129,11 +133,11 @@ def test_campaign_command_with_the_third_solver(third_solver, small_campaign, tm
     out = tmp_path / "camp"
     rc = main(["campaign", str(small_campaign), "--out", str(out), "--workers", "0", "--solver", NAME,
                "--no-report", "--quiet"])
-    assert rc == 0
+    assert rc == 3                                   # computed, and the prior fails the residual test
     doc = _json(out / "campaign.json")
     assert doc["solvers"] == [NAME] and doc["primary_solver"] == NAME
     for e in doc["experiments"]:
-        assert e["results"][NAME]["status"] == "computed" and e["verdict"]["passed"]
+        assert e["results"][NAME]["status"] == "computed" and e["verdict"]["passed"] is False
         assert io.read_result(out / e["results"][NAME]["file"]).solver == NAME
         assert e["loop"] is not None                 # the closed loop ran (the graph tests, the prior is run)
 
