@@ -29,8 +29,8 @@ def main(argv=None):
     from graph_calib.cli import main as cli
 
     work = Path(args.work)
-    return cli(["compare", *(str(Path("data/programs") / p) for p in PROCEDURES), "--soak-h", *SOAKS_H,
-                "--simulate", str(args.realisations), "--simulate-at", *SIMULATE_AT, "--work", str(work / "simulated"),
+    return cli(["compare", *(str(Path("data/programs") / p) for p in PROCEDURES), *(a for h in SOAKS_H for a in ("--soak-h", h)),
+                "--simulate", str(args.realisations), *(a for s in SIMULATE_AT for a in ("--simulate-at", s)), "--work", str(work / "simulated"),
                 "--out", str(work / "out"), "--markdown", "docs/study.md", "--notes", "docs/study-notes.md"])
 
 

@@ -1,4 +1,4 @@
-"""``graph-calib compare PROCEDURE.toml PROCEDURE.toml [...] --out DIR [--soak-h H ...] [--simulate N ...]``.
+"""``graph-calib compare PROCEDURE.toml PROCEDURE.toml [...] --out DIR [--soak-h H]... [--simulate N --simulate-at NAME:HOURS]...``.
 
 Campaign procedures compared on predicted accuracy against campaign duration
 (:mod:`graph_calib.design.comparison`; the procedures: :mod:`graph_calib.design.procedures`), optionally
@@ -26,16 +26,16 @@ def add_arguments(p):
                    help="two or more campaign procedures (docs/study.md, data/programs/procedure-*.toml); the "
                         "first is the reference of the equal-accuracy ratios")
     p.add_argument("--out", required=True, help="output folder (comparison.json, report.html)")
-    p.add_argument("--soak-h", type=float, nargs="+", default=None, metavar="H",
-                   help="soak times of the step procedures, h (default: each procedure's own)")
+    p.add_argument("--soak-h", type=float, action="append", default=None, metavar="H",
+                   help="a soak time of the step procedures, h (repeatable; default: each procedure's own)")
     p.add_argument("--range-degc", type=float, nargs=2, default=(-10.0, 50.0), metavar=("LOW", "HIGH"),
                    help="temperature range the stitched curves are judged over, degC (default -10 50)")
     p.add_argument("--draws", type=int, default=40, help="truth curves drawn from the family (default 40)")
     p.add_argument("--seed", type=int, default=1, help="seed of the truth draws and of the simulations (default 1)")
     p.add_argument("--simulate", type=int, default=0, metavar="N",
                    help="also simulate and calibrate N realisations of the campaigns named by --simulate-at")
-    p.add_argument("--simulate-at", nargs="+", default=[], metavar="NAME:HOURS",
-                   help="campaigns to simulate, e.g. steps:0.25 ramp:0.25 ramp:0.5 (hours recorded per experiment)")
+    p.add_argument("--simulate-at", action="append", default=[], metavar="NAME:HOURS",
+                   help="a campaign to simulate, NAME:HOURS (hours recorded per experiment; repeatable), e.g. steps:0.25")
     p.add_argument("--markdown", default=None, metavar="PAGE.md",
                    help="also write the study page (Markdown; its figures in figures/ beside it), e.g. docs/study.md")
     p.add_argument("--notes", default=None, metavar="NOTES.md",
@@ -60,7 +60,7 @@ def _check(args):
     if args.simulate < 0:
         raise InputError(f"must not be negative, got {args.simulate}", dataset="--simulate")
     if args.simulate and not args.simulate_at:
-        raise InputError("name the campaigns to simulate (NAME:HOURS ...)", dataset="--simulate-at")
+        raise InputError("name the campaigns to simulate (--simulate-at NAME:HOURS, repeatable)", dataset="--simulate-at")
     at = {}
     for item in args.simulate_at:
         name, _, hours = item.partition(":")
@@ -123,7 +123,7 @@ def _command_line(args):
     """The command line that reproduces this comparison (quoted on the study page)."""
     parts = ["graph-calib compare", *args.procedures]
     if args.soak_h is not None:
-        parts += ["--soak-h", *(f"{w:g}" for w in args.soak_h)]
+        parts += [a for w in args.soak_h for a in ("--soak-h", f"{w:g}")]
     if tuple(args.range_degc) != (-10.0, 50.0):
         parts += ["--range-degc", *(f"{v:g}" for v in args.range_degc)]
     if args.draws != 40:
@@ -131,7 +131,7 @@ def _command_line(args):
     if args.seed != 1:
         parts += ["--seed", str(args.seed)]
     if args.simulate:
-        parts += ["--simulate", str(args.simulate), "--simulate-at", *args.simulate_at]
+        parts += ["--simulate", str(args.simulate), *(a for s in args.simulate_at for a in ("--simulate-at", s))]
     parts += ["--out", str(args.out), "--markdown", str(args.markdown)]
     if args.notes:
         parts += ["--notes", str(args.notes)]

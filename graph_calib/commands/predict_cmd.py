@@ -35,7 +35,7 @@ def add_arguments(p):
                    help="accelerometer velocity random walk, m/s^2/sqrt(Hz) (default as --gyro-noise)")
     p.add_argument("--encoder-noise", type=float, default=None, metavar="RAD",
                    help="encoder reading noise, rad (default: the grade's)")
-    p.add_argument("--effect", "--effects", dest="effect", action="extend", nargs="+", default=[], metavar="NAME",
+    p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="further effects of model.md to include (repeatable)")
     p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")

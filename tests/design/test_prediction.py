@@ -138,7 +138,7 @@ def test_predict_command_writes_the_result_layout(short_file, tmp_path):
     # a further effect enlarges the layout and can only lose accuracy on the declared elements
     out2 = tmp_path / "with_effect.json"
     assert main(["predict", str(short_file), "--out", str(out2), "--grade", "navigation",
-                 "--effects", "accel.bias_dtdt"]) == 0
+                 "--effect", "accel.bias_dtdt"]) == 0
     est2 = json.loads(out2.read_text())["estimates"]
     assert "accel.bias_dtdt.x" in est2 and set(est) < set(est2)
     assert all(est2[n]["sigma"] >= est[n]["sigma"] * (1 - 1e-9) for n in est)
