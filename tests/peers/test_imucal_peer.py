@@ -13,6 +13,9 @@ from graph_calib.options import CalibrationOptions
 
 from imucal_peer import imucal_ferraris
 
+#: Comparative runs of whole sessions (several calibrations each): the slow tier.
+pytestmark = pytest.mark.slow
+
 CONSUMER = CalibrationOptions(model=ModelOptions(grade="consumer"))
 
 
