@@ -69,7 +69,9 @@ def residual_block(output, *, statistics=None):
 def noise_block(model):
     """The result's ``noise`` block (data-format.md): the densities the solve used and where each came from.
 
-    ``gyro_rad_per_sqrt_s``, ``accel_mps_per_sqrt_s``, ``encoder_rad``, ``sway_mps2``; ``source`` per sensor
+    ``gyro_rad_per_sqrt_s``, ``accel_mps_per_sqrt_s``, ``encoder_rad``, ``sway_mps2``; the rate random walks
+    ``gyro_random_walk_rad_per_s_per_sqrt_s`` and ``accel_random_walk_mps2_per_sqrt_s`` where the rests support
+    them; ``source`` per sensor
     (``identified`` from the record, ``declared`` by the user, or the ``grade``'s); and, where the record
     showed them, ``identified``: per sensor the IEEE terms with their sigmas and the channels that support
     them, the keyframe density with its sigma and the rest time behind it (docs/model.md, "Noise from the
@@ -87,6 +89,13 @@ def noise_block(model):
            "source": src}
     if o.noise_identified:
         out["identified"] = o.noise_identified
+        # the rate random walks where the rests support them (the bias's random walk of Kalibr's and OpenVINS's
+        # files): the IEEE term's RMS over the channels, rad/s/sqrt(s) and m/s^2/sqrt(s)
+        for sensor, key in (("gyro", "gyro_random_walk_rad_per_s_per_sqrt_s"),
+                            ("accel", "accel_random_walk_mps2_per_sqrt_s")):
+            term = (o.noise_identified.get(sensor) or {}).get("rate_random_walk")
+            if term and term.get("supported"):
+                out[key] = float(term["value"])
     return out
 
 
