@@ -211,3 +211,25 @@ def test_a_one_subrange_campaign_reports_its_boundaries_as_not_checked():
                sigmas={"gyro.bias.x": 1e-9, "gyro.bias_tc.x": 1e-10})
     sm = stitch([r], names=["only"]).boundary_summary()
     assert sm["checks"] == 0 and sm["checked"] is False
+
+
+def _truth_document(max_z_per_result, rms=1.0, n=39):
+    exps = []
+    for i, z in enumerate(max_z_per_result):
+        a = {"rms_z": rms, "max_abs_z": z, "worst": "accel.scale_tc.x", "fraction_within_3sigma": 1.0, "n": n}
+        exps.append({"name": f"sub{i + 1}", "loop": {"error_vs_truth": {"factor-graph": {"after": a}}}})
+    return {"experiments": exps}
+
+
+def test_the_subranges_truth_check_is_calibrated_for_many_elements():
+    from graph_calib.campaign.checks import _truth_checks
+
+    # one element at 3.0 sigma among 6 x 39: what a right model shows more often than not, passes
+    (ok,) = _truth_checks(_truth_document([2.1, 2.5, 3.0, 2.2, 1.9, 2.4]))
+    assert ok["passed"] and "limit 4.2" in ok["text"]
+    # one at 5 sigma fails, naming it
+    (bad,) = _truth_checks(_truth_document([2.1, 2.5, 5.0, 2.2, 1.9, 2.4]))
+    assert not bad["passed"] and "sub3 accel.scale_tc.x 5.0 sigma" in bad["text"]
+    # an RMS normalised error of 1.3 over 234 elements fails (its chi-square limit is about 1.12)
+    (wide,) = _truth_checks(_truth_document([2.0] * 6, rms=1.3))
+    assert not wide["passed"] and "RMS normalised error 1.30" in wide["text"]
