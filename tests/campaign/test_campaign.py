@@ -319,7 +319,7 @@ def _write(path, text):
     ("not-hdf5", r"junk\.h5: not an HDF5 file"),
     ("missing-validation", r"--validate: validation record not found"),
     ("bad-workers", r"--workers: must be 0 or more"),
-    ("out-is-file", r"--out: exists and is not a folder"),
+    ("out-is-file", r"--out: is a file; it names the folder to write into"),
 ])
 def test_bad_input_gives_one_clear_error(case, pattern, simulated, tmp_path, capsys):
     good = simulated / "sub1_m10_0.h5"
