@@ -16,6 +16,7 @@ from graph_calib import io
 from graph_calib.design.comparison import compare
 from graph_calib.design.comparison_check import simulated_check
 from graph_calib.design.procedures import read_procedure
+from graph_calib.commands.paths import make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.reports.comparison_report import comparison_report_html
 from graph_calib.reports.comparison_study import comparison_markdown
@@ -88,11 +89,7 @@ def run(args):
             if not any(abs(L - k) < 1e-6 for k in proc.lengths()):
                 raise InputError(f"{name}: {L / 3600:g} h is not one of its lengths "
                                  f"({', '.join(f'{k / 3600:g}' for k in proc.lengths())} h)", dataset="--simulate-at")
-    out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create the output folder: {exc}", path=out) from None
+    out = make_output_folder(args.out)
 
     def progress(msg):
         print(msg, file=sys.stderr, flush=True)

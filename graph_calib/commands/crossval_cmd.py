@@ -14,6 +14,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import calibrate
 from graph_calib.commands.calibrate_cmd import options_from_args
+from graph_calib.commands.paths import make_output_folder, output_folder
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.diagnosis import DiagnosisOptions, diagnose
 from graph_calib.errors import InputError
@@ -49,9 +50,7 @@ def run(args):
     if args.folds < 2:
         raise InputError("must be at least 2", dataset="--folds")
     options_from_args(args)                       # bad arguments refused before the file is read
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise InputError("names a file, not a folder", path=out, dataset="--out")
+    out = output_folder(args.out)
     exp = io.read_experiment(path)
     grade = args.grade
     if grade is None:
@@ -74,7 +73,7 @@ def run(args):
 
     cv = cross_validate(exp, fit=fit, folds=args.folds, by=args.by,
                         progress=lambda line: print(line, file=sys.stderr))
-    out.mkdir(parents=True, exist_ok=True)
+    make_output_folder(out)
     doc = {**cv.to_json(), "source": path.name, "solver": solver, "grade": grade, "diagnose": bool(args.diagnose)}
     io.atomic_write_json(out / "crossval.json", doc)
     print(crossval_table(cv))

@@ -8,13 +8,12 @@ CasADi/IPOPT on a reduced model, every candidate verified with the full predicti
 from __future__ import annotations
 
 import sys
-from pathlib import Path
 
 import numpy as np
 
 from graph_calib import io
 from graph_calib.constants import RS_TO_DH
-from graph_calib.errors import InputError
+from graph_calib.commands.paths import make_output_folder
 from graph_calib.design.prediction import prediction_result
 from graph_calib.design.program_search import DesignSpec, design, design_document, read_spec
 from graph_calib.reports.design_report import design_report_html
@@ -38,11 +37,7 @@ def run(args):
         baseline = read_program(args.baseline)
     else:
         baseline = scenario_program(simulate("nav-subrange", rng=np.random.default_rng(7)), name="nav-subrange")
-    out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create the output folder: {exc}", path=out) from None
+    out = make_output_folder(args.out)
 
     def progress(msg):
         print(msg, file=sys.stderr, flush=True)

@@ -15,6 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 from graph_calib.commands.model_options import add_sway, sway_of
+from graph_calib.commands.paths import make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.commands.calibrate_cmd import solver_choice
@@ -106,10 +107,7 @@ def run(args):
     calibration_options, diagnosis_options = _options(args, grade=choice.grade if choice else "navigation")
     truth, tp = _truth(args, path)
     out = Path(args.out)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise InputError(f"cannot create the output folder: {exc}", path=out) from None
+    make_output_folder(out)
 
     def say(msg):
         print(f"  {msg}", file=sys.stderr)

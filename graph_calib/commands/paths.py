@@ -48,4 +48,14 @@ def output_folder(path, *, option="--out"):
     return path
 
 
-__all__ = ["output_file", "output_folder"]
+def make_output_folder(path, *, option="--out"):
+    """Create the output folder ``path`` (checked by :func:`output_folder` first); one clear error if it cannot be."""
+    path = output_folder(path, option=option)
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"cannot create the output folder: {exc}", path=path, dataset=option) from None
+    return path
+
+
+__all__ = ["output_file", "output_folder", "make_output_folder"]
