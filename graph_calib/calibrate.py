@@ -12,10 +12,12 @@ alignment) is built once and solved by each (:func:`graph_calib.solvers.orchestr
 
 from __future__ import annotations
 
-from graph_calib.options import CalibrationOptions
 from dataclasses import replace
 
+from threadpoolctl import threadpool_limits
+
 from graph_calib.model.calibration_model import reusing_preintegrations
+from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.solvers.orchestration import CalibrationRun, judge, run_solvers
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER, primary_of
@@ -44,8 +46,10 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     CalibrationRun
     """
     solvers = tuple(solvers)
-    # one record solved several times: a preintegration at a point just solved is not formed again
-    with reusing_preintegrations():
+    # one record solved several times: a preintegration at a point just solved is not formed again; BLAS on one
+    # thread (as inside each solve) also for the fit statistics and the structure tests between the solves:
+    # their products are small, and OpenBLAS's threads spin against each other (docs/performance.md)
+    with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):
         initial = None
         if options.variance_components:
             # one variance factor per measurement kind, estimated with the primary solver (solvers/variance.py);
