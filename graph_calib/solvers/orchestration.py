@@ -103,8 +103,9 @@ def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, i
     on_start : callable, optional
         ``on_start(name)`` before each solver is run here (a campaign's job starts its clock there).
     on_output : callable, optional
-        ``on_output(name, output)`` as each solver's output is here, before its result is made; run
-        concurrently, the one solved here is passed on while the other still runs in its worker.
+        ``on_output(name, output)`` as each solver run here returns (not those of ``outputs``), before its
+        result is made; run concurrently, the one solved in this process is passed on while the other still
+        runs in its worker.
     on_solved : callable, optional
         ``on_solved(name, output, result)`` as each solver's result is made (before the verdict: a campaign
         writes its task files there); an exception it raises counts as that solver's.
