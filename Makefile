@@ -33,7 +33,8 @@ bench: $(STAMP)
 clean:
 	rm -rf $(VENV) demo-out .pytest_cache build *.egg-info
 
-# numba's compiled kernels (docs/performance.md): a cached kernel is checked against its own file only, so
-# after editing a module whose kernels others call or inline (sensor_model.py, rotations.py), delete them all.
+# numba's compiled kernels (docs/performance.md): each cached kernel is stamped with its own source and the sources
+# it depends on (graph_calib/kernel_cache.py), so an edited sensor_model.py or rotations.py recompiles the kernels
+# that call or inline it by itself; this target only frees the disk or forces a full recompile.
 clean-cache:
 	find graph_calib kf_reference \( -name '*.nbi' -o -name '*.nbc' \) -delete

@@ -7,7 +7,9 @@ command is timed whole (``python -m graph_calib.cli calibrate``, a fresh process
 on-disk cache: warm), and its parts in this process: start-up (importing the command and building its
 parser, in a fresh process), reading, the grade choice, ``build_problem`` (static detection, alignment,
 the plausibility check, the model), each solver (seconds, iterations, preintegrations), both at once as
-the command runs them (``solve_pair``: the filter in a forked worker) and writing.
+the command runs them (``solve_pair``: the filter in a forked worker), the variance components (the
+primary solver's solves, ``solvers/variance.py``), the structure tests at the solution
+(``diagnosis/structure.py``) and writing.
 Figures in docs/performance.md, 'calibrate on the Xsens session'.
 """
 
@@ -30,6 +32,11 @@ from graph_calib.model import CalibrationModel
 from graph_calib.options import CalibrationOptions, ModelOptions
 from graph_calib.solvers import solve, to_result
 from graph_calib.solvers.concurrent import solve_pair
+from graph_calib.solvers.registry import PRIMARY_SOLVER
+from graph_calib.solvers.variance import estimate_variance_components
+from graph_calib.diagnosis.structure import structure_tests
+from graph_calib.model.calibration_model import reusing_preintegrations
+from threadpoolctl import threadpool_limits
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = ROOT.parent / "shared" / "data" / "real" / "imu_tk_xsens"
@@ -88,6 +95,11 @@ def main():
         CalibrationModel.preintegrate = original
         _, t_pair = timed("both at once (solve_pair)", lambda: solve_pair(("sqrt-kf", "factor-graph"), problem,
                                                                          options=opts))
+        with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):     # as calibrate runs them
+            vc, t_vc = timed("variance components", lambda: estimate_variance_components(
+                problem, options=opts, solver=PRIMARY_SOLVER))
+            print(f"  {vc.solves} solves, converged {vc.converged}")
+            _, t_structure = timed("structure tests", lambda: structure_tests(vc.problem, solved[PRIMARY_SOLVER][0]))
         _, t_write = timed("results written", lambda: [io.write_result(to_result(problem.model, o),
                                                                        Path(d) / f"{s}.json")
                                                        for s, (o, _, _) in solved.items()])
@@ -98,6 +110,8 @@ def main():
     for s, (o, el, n) in solved.items():
         report(f"{s}_s", el, "s", f"{s} solve ({o.iterations} iterations, {n} preintegrations)")
     report("both_at_once_s", t_pair, "s", "both solvers at once, the filter in a forked worker (calibrate's way)")
+    report("variance_components_s", t_vc, "s", f"variance components ({vc.solves} solves of {PRIMARY_SOLVER})")
+    report("structure_tests_s", t_structure, "s", "structure tests at the solution (one linearisation)")
 
 
 if __name__ == "__main__":

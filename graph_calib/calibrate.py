@@ -12,9 +12,12 @@ alignment) is built once and solved by each (:func:`graph_calib.solvers.orchestr
 
 from __future__ import annotations
 
-from graph_calib.options import CalibrationOptions
 from dataclasses import replace
 
+from threadpoolctl import threadpool_limits
+
+from graph_calib.model.calibration_model import reusing_preintegrations
+from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.solvers.orchestration import CalibrationRun, judge, run_solvers
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER, primary_of
@@ -43,19 +46,37 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     CalibrationRun
     """
     solvers = tuple(solvers)
-    if options.variance_components:
-        # one variance factor per measurement kind, estimated with the primary solver (solvers/variance.py)
-        problem = estimate_variance_components(problem, options=options, solver=primary_of(solvers),
-                                               fixed=tuple(problem.model.options.variance_factors or ()),
-                                               progress=progress).problem
-    run = run_solvers(problem, options=options, solvers=solvers, progress=progress, concurrent=concurrent,
-                      stamp=not options.structure_tests)
+    # one record solved several times: a preintegration at a point just solved is not formed again; BLAS on one
+    # thread (as inside each solve) also for the fit statistics and the structure tests between the solves:
+    # their products are small, and OpenBLAS's threads spin against each other (docs/performance.md)
+    with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):
+        initial = None
+        if options.variance_components:
+            # one variance factor per measurement kind, estimated with the primary solver (solvers/variance.py);
+            # the primary solver's final solve starts from its last solution (the factors' last rescale moves
+            # the solution to second order only), every other solver from its own start
+            primary = primary_of(solvers)
+            vc = estimate_variance_components(problem, options=options, solver=primary,
+                                              fixed=tuple(problem.model.options.variance_factors or ()),
+                                              progress=progress)
+            problem, initial = vc.problem, {primary: vc.initial}
+        tests = {}
+
+        def structure_of(name, output):
+            """The structure tests at the primary solver's solution, as soon as it is solved (with two solvers
+            run concurrently, while the other still runs)."""
+            if options.structure_tests and name == primary_of(solvers):
+                # the diagnosis package only when it is used: `calibrate --help` and a run without the tests
+                # import none of it
+                from graph_calib.diagnosis.structure import structure_tests
+
+                tests[name] = structure_tests(problem, output)
+
+        run = run_solvers(problem, options=options, solvers=solvers, progress=progress, concurrent=concurrent,
+                          initial=initial, on_output=structure_of, stamp=not options.structure_tests)
     if not options.structure_tests:
         return run
-    # the diagnosis package only when it is used: `calibrate --help` and a run without the tests import none of it
-    from graph_calib.diagnosis.structure import structure_tests
-
-    structure = structure_tests(problem, run.outputs[primary_of(tuple(run.outputs))])
+    structure = tests[primary_of(solvers)]
     results, comparison, verdict = judge(run.results, order=solvers, structure=structure)
     return replace(run, results=results, comparison=comparison, verdict=verdict)
 

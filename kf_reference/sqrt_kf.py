@@ -36,6 +36,10 @@ from __future__ import annotations
 import numba
 import numpy as np
 
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
+
 #: The attitude error (right perturbation of the keyframe attitude, body axes), rad.
 ATT = slice(0, 3)
 #: Offset of the calibration error ``dx`` in the state.

@@ -18,6 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 #: Layer of each module (longest matching prefix wins), as drawn in docs/architecture.md.
 LAYERS = {
     "graph_calib.constants": 0, "graph_calib.errors": 0, "graph_calib.navigation.rotations": 0, "graph_calib.records.experiment": 0,
+    "graph_calib.kernel_cache": 0,           # numba's cache stamped with the kernels' dependencies: imports nothing of the package
     "graph_calib": 0,                         # the package root: conventions docstring and version only
     "graph_calib.sensors.effects": 1,
     "graph_calib.sensors.params": 2, "graph_calib.sensors.sensor_model": 2,

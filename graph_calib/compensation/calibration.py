@@ -64,6 +64,9 @@ from graph_calib.errors import InputError
 from graph_calib.model import ModelOptions, PreparedRecord
 from graph_calib.sensors.params import Layout, split_element_name
 from graph_calib.sensors.sensor_model import correct_sample, sample_features, term_rows
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
 
 #: ``format`` of a calibration document.
 CALIBRATION_FORMAT = "imu-calibration-coefficients"

@@ -27,40 +27,42 @@ Modules, from the data up:
   :class:`Diagnosis` with ``to_json``);
 - :mod:`graph_calib.diagnosis.loop`: :func:`diagnose`, the loop as a sequence of steps, and
   :func:`diagnose_from`, the loop continued on a model grown from outside (a campaign's pooled test).
+
+The package's names are its modules' and load with the first use of each (PEP 562's module
+``__getattr__``): ``calibrate``'s structure tests (:mod:`graph_calib.diagnosis.structure`) import only
+what they use, not the loop and its ``scipy.stats`` and ``scipy.interpolate``.
 """
 
-from graph_calib.diagnosis.drivers import (
-    DRIVER_GROUPS,
-    RATE_SIGN_DEADBAND,
-    REGRESSION_DRIVERS,
-    SENSOR_AXES,
-    TIME_SEGMENTS,
-    Driver,
-    driver_series,
-    keyframe_context,
-    time_basis,
-)
-from graph_calib.diagnosis.loop import diagnose, diagnose_from
-from graph_calib.diagnosis.rounds import (
-    CandidateTest,
-    Diagnosis,
-    DiagnosisOptions,
-    DriverTest,
-    Round,
-    Stage,
-)
-from graph_calib.diagnosis.reduced_system import ReducedSystem, linearise
-from graph_calib.diagnosis.residuals import (
-    error_against_truth,
-    ljung_box,
-    regression_tests,
-    residual_rms,
-    residual_statistics,
-)
-from graph_calib.diagnosis.score import Score, log10_chi2_sf, score_test
+import importlib
+
+#: Each public name and the module that defines it.
+_WHERE = {
+    **dict.fromkeys(("DRIVER_GROUPS", "RATE_SIGN_DEADBAND", "REGRESSION_DRIVERS", "SENSOR_AXES", "TIME_SEGMENTS",
+                     "Driver", "driver_series", "keyframe_context", "time_basis"), "drivers"),
+    **dict.fromkeys(("diagnose", "diagnose_from"), "loop"),
+    **dict.fromkeys(("CandidateTest", "Diagnosis", "DiagnosisOptions", "DriverTest", "Round", "Stage"), "rounds"),
+    **dict.fromkeys(("ReducedSystem", "linearise"), "reduced_system"),
+    **dict.fromkeys(("error_against_truth", "ljung_box", "regression_tests", "residual_rms", "residual_statistics"),
+                    "residuals"),
+    **dict.fromkeys(("Score", "log10_chi2_sf", "score_test"), "score"),
+}
+
+
+def __getattr__(name):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__():
+    return sorted(set(globals()) | set(_WHERE))
+
 
 __all__ = ["diagnose", "diagnose_from", "DiagnosisOptions", "Diagnosis", "Stage", "Round", "CandidateTest", "DriverTest",
            "Driver", "driver_series", "time_basis", "keyframe_context", "DRIVER_GROUPS", "SENSOR_AXES",
            "REGRESSION_DRIVERS", "RATE_SIGN_DEADBAND", "TIME_SEGMENTS", "ReducedSystem", "linearise", "Score",
-           "score_test", "log10_chi2_sf", "ljung_box", "regression_tests", "residual_statistics", "residual_rms",
+           "score_test", "log10_chi2_sf", "ljung_box", "regression_tests", "residual_rms", "residual_statistics",
            "error_against_truth"]

@@ -12,7 +12,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.interpolate import BSpline
 
 #: Sensor axes a generic driver is placed on (as a bias), in order.
 SENSOR_AXES = ("gyro.x", "gyro.y", "gyro.z", "accel.x", "accel.y", "accel.z")
@@ -73,6 +72,8 @@ def time_basis(t, n):
     u = (np.asarray(t, dtype=float) - t[0]) / max(float(t[-1] - t[0]), 1e-12)
     inner = np.linspace(0.0, 1.0, n - k + 1)
     knots = np.concatenate([np.zeros(k), inner, np.ones(k)])
+    from scipy.interpolate import BSpline       # loaded when used
+
     return BSpline.design_matrix(np.clip(u, 0.0, 1.0), knots, k).toarray()
 
 

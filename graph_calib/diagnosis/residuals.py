@@ -12,7 +12,7 @@
 from __future__ import annotations
 
 import numpy as np
-from scipy import stats
+from scipy.special import chdtrc
 
 from graph_calib.sensors import effects
 from graph_calib.diagnosis.drivers import keyframe_context
@@ -96,7 +96,7 @@ def ljung_box(y, lags=10):
         rho = np.sum(yc[k:] * yc[:-k], axis=0) / den
         Q += rho**2 / (n - k)
     Q *= n * (n + 2)
-    return Q, stats.chi2.sf(Q, h), h
+    return Q, chdtrc(h, Q), h                # scipy.stats.chi2.sf
 
 
 
@@ -132,6 +132,8 @@ def regression_tests(series, ctx, *, key, static=None):
     n = y_all.shape[0]
     if n < 20:
         return out
+    from scipy import stats        # loaded when used (calibrate's structure tests need none of it)
+
     for group in ctx:
         X = _regressors(ctx, group, key)
         X = X[:, np.std(X, axis=0) > 0]

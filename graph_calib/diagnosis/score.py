@@ -33,8 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 import scipy.linalg as sla
-from scipy import stats
-from scipy.special import gammaln
+from scipy.special import chdtrc, gammaln
 
 from graph_calib.model.normal_equations import add_prior
 
@@ -73,7 +72,7 @@ class Score:
     S: np.ndarray | None = None
 
     def p_value(self):
-        return float(stats.chi2.sf(self.statistic, self.dof)) if self.dof else 1.0
+        return float(chdtrc(self.dof, self.statistic)) if self.dof else 1.0     # scipy.stats.chi2.sf
 
     def log10_p(self):
         """``log10`` of the p-value (finite far into the tail, where the p-value underflows)."""
@@ -84,6 +83,8 @@ def log10_chi2_sf(T, k):
     """``log10 P(chi^2_k > T)``; for huge ``T`` the leading term of the asymptotic series."""
     if k <= 0:
         return 0.0
+    from scipy import stats        # loaded when used (calibrate's structure tests need none of it)
+
     v = stats.chi2.logsf(T, k)
     if np.isfinite(v):
         return float(v / np.log(10.0))

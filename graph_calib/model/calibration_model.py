@@ -8,6 +8,7 @@ two prior residuals, so that the equations are written once.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from dataclasses import replace
 
 import numpy as np
@@ -43,6 +44,34 @@ def gyrocompass_attitude_sigma(options, *, latitude_rad):
     horizontal = float(np.hypot(*_omega_ie_n(latitude_rad)[:2]))
     bias = float(np.max((options.prior_sigma or {}).get("gyro.bias", g.prior_sigma["gyro.bias"])))
     return float(min(np.pi, max(TABLE_ALIGNMENT_SIGMA, bias / max(horizontal, 1e-12))))
+
+
+#: How many preintegrations :func:`reusing_preintegrations` holds (the last ones formed).
+REUSED_PREINTEGRATIONS = 2
+
+_REUSE = []    # the held preintegrations while a ``reusing_preintegrations`` block runs (else empty, off)
+
+
+@contextmanager
+def reusing_preintegrations():
+    """Within the block, :meth:`CalibrationModel.preintegrate` of a point it has just formed returns that one.
+
+    A preintegration depends on the prepared record, the layout, ``n_newton`` and the calibration ``x`` only
+    (not on the noise or the variance factors), so the solves of one record one after the other (the
+    variance components' solves, each warm-started from the last solution, and the fit statistics at each
+    solution: :mod:`graph_calib.solvers.variance`) need not form the same one again.  The last
+    :data:`REUSED_PREINTEGRATIONS` formed are held (strongly: for a 3 h record 0.2 GB each) until the block
+    ends, so it is meant for a single record's calibration, not for a campaign's workers.  Blocks nest; the
+    outermost one frees them.
+    """
+    outer = bool(_REUSE)
+    if not outer:
+        _REUSE.append([])
+    try:
+        yield
+    finally:
+        if not outer:
+            _REUSE.clear()
 
 
 class CalibrationModel:
@@ -285,8 +314,22 @@ class CalibrationModel:
     # -- preintegration and attitudes ----------------------------------------
 
     def preintegrate(self, x):
-        """Preintegrate every keyframe and encoder reading at calibration ``x`` (P,)."""
-        return preintegrate(self.record, self.terms, x, layout=self.layout, n_newton=self.options.n_newton)
+        """Preintegrate every keyframe and encoder reading at calibration ``x`` (P,).
+
+        Inside :func:`reusing_preintegrations`, one formed there at the same record, layout, ``n_newton`` and
+        ``x`` (bit for bit) is returned instead.
+        """
+        if not _REUSE:
+            return preintegrate(self.record, self.terms, x, layout=self.layout, n_newton=self.options.n_newton)
+        held = _REUSE[0]
+        n_newton = int(self.options.n_newton)
+        for p in held:
+            if (p.record is self.record and p.n_newton == n_newton and p.layout == self.layout
+                    and np.array_equal(p.x_lin, x)):
+                return p
+        p = preintegrate(self.record, self.terms, x, layout=self.layout, n_newton=n_newton)
+        held[:] = [p, *held[:REUSED_PREINTEGRATIONS - 1]]
+        return p
 
     def propagate(self, R0, preint, x):
         """Dead-reckoned attitude at every keyframe boundary, shape (K+1, 3, 3).
@@ -322,4 +365,5 @@ class CalibrationModel:
                                                                      noise=self.noise))
 
 
-__all__ = ["CalibrationModel", "gyrocompass_attitude_sigma", "TABLE_ALIGNMENT_SIGMA", "HEADING_UNRESOLVED_SIGMA"]
+__all__ = ["CalibrationModel", "reusing_preintegrations", "REUSED_PREINTEGRATIONS", "gyrocompass_attitude_sigma",
+           "TABLE_ALIGNMENT_SIGMA", "HEADING_UNRESOLVED_SIGMA"]

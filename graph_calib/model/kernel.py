@@ -16,6 +16,9 @@ import numpy as np
 
 from graph_calib.navigation.rotations import exp_so3_nb, right_jacobian_nb
 from graph_calib.sensors.sensor_model import gsens_coupling, invert_sample, is_nonlinear, sample_features
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
 
 _C12 = 1.0 / 12.0   # coning Jacobians
 _C6 = 1.0 / 6.0     # velocity-rotation Jacobians; the values divide by 6 as the recursion is written

@@ -35,6 +35,9 @@ import numpy as np
 from scipy.linalg import lapack
 
 from graph_calib.model.normal_equations import linearise
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
 
 @dataclass(frozen=True)
 class KindFit:

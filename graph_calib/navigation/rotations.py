@@ -13,6 +13,10 @@ kernels of :mod:`graph_calib.navigation.strapdown` and :mod:`graph_calib.model` 
 import numba
 import numpy as np
 
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
+
 _SMALL = 1e-7
 
 

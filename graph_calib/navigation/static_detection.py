@@ -15,6 +15,9 @@ import numba
 import numpy as np
 
 from graph_calib.errors import InputError
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
 
 __all__ = [
     "accelerometer_threshold",

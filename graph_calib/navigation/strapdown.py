@@ -43,6 +43,9 @@ from graph_calib.navigation.rotations import (
     quat_to_rotvec,
     rotvec_to_quat,
 )
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
 
 __all__ = [
     "integrate_attitude",

@@ -93,11 +93,15 @@ def overlapping_allan(increments, intervals, *, tau0, m=None):
         x = d[a:b]
         theta = np.concatenate([np.zeros((1, x.shape[1])), np.cumsum(x - x.mean(axis=0), axis=0)])
         n = theta.shape[0] - 1
+        buf = np.empty_like(theta)       # the second differences formed in place: no temporaries per m
         for j, mm in enumerate(m):
             if n - 2 * mm < 1:
                 break
-            dd = theta[2 * mm:] - 2.0 * theta[mm:n + 1 - mm] + theta[:n + 1 - 2 * mm]
-            ss[j] += np.sum(dd**2, axis=0)
+            dd = buf[:n + 1 - 2 * mm]
+            np.multiply(theta[mm:n + 1 - mm], -2.0, out=dd)
+            dd += theta[2 * mm:]
+            dd += theta[:n + 1 - 2 * mm]
+            ss[j] += np.einsum("ij,ij->j", dd, dd)
             cnt[j] += dd.shape[0]
     ok = cnt > 0
     m, ss, cnt = m[ok], ss[ok], cnt[ok]

@@ -147,6 +147,42 @@ class NoiseIdentification:
         return out
 
 
+def nonnegative_least_squares(A, b):
+    """``argmin |A c - b|`` over ``c >= 0`` for a few columns (``scipy.optimize.nnls``'s answer).
+
+    Every subset of the columns is solved by least squares unconstrained; the solution is the one of least
+    residual among those whose coefficients are all positive (the constrained minimum is the unconstrained
+    one on its own support), zero where none is.  ``2^n`` small solves: meant for the :data:`TERMS`'
+    five columns, where it spares ``calibrate`` the import of ``scipy.optimize`` (and with it
+    ``scipy.sparse``: about 0.3 s).
+
+    Parameters
+    ----------
+    A : ndarray, shape (M, n)
+        ``n`` at most 10.
+    b : ndarray, shape (M,)
+
+    Returns
+    -------
+    ndarray, shape (n,)
+    """
+    A = np.asarray(A, dtype=float)
+    b = np.asarray(b, dtype=float)
+    n = A.shape[1]
+    if n > 10:
+        raise ValueError(f"{n} columns: meant for a few (2^n subsets)")
+    best, best_cost = np.zeros(n), float(b @ b)
+    for mask in range(1, 2**n):
+        cols = [j for j in range(n) if mask >> j & 1]
+        c, *_ = np.linalg.lstsq(A[:, cols], b, rcond=None)
+        if np.all(c > 0):
+            cost = float(np.sum((A[:, cols] @ c - b) ** 2))
+            if cost < best_cost:
+                best, best_cost = np.zeros(n), cost
+                best[cols] = c
+    return best
+
+
 def fit_terms(allan, channel):
     """Weighted non-negative fit of the IEEE terms to one channel's Allan variance.
 
@@ -171,9 +207,7 @@ def fit_terms(allan, channel):
     w = 1.0 / (2.0 * allan.rel_sigma * np.maximum(y, 1e-12 * np.max(y)))     # 1 / sd(sigma^2)
     scale = np.max(np.abs(A * w[:, None]), axis=0)
     scale[scale == 0] = 1.0
-    from scipy.optimize import nnls        # scipy.optimize loads scipy.sparse: only when a record is identified
-
-    c_s, _ = nnls(A * w[:, None] / scale, y * w)
+    c_s = nonnegative_least_squares(A * w[:, None] / scale, y * w)
     c = c_s / scale
     active = c > 0
     cov = np.zeros((len(TERMS), len(TERMS)))
@@ -267,4 +301,4 @@ def identify_noise(experiment, *, keyframe_s, rests=None):
 
 
 __all__ = ["ChannelTerms", "SensorNoise", "NoiseIdentification", "identify_noise", "fit_terms", "sensor_noise",
-           "table_noise", "TERMS", "SUPPORT_SIGMAS", "MIN_REST_S", "ENCODER_NOISE_FLOOR"]
+           "nonnegative_least_squares", "table_noise", "TERMS", "SUPPORT_SIGMAS", "MIN_REST_S", "ENCODER_NOISE_FLOOR"]

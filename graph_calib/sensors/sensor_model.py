@@ -61,6 +61,9 @@ import numba
 import numpy as np
 
 from graph_calib.sensors.effects import EFFECTS, XYZ
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
 
 BIAS, BIAS_TC, BIAS_TC2, BIAS_DTDT, SCALE, SCALE_TC, SCALE_TC2, SCALE_ASYM, CROSS, GSENS, NONLIN, SIZE, LAG = range(13)
 BIAS_TC3 = 13

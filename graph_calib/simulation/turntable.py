@@ -56,6 +56,9 @@ import numba
 import numpy as np
 
 from graph_calib.navigation.rotations import dcm_to_quat
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
 
 OUTER, INNER = 0, 1
 _DWELL = -1

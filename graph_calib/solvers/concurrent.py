@@ -37,12 +37,13 @@ class _FirstSolverFailed(Exception):
     """Raised inside the second solver's progress callback to stop it once the first has failed."""
 
 
-def _worker(conn, name, problem, options):
+def _worker(conn, name, problem, options, initial):
     """Run solver ``name`` in the forked worker; send ``("progress", event)``, then ``("done", output)``
     or ``("error", exception or text)``."""
     try:
         with threadpool_limits(limits=1, user_api="blas"):
-            out = solve(name, problem, options=options, progress=lambda e: conn.send(("progress", e)))
+            out = solve(name, problem, options=options, progress=lambda e: conn.send(("progress", e)),
+                        initial=initial)
         conn.send(("done", out))
     except BaseException as exc:   # every error goes back to the parent, which raises it
         try:
@@ -63,7 +64,7 @@ def fork_available():
             and threading.active_count() == 1)
 
 
-def solve_pair(names, problem, *, options, progress=None):
+def solve_pair(names, problem, *, options, progress=None, initial=None, on_output=None):
     """Solve ``problem`` with the two solvers ``names`` at once; their outputs in the order of ``names``.
 
     Parameters
@@ -75,17 +76,30 @@ def solve_pair(names, problem, *, options, progress=None):
     progress : callable, optional
         Called (in this process) with each :class:`graph_calib.solvers.interface.ProgressEvent`, every
         event of the first solver before any of the second.
+    initial : mapping of str to (R, x), optional
+        A solver's starting keyframe attitudes and calibration (its ``initial``); the others start on their own.
+    on_output : callable, optional
+        ``on_output(name, output)`` as each solver's output is here: the second's while the first may still
+        run in its worker (work on it then overlaps the first solver's); an exception it raises is raised
+        after the first has finished.
 
     Returns
     -------
     list of graph_calib.solvers.interface.SolverOutput
     """
     first, second = names
+    initial = dict(initial or {})
     if not fork_available():
-        return [solve(n, problem, options=options, progress=progress) for n in names]
+        outs = []
+        for n in names:
+            outs.append(solve(n, problem, options=options, progress=progress, initial=initial.get(n)))
+            if on_output is not None:
+                on_output(n, outs[-1])
+        return outs
     ctx = multiprocessing.get_context("fork")
     recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_worker, args=(send, first, problem, options), daemon=True)
+    proc = ctx.Process(target=_worker, args=(send, first, problem, options, initial.get(first)),
+                       daemon=True)
     lock = threading.Lock()
     state = {"finished": False, "output": None, "error": None, "held": []}
 
@@ -133,7 +147,10 @@ def solve_pair(names, problem, *, options, progress=None):
     try:
         try:
             with threadpool_limits(limits=1, user_api="blas"):
-                out_second = solve(second, problem, options=options, progress=second_progress)
+                out_second = solve(second, problem, options=options, progress=second_progress,
+                                   initial=initial.get(second))
+                if on_output is not None:
+                    on_output(second, out_second)
             error_second = None
         except _FirstSolverFailed:
             out_second, error_second = None, None
@@ -147,6 +164,8 @@ def solve_pair(names, problem, *, options, progress=None):
             raise RuntimeError(err)
         if error_second is not None:
             raise error_second
+        if on_output is not None:
+            on_output(first, state["output"])
         return [state["output"], out_second]
     finally:
         if proc.is_alive():

@@ -79,7 +79,7 @@ def judge(results, *, order=None, stamp=True, structure=()):
 
 
 def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, initial=None, outputs=None,
-                order=None, on_start=None, on_solved=None, keep_going=False, stamp=True):
+                order=None, on_start=None, on_output=None, on_solved=None, keep_going=False, stamp=True):
     """Solve ``problem`` with each of ``solvers``, make their results, compare the first two, give the verdict.
 
     Parameters
@@ -102,6 +102,10 @@ def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, i
         Solvers already solved (the diagnosis' primary solver): their outputs are taken, not solved again.
     on_start : callable, optional
         ``on_start(name)`` before each solver is run here (a campaign's job starts its clock there).
+    on_output : callable, optional
+        ``on_output(name, output)`` as each solver run here returns (not those of ``outputs``), before its
+        result is made; run concurrently, the one solved in this process is passed on while the other still
+        runs in its worker.
     on_solved : callable, optional
         ``on_solved(name, output, result)`` as each solver's result is made (before the verdict: a campaign
         writes its task files there); an exception it raises counts as that solver's.
@@ -120,8 +124,9 @@ def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, i
     given = dict(outputs or {})
     todo = [n for n in solvers if n not in given]
     solved, errors = {}, {}
-    if concurrent and len(todo) == 2 and not initial and not keep_going:
-        solved.update(zip(todo, solve_pair(todo, problem, options=options, progress=progress)))
+    if concurrent and len(todo) == 2 and not keep_going:
+        solved.update(zip(todo, solve_pair(todo, problem, options=options, progress=progress, initial=initial,
+                                           on_output=on_output)))
     results = {}
     for name in solvers:
         try:
@@ -133,6 +138,8 @@ def run_solvers(problem, *, options, solvers, progress=None, concurrent=False, i
                 if on_start is not None:
                     on_start(name)
                 output = solve(name, problem, options=options, progress=progress, initial=initial.get(name))
+                if on_output is not None:
+                    on_output(name, output)
             result = to_result(problem.model, output)
             if on_solved is not None:
                 on_solved(name, output, result)

@@ -8,6 +8,7 @@ import pytest
 
 from graph_calib.sensors import sensor_model as sm
 from graph_calib.model import CalibrationModel, ModelOptions, boundary_rate_correction
+from graph_calib.model.calibration_model import reusing_preintegrations
 from graph_calib.sensors.effects import FURTHER_EFFECTS
 from graph_calib.sensors.params import Layout
 from graph_calib.navigation.rotations import dcm_to_quat, exp_so3, exp_so3_nb, right_jacobian_nb
@@ -150,6 +151,26 @@ def test_first_order_update_tracks_repreintegration(problem):
     b = model.gravity_factors(R, model.preintegrate(x + dx), x + dx).r
     c0 = model.gravity_factors(R, preint, x).r
     assert np.abs(a - b).max() < 1e-3 * np.abs(b - c0).max()
+
+
+def test_preintegrations_reused_only_inside_the_block_and_only_at_the_same_point(problem):
+    model, x, preint, R = problem
+    assert model.preintegrate(x) is not model.preintegrate(x)           # off outside the block
+    other = CalibrationModel.from_record(model.record, options=replace(model.options, variance_factors={"gravity": 4.0}))
+    smaller = model.with_effects(())
+    with reusing_preintegrations():
+        p = model.preintegrate(x)
+        assert other.preintegrate(x.copy()) is p                         # noise and variance factors play no part
+        nudged = x.copy()
+        nudged[0] += 1e-15
+        q = model.preintegrate(nudged)
+        assert q is not p and q.x_lin[0] == nudged[0]                    # bit for bit, or formed again
+        assert model.preintegrate(x) is p                                # the last two are held
+        assert smaller.preintegrate(x[:smaller.layout.size]) is not p    # another layout: its own
+        with reusing_preintegrations():                                  # nested: the outer block's held ones
+            assert model.preintegrate(nudged) is q
+    np.testing.assert_array_equal(p.J_dR, preint.J_dR)                   # the very preintegration, unchanged
+    assert model.preintegrate(x) is not p
 
 
 # ---------------------------------------------------------------------------

@@ -5,7 +5,7 @@ import pytest
 
 from graph_calib.constants import ARCSEC_TO_RAD
 from graph_calib.noise import find_rests, identify_noise, overlapping_allan
-from graph_calib.noise.identify import sensor_noise
+from graph_calib.noise.identify import nonnegative_least_squares, sensor_noise
 from graph_calib.records.experiment import Experiment
 from graph_calib.simulation.scenarios import simulate
 
@@ -20,6 +20,22 @@ def test_overlapping_allan_agrees_with_allantools():
     taus, adev, _, _ = allantools.oadev(d[:, 0] / tau0, rate=1.0 / tau0, data_type="freq", taus=m * tau0)
     np.testing.assert_allclose(ours.tau, taus)
     np.testing.assert_allclose(ours.adev[:, 0], adev, rtol=1e-9)
+
+
+def test_nonnegative_least_squares_is_scipys_nnls():
+    from scipy.optimize import nnls
+
+    rng = np.random.default_rng(5)
+    clipped = 0
+    for _ in range(300):
+        A = rng.standard_normal((int(rng.integers(5, 40)), 5)) * 10.0 ** rng.uniform(-2, 2, size=5)
+        b = rng.standard_normal(A.shape[0])
+        ours, theirs = nonnegative_least_squares(A, b), nnls(A, b)[0]
+        np.testing.assert_array_equal(ours > 0, theirs > 0)
+        np.testing.assert_allclose(ours, theirs, rtol=1e-8, atol=1e-12 * np.max(np.abs(theirs), initial=1.0))
+        clipped += int(np.any(theirs == 0) and np.any(theirs > 0))
+    assert clipped > 50                          # the constraint binds in many of them
+    assert not np.any(nonnegative_least_squares(np.eye(3), -np.ones(3)))    # nothing positive fits: zero
 
 
 def test_allan_pools_rests_and_never_spans_the_motion_between():

@@ -1,6 +1,7 @@
 """Two solvers at once (graph_calib.solvers.concurrent): what a sequential run gives, outputs, progress, errors."""
 
 import os
+import time
 
 import numpy as np
 import pytest
@@ -54,12 +55,12 @@ def test_real_solvers_give_the_sequential_outputs_and_events_bit_for_bit(problem
 
 def _fake(fail=None, error=None):
     """A stand-in for registry.solve: three progress events per solver, then its name or ``error``."""
-    def solve(name, problem, *, options, progress=None):
+    def solve(name, problem, *, options, progress=None, initial=None):
         for i in range(3):
             progress(ProgressEvent(solver=name, iteration=i + 1, cost=float(10 - i)))
         if name == fail:
             raise error
-        return f"output of {name}", os.getpid()
+        return f"output of {name}", os.getpid(), initial
     return solve
 
 
@@ -70,6 +71,24 @@ def test_every_event_of_the_first_solver_comes_before_any_of_the_second(monkeypa
     assert [o[0] for o in outs] == ["output of a", "output of b"]
     assert outs[0][1] != os.getpid() and outs[1][1] == os.getpid()     # the first ran in the worker
     assert [(e.solver, e.iteration) for e in events] == [("a", 1), ("a", 2), ("a", 3), ("b", 1), ("b", 2), ("b", 3)]
+
+
+def test_each_solver_gets_its_own_start_and_the_second_output_is_handed_on_while_the_first_runs(monkeypatch):
+    fake = _fake()
+
+    def solve(name, problem, *, options, progress=None, initial=None):
+        if name == "a":
+            time.sleep(0.5)           # the worker still runs when the second's output is handed on
+        return (*fake(name, problem, options=options, progress=progress, initial=initial), time.monotonic())
+
+    monkeypatch.setattr(concurrent, "solve", solve)
+    seen = []
+    outs = concurrent.solve_pair(("a", "b"), None, options=None, progress=lambda e: None, initial={"b": "warm"},
+                                 on_output=lambda name, out: seen.append((name, out, time.monotonic())))
+    assert [o[2] for o in outs] == [None, "warm"]                  # the first starts on its own
+    assert [n for n, _, _ in seen] == ["b", "a"]
+    assert seen[0][1] is outs[1] and seen[1][1] == outs[0]
+    assert seen[0][2] < outs[0][3]                                   # handed on before the first had finished
 
 
 def test_an_error_of_the_first_solver_is_raised_with_its_message_and_the_second_is_not_shown(monkeypatch):
@@ -90,7 +109,7 @@ def test_an_error_of_the_second_solver_is_raised_after_every_event_of_the_first(
 
 
 def test_a_worker_that_dies_is_an_error_naming_the_solver(monkeypatch):
-    def solve(name, problem, *, options, progress=None):
+    def solve(name, problem, *, options, progress=None, initial=None):
         if name == "a":
             os._exit(7)
         return name
