@@ -13,6 +13,7 @@ import numpy as np
 from graph_calib.constants import omega_ie_n as _omega_ie_n
 from graph_calib.model.encoder_noise import dwell_scatter, noise_frame
 from graph_calib.navigation.rotations import exp_so3, quat_to_dcm
+from graph_calib.navigation.static_detection import _runs
 
 
 def _limited_derivative(y, t):
@@ -147,6 +148,14 @@ def boundary_rate_correction(w_mean, k0, *, segment_keys=None):
     return fix
 
 
+def _grid(a, b, per):
+    """Keyframe starts in ``[a, b)``: every ``per`` samples, a last piece shorter than ``per / 2`` joined to the one before."""
+    k0 = np.arange(a, b, per, dtype=np.int64)
+    if b - k0[-1] < max(1, per // 2) and k0.size > 1:
+        k0 = k0[:-1]
+    return k0
+
+
 class PreparedRecord:
     """The data of one experiment cut into keyframes, ready for any layout.
 
@@ -158,7 +167,9 @@ class PreparedRecord:
     t_ref_degC : float, optional
         Reference temperature; default the mean of the six sensors' temperatures.
     static_mask : ndarray of bool, shape (N,), optional
-        Samples known to be static; None: every keyframe counts as static.
+        Samples known to be static; None: every keyframe counts as static.  Each run of static samples
+        (a rest) starts and ends on a keyframe boundary, so a rest shorter than two keyframes is still
+        one static keyframe; between the boundaries keyframes are ``keyframe_s`` long.
 
     Attributes
     ----------
@@ -198,7 +209,7 @@ class PreparedRecord:
         self.t_ref_degC = float(experiment.default_t_ref() if t_ref_degC is None else t_ref_degC)
         self.gravity = float(experiment.gravity_mps2)
         self._prepare_samples()
-        self._prepare_keyframes()
+        self._prepare_keyframes(static_mask)
         self._prepare_table()
         self._static_keyframes(static_mask)
         self._prepare_reading_noise()
@@ -243,15 +254,19 @@ class PreparedRecord:
         self.dTdtg = np.ascontiguousarray(dTdt[:, :3])
         self.dTdta = np.ascontiguousarray(dTdt[:, 3:])
 
-    def _prepare_keyframes(self):
+    def _prepare_keyframes(self, static_mask):
         e = self.experiment
         n = e.n_samples
         per = max(1, int(round(self.keyframe_s * e.rate_hz)))
+        # a rest's first and last samples are keyframe boundaries: a rest shorter than two keyframes (a hand
+        # holds a face 0.5-1.5 s) still gets a static keyframe, its own length
+        cuts = np.zeros(0, dtype=np.int64)
+        if static_mask is not None:
+            cuts = _runs(np.asarray(static_mask, dtype=bool)).ravel()
         starts, seg_keys = [], []
         for a, b in self.segment_bounds:          # keyframes never span a segment boundary
-            k0 = np.arange(a, b, per, dtype=np.int64)
-            if b - k0[-1] < max(1, per // 2) and k0.size > 1:
-                k0 = k0[:-1]
+            edges = np.unique(np.concatenate([[a, b], cuts[(cuts > a) & (cuts < b)]]))
+            k0 = np.concatenate([_grid(s, t, per) for s, t in zip(edges[:-1], edges[1:])])
             seg_keys.append(sum(s.size for s in starts))
             starts.append(k0)
         self.k0 = np.append(np.concatenate(starts), n).astype(np.int64)

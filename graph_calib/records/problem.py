@@ -13,7 +13,7 @@ import numpy as np
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.noise import find_rests, identify_noise, table_noise
 from graph_calib.noise.identify import TERMS
-from graph_calib.noise.rests import segment_thresholds
+from graph_calib.noise.rests import segment_static, segment_thresholds
 from graph_calib.options import CalibrationOptions
 from graph_calib.sensors.params import grade
 from graph_calib.navigation.alignment import Alignment, alignment
@@ -81,7 +81,8 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     segs = segment_thresholds(experiment)
     bounds = [(a, b) for a, b, _, _ in segs]
     pieces = [p for _, _, p, _ in segs]
-    static_per = [detect_static(p, threshold=th) for _, _, p, th in segs]
+    # the rests as a hand makes them: detect_static's, and the short rests (0.5-2 s) between them
+    static_per = [segment_static(p, threshold=th) if th is not None else detect_static(p) for _, _, p, th in segs]
     static = np.concatenate([np.asarray(st, dtype=np.int64).reshape(-1, 2) + a
                              for st, (a, _) in zip(static_per, bounds)])
     static_mask = None
