@@ -167,8 +167,8 @@ class PreparedRecord:
     t_ref_degC : float, optional
         Reference temperature; default the mean of the six sensors' temperatures.
     static_mask : ndarray of bool, shape (N,), optional
-        Samples known to be static; None: every keyframe counts as static.  Each run of static samples
-        (a rest) starts and ends on a keyframe boundary, so a rest shorter than two keyframes is still
+        Samples known to be static; None: every keyframe counts as static.  A run of static samples
+        (a rest) shorter than two keyframes starts and ends on a keyframe boundary, so that it is still
         one static keyframe; between the boundaries keyframes are ``keyframe_s`` long.
 
     Attributes
@@ -258,11 +258,12 @@ class PreparedRecord:
         e = self.experiment
         n = e.n_samples
         per = max(1, int(round(self.keyframe_s * e.rate_hz)))
-        # a rest's first and last samples are keyframe boundaries: a rest shorter than two keyframes (a hand
-        # holds a face 0.5-1.5 s) still gets a static keyframe, its own length
+        # a short rest's first and last samples are keyframe boundaries: a rest shorter than two keyframes (a
+        # hand holds a face 0.5-1.5 s) still gets a static keyframe, its own length; longer rests keep the grid
         cuts = np.zeros(0, dtype=np.int64)
         if static_mask is not None:
-            cuts = _runs(np.asarray(static_mask, dtype=bool)).ravel()
+            runs = _runs(np.asarray(static_mask, dtype=bool))
+            cuts = runs[runs[:, 1] - runs[:, 0] < 2 * per].ravel()
         starts, seg_keys = [], []
         for a, b in self.segment_bounds:          # keyframes never span a segment boundary
             edges = np.unique(np.concatenate([[a, b], cuts[(cuts > a) & (cuts < b)]]))

@@ -146,12 +146,13 @@ SWAY_VARIANCE_FACTOR = 2.0
 def sway_from_static(experiment, static, *, keyframe_s, accel_noise):
     """The bench's own acceleration at rest over a keyframe, one sigma, m/s^2 (0 when not seen).
 
-    In every static interval the specific force is averaged over blocks of one keyframe; the sample
-    variance of those block means about their interval's mean, pooled over the intervals and the
-    axes, is what a gravity factor of a resting keyframe sees.  White noise explains
-    ``accel_noise^2 / keyframe_s`` of it; a hand's sway (coloured, 0.3-3 Hz, which a per-sample
-    variance does not reach) the rest.  When the pooled variance exceeds the white part by more than
-    :data:`SWAY_VARIANCE_FACTOR` the difference's root is returned, else 0.
+    In every static interval the specific force is averaged over blocks of one keyframe (a rest
+    shorter than two keyframes: over its two halves); the sample variance of those block means about
+    their interval's mean, less what white noise explains (``accel_noise^2 / T_block``), pooled over
+    the intervals and the axes, is the hand's sway (coloured, 0.3-3 Hz, which a per-sample variance
+    does not reach) a gravity factor of a resting keyframe sees.  When that, plus the white part of a
+    keyframe (``accel_noise^2 / keyframe_s``), exceeds the white part by more than
+    :data:`SWAY_VARIANCE_FACTOR` the sway's root is returned, else 0.
 
     Parameters
     ----------
@@ -166,20 +167,21 @@ def sway_from_static(experiment, static, *, keyframe_s, accel_noise):
     -------
     float
     """
-    m = max(1, int(round(keyframe_s * experiment.rate_hz)))
+    per = max(1, int(round(keyframe_s * experiment.rate_hz)))
     f = experiment.dv / experiment.dt[:, None]
-    ss, dof = 0.0, 0
+    excess, dof = 0.0, 0
     for a, b in np.asarray(static, dtype=np.int64).reshape(-1, 2):
-        nb = (b - a) // m
-        if nb < 2:
+        m = min(per, (b - a) // 2)          # a rest shorter than two keyframes: two blocks of half its length
+        if m < 1:
             continue
+        nb = (b - a) // m
         means = f[a:a + nb * m].reshape(nb, m, 3).mean(axis=1)
-        ss += float(np.sum((means - means.mean(axis=0)) ** 2))
+        excess += float(np.sum((means - means.mean(axis=0)) ** 2)) - 3 * (nb - 1) * accel_noise**2 / (m / experiment.rate_hz)
         dof += 3 * (nb - 1)
     if dof == 0:
         return 0.0
-    white = accel_noise**2 / (m / experiment.rate_hz)
-    var = ss / dof
+    white = accel_noise**2 / (per / experiment.rate_hz)
+    var = excess / dof + white
     return float(np.sqrt(var - white)) if var > SWAY_VARIANCE_FACTOR * white else 0.0
 
 
