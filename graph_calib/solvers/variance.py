@@ -17,6 +17,14 @@ solution), so that it does not depend on a solver's internals; the factors live 
 solves the problem uses the same ones.  A kind whose redundancy is below :data:`MIN_REDUNDANCY` keeps its
 factor (too few degrees of freedom to estimate one), and so does a kind the caller fixes; no factor goes
 below :data:`FACTOR_MIN` or above :data:`FACTOR_MAX`.
+
+Moving keyframes.  Without a table the gravity factor of a keyframe in motion has the sigma
+``ModelOptions.moving_sigma`` (default 1 m/s^2), a guess at what the hand's own acceleration adds.  It is
+estimated the same way, from the moving keyframes' own ``chi2 / redundancy`` (the pseudo-kind
+:data:`graph_calib.model.redundancy.MOVING`), within :data:`MOVING_SIGMA_BOUNDS`: a hand that turns the unit
+about itself accelerates it by a few cm/s^2, and a guess twenty times that leaves the attitude in a turn, and
+so the gyro's cross-axis terms, to the rotation factors alone.  ``fixed`` containing ``"gravity.moving"``
+keeps the given sigma.
 """
 
 from __future__ import annotations
@@ -26,7 +34,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel
-from graph_calib.model.redundancy import fit_statistics
+from graph_calib.model.redundancy import MOVING, fit_statistics
 from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
 
 #: The kinds that get a factor.
@@ -44,6 +52,8 @@ FACTOR_MIN = 1e-2
 FACTOR_MAX = 1e4
 #: Smallest exponent of a kind's response to its factor used for the step (module doc of the iteration).
 MIN_EXPONENT = 0.25
+#: Bounds of the moving keyframes' gravity sigma, m/s^2 (module doc).
+MOVING_SIGMA_BOUNDS = (1e-3, 10.0)
 
 
 @dataclass(frozen=True)
@@ -56,6 +66,8 @@ class VarianceComponents:
         The problem with ``ModelOptions.variance_factors`` set.
     factors : dict of str to float
         Each kind's variance factor (1 where not estimated).
+    moving_sigma : float or None
+        The moving keyframes' gravity sigma the problem carries, m/s^2 (None: every keyframe static).
     solves : int
     converged : bool
         Whether every estimated kind's ``chi2 / redundancy`` came within :data:`TOLERANCE` of 1.
@@ -67,16 +79,19 @@ class VarianceComponents:
 
     problem: object
     factors: dict
+    moving_sigma: object
     solves: int
     converged: bool
     history: tuple
     initial: tuple
 
 
-def with_variance_factors(problem, factors):
-    """``problem`` whose model carries the variance ``factors`` (the same prepared record)."""
+def with_variance_factors(problem, factors, *, moving_sigma=None):
+    """``problem`` whose model carries the variance ``factors`` (and ``moving_sigma`` when given; the same record)."""
     model = problem.model
     options = replace(model.options, variance_factors=dict(factors))
+    if moving_sigma is not None:
+        options = replace(options, moving_sigma=float(moving_sigma))
     return replace(problem, model=CalibrationModel.from_record(model.record, options=options))
 
 
@@ -102,6 +117,12 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
     """
     factors = {k: float(v) for k, v in (problem.model.options.variance_factors or {}).items()}
     fixed = set(fixed)
+    moving = problem.model.options.moving_sigma
+    if moving is not None and MOVING not in fixed:
+        # estimated as a factor on the given sigma (the kinds' loop), turned back into a sigma below
+        factors[MOVING] = 1.0
+        moving0 = float(moving)
+        lo, hi = (b / moving0 for b in MOVING_SIGMA_BOUNDS)
     history = []
     initial = None
     converged = False
@@ -112,7 +133,8 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         initial = (out.attitudes, out.x)
         st = fit_statistics(problem.model, out.attitudes, out.x)
         ratios = {k: f.chi2_per_redundancy for k, f in st.kinds.items()
-                  if k in KINDS and k not in fixed and f.redundancy >= MIN_REDUNDANCY and f.chi2 > 0}
+                  if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY
+                  and f.chi2 > 0}
         history.append(dict(ratios))
         converged = all(abs(v - 1.0) <= tolerance for v in ratios.values())
         for k, v in ratios.items():
@@ -125,14 +147,23 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             if k in previous and abs(lf - previous[k][0]) > 0.05:      # a step large enough to read a from
                 a = float(np.clip(-(lr - previous[k][1]) / (lf - previous[k][0]), MIN_EXPONENT, 1.0))
             previous[k] = (lf, lr)
-            factors[k] = float(np.clip(np.exp(lf + lr / a), FACTOR_MIN, FACTOR_MAX))
+            bounds = (lo, hi) if k == MOVING else (FACTOR_MIN, FACTOR_MAX)
+            factors[k] = float(np.clip(np.exp(lf + lr / a), *bounds))
         # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
-        problem = with_variance_factors(problem, factors)
+        if MOVING in factors:
+            moving = moving0 * np.sqrt(factors[MOVING])
+        problem = with_variance_factors(problem, {k: v for k, v in factors.items() if k in KINDS},
+                                        moving_sigma=moving)
         if converged:
             break
-    return VarianceComponents(problem=problem, factors={k: factors.get(k, 1.0) for k in KINDS}, solves=n,
-                              converged=converged, history=tuple(history), initial=initial)
+    return VarianceComponents(problem=problem, factors={k: factors.get(k, 1.0) for k in KINDS}, moving_sigma=moving,
+                              solves=n, converged=converged, history=tuple(history), initial=initial)
 
 
-__all__ = ["VarianceComponents", "estimate_variance_components", "with_variance_factors", "KINDS",
+def factors_estimated(factors):
+    """The kinds whose factor the loop estimates: :data:`KINDS` and, when the record has moving keyframes, MOVING."""
+    return KINDS + ((MOVING,) if MOVING in factors else ())
+
+
+__all__ = ["VarianceComponents", "estimate_variance_components", "with_variance_factors", "KINDS", "MOVING_SIGMA_BOUNDS",
            "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]
