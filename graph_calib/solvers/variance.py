@@ -21,7 +21,8 @@ below :data:`FACTOR_MIN` or above :data:`FACTOR_MAX`.
 Moving keyframes.  Without a table the gravity factor of a keyframe in motion has the sigma
 ``ModelOptions.moving_sigma`` (default 1 m/s^2), a guess at what the hand's own acceleration adds.  It is
 estimated the same way, from the moving keyframes' own ``chi2 / redundancy`` (the pseudo-kind
-:data:`graph_calib.model.redundancy.MOVING`), within :data:`MOVING_SIGMA_BOUNDS`: a hand that turns the unit
+:data:`graph_calib.model.redundancy.MOVING`; the gravity kind's factor then from the static keyframes'),
+within :data:`MOVING_SIGMA_BOUNDS`: a hand that turns the unit
 about itself accelerates it by a few cm/s^2, and a guess twenty times that leaves the attitude in a turn, and
 so the gyro's cross-axis terms, to the rotation factors alone.  ``fixed`` containing ``"gravity.moving"``
 keeps the given sigma.
@@ -54,6 +55,12 @@ FACTOR_MAX = 1e4
 MIN_EXPONENT = 0.25
 #: Bounds of the moving keyframes' gravity sigma, m/s^2 (module doc).
 MOVING_SIGMA_BOUNDS = (1e-3, 10.0)
+#: The moving keyframes' ``chi2 / redundancy`` counts as settled within this of 1 (their sigma's order is what matters).
+MOVING_TOLERANCE = 0.5
+#: Largest step of the moving keyframes' log variance factor before it is bracketed (a factor of e^3, 20, per solve).
+MOVING_STEP = 3.0
+#: Further solves the loop may take when it estimates the moving keyframes' sigma.
+MOVING_EXTRA_SOLVES = 3
 
 
 @dataclass(frozen=True)
@@ -119,45 +126,69 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
     fixed = set(fixed)
     moving = problem.model.options.moving_sigma
     if moving is not None and MOVING not in fixed:
-        # estimated as a factor on the given sigma (the kinds' loop), turned back into a sigma below
-        factors[MOVING] = 1.0
+        # estimated as a factor on the moving rows' effective variance (moving_sigma^2 times the gravity
+        # kind's factor, which scales every gravity row), turned back into a sigma below
         moving0 = float(moving)
-        lo, hi = (b / moving0 for b in MOVING_SIGMA_BOUNDS)
+        factors[MOVING] = factors.get("gravity", 1.0)
     history = []
     initial = None
     converged = False
     previous = {}                      # kind -> (log factor, log ratio) of the previous solve
+    bracket = [None, None]             # log factors of MOVING known too small (ratio > 1) and too large
+    if MOVING in factors and max_solves == MAX_SOLVES:
+        max_solves += MOVING_EXTRA_SOLVES
     n = 0
     for n in range(1, max_solves + 1):
         out = solve(solver, problem, options=options, progress=progress, initial=initial)
         initial = (out.attitudes, out.x)
         st = fit_statistics(problem.model, out.attitudes, out.x)
+        st = _static_gravity(st)
         ratios = {k: f.chi2_per_redundancy for k, f in st.kinds.items()
                   if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY
                   and f.chi2 > 0}
         history.append(dict(ratios))
-        converged = all(abs(v - 1.0) <= tolerance for v in ratios.values())
+        converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance) for k, v in ratios.items())
         for k, v in ratios.items():
             if not np.isfinite(v):
                 continue
             lf, lr = np.log(factors.get(k, 1.0)), np.log(v)
+            if k == MOVING:
+                # the moving rows' residuals are absorbed by the attitudes the more, the more weight they get: their
+                # chi2 / redundancy answers a factor far from any power law; bracketed, then halved (in logs)
+                bracket[0 if v > 1.0 else 1] = lf
+                if bracket[0] is not None and bracket[1] is not None:
+                    factors[k] = float(np.exp(0.5 * (bracket[0] + bracket[1])))
+                else:
+                    factors[k] = float(np.exp(lf + np.clip(lr, -MOVING_STEP, MOVING_STEP)))
+                continue
             # chi2 / redundancy ~ c / factor^a: a kind whose residuals the attitudes partly absorb (a < 1) needs
             # a larger step than Helmert's (a = 1); a from the last two solves (secant in logs), within bounds
             a = 1.0
             if k in previous and abs(lf - previous[k][0]) > 0.05:      # a step large enough to read a from
                 a = float(np.clip(-(lr - previous[k][1]) / (lf - previous[k][0]), MIN_EXPONENT, 1.0))
             previous[k] = (lf, lr)
-            bounds = (lo, hi) if k == MOVING else (FACTOR_MIN, FACTOR_MAX)
-            factors[k] = float(np.clip(np.exp(lf + lr / a), *bounds))
+            factors[k] = float(np.clip(np.exp(lf + lr / a), FACTOR_MIN, FACTOR_MAX) if k != MOVING
+                               else np.exp(lf + lr / a))
         # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
         if MOVING in factors:
-            moving = moving0 * np.sqrt(factors[MOVING])
+            moving = float(np.clip(moving0 * np.sqrt(factors[MOVING] / factors.get("gravity", 1.0)),
+                                   *MOVING_SIGMA_BOUNDS))
+            factors[MOVING] = factors.get("gravity", 1.0) * (moving / moving0) ** 2
         problem = with_variance_factors(problem, {k: v for k, v in factors.items() if k in KINDS},
                                         moving_sigma=moving)
         if converged:
             break
     return VarianceComponents(problem=problem, factors={k: factors.get(k, 1.0) for k in KINDS}, moving_sigma=moving,
                               solves=n, converged=converged, history=tuple(history), initial=initial)
+
+
+def _static_gravity(st):
+    """``st`` whose ``"gravity"`` counts the static keyframes only when the moving ones are apart (MOVING)."""
+    g, m = st.kinds.get("gravity"), st.kinds.get(MOVING)
+    if g is None or m is None:
+        return st
+    static = replace(g, count=g.count - m.count, chi2=g.chi2 - m.chi2, redundancy=g.redundancy - m.redundancy)
+    return replace(st, kinds={**st.kinds, "gravity": static})
 
 
 def factors_estimated(factors):
