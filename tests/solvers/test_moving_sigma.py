@@ -16,7 +16,7 @@ from graph_calib.solvers.variance import MOVING_SIGMA_BOUNDS, estimate_variance_
 
 pytestmark = pytest.mark.slow
 
-OPTIONS = CalibrationOptions(model=ModelOptions(grade="consumer"))
+OPTIONS = CalibrationOptions(model=ModelOptions(grade="consumer", moving_sigma="estimate"))
 
 
 @pytest.fixture(scope="module")
@@ -38,3 +38,11 @@ def test_the_moving_keyframes_sigma_follows_their_residuals(problem):
 def test_a_fixed_moving_sigma_is_kept(problem):
     vc = estimate_variance_components(problem, options=OPTIONS, solver="factor-graph", fixed=(MOVING,))
     assert vc.moving_sigma == 1.0 and all(MOVING not in h for h in vc.history)
+
+
+def test_the_default_keeps_the_guess(problem):
+    plain = build_problem(problem.model.experiment, options=CalibrationOptions(model=ModelOptions(grade="consumer")))
+    vc = estimate_variance_components(plain, options=OPTIONS, solver="factor-graph")
+    assert vc.moving_sigma == 1.0 and all(MOVING not in h for h in vc.history)
+    assert problem.model.options.noise_source["moving"] == "variance components"
+    assert "moving" not in plain.model.options.noise_source
