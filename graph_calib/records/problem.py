@@ -92,16 +92,16 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             static_mask[a:b] = True
         if model_options.moving_sigma is None:
             model_options = replace(model_options, moving_sigma=1.0)
+    identified = identify_noise(experiment, keyframe_s=model_options.keyframe_s, rests=find_rests(experiment))
+    model_options = noise_options(identified, model_options)
     if isinstance(model_options.moving_sigma, str):
         if model_options.moving_sigma != "estimate":
             raise InputError(f"moving_sigma must be a number of m/s^2, 'estimate' or None, not "
                              f"{model_options.moving_sigma!r}", dataset="moving_sigma")
-        # 1 m/s^2 to start with; the variance components estimate it (solvers/variance.py); a table's record has
-        # every keyframe static
+        # 1 m/s^2 to start with, the variance components estimate it (solvers/variance.py; here, after
+        # noise_options, which writes noise_source afresh); a table's record has every keyframe static
         model_options = replace(model_options, moving_sigma=None) if static_mask is None else replace(
             model_options, moving_sigma=1.0, noise_source={**model_options.noise_source, "moving": MOVING_ESTIMATED})
-    identified = identify_noise(experiment, keyframe_s=model_options.keyframe_s, rests=find_rests(experiment))
-    model_options = noise_options(identified, model_options)
     if isinstance(model_options.sway_sigma, str):
         if model_options.sway_sigma != "estimate":
             raise InputError(f"sway_sigma must be a number of m/s^2, 'estimate' or None, not "
