@@ -20,13 +20,15 @@ below :data:`FACTOR_MIN` or above :data:`FACTOR_MAX`.
 
 Moving keyframes.  Without a table the gravity factor of a keyframe in motion has the sigma
 ``ModelOptions.moving_sigma`` (default 1 m/s^2), a guess at what the hand's own acceleration adds.  With
-``ModelOptions(moving_sigma="estimate")`` (``--moving-sigma estimate``) it is estimated the same way, from the moving keyframes' own ``chi2 / redundancy`` (the pseudo-kind
-:data:`graph_calib.model.redundancy.MOVING`; the gravity kind's factor then from the static keyframes'),
-within :data:`MOVING_SIGMA_BOUNDS`: a hand that turns the unit
-about itself accelerates it by a few cm/s^2, and a guess twenty times that leaves the attitude in a turn, and
-so the gyro's cross-axis terms, to the rotation factors alone.  Not the default: on the MPU-6050 session it
+``ModelOptions(moving_sigma="estimate")`` (``--moving-sigma estimate``) it is estimated the same way, from
+the moving keyframes' own ``chi2 / redundancy`` (the pseudo-kind :data:`graph_calib.model.redundancy.MOVING`),
+within :data:`MOVING_SIGMA_BOUNDS`: a hand that turns the unit about itself accelerates it by a few cm/s^2,
+and a guess twenty times that leaves the attitude in a turn, and so the gyro's cross-axis terms, to the
+rotation factors alone.  Not the default: on the MPU-6050 session it
 settles at 0.09 m/s^2 and the held-out transitions (two folds by pairs) grow from 2.24 to 3.61 deg while the
-|f| spread falls from 0.126 to 0.082 m/s^2 (docs/crossval.md).
+|f| spread falls from 0.126 to 0.082 m/s^2 (docs/crossval.md).  Whenever the moving keyframes have a sigma of
+their own the gravity kind's factor is estimated from the static keyframes' ``chi2 / redundancy`` alone (the
+moving ones' would dilute it).
 """
 
 from __future__ import annotations
@@ -172,8 +174,7 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             if k in previous and abs(lf - previous[k][0]) > 0.05:      # a step large enough to read a from
                 a = float(np.clip(-(lr - previous[k][1]) / (lf - previous[k][0]), MIN_EXPONENT, 1.0))
             previous[k] = (lf, lr)
-            factors[k] = float(np.clip(np.exp(lf + lr / a), FACTOR_MIN, FACTOR_MAX) if k != MOVING
-                               else np.exp(lf + lr / a))
+            factors[k] = float(np.clip(np.exp(lf + lr / a), FACTOR_MIN, FACTOR_MAX))
         # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
         if estimate_moving:
             moving = float(np.clip(moving0 * np.sqrt(factors[MOVING] / factors.get("gravity", 1.0)),
