@@ -49,7 +49,8 @@ from graph_calib.records.problem import build_problem
 from graph_calib.navigation.rotations import exp_so3
 from graph_calib.solvers.orchestration import run_solvers
 from graph_calib.solvers.registry import SOLVER_LABELS, comparison_order, solve
-from graph_calib.solvers.variance import estimate_variance_components
+from graph_calib.solvers.variance import KINDS, estimate_variance_components
+from graph_calib.records.problem import MOVING_ESTIMATED
 
 
 def _columns(layout, name):
@@ -465,8 +466,8 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     experiment : graph_calib.records.experiment.Experiment
     options : graph_calib.calibrate.CalibrationOptions, optional
         The declared model (grade, keyframes, effects already modelled, priors); with
-        ``variance_components`` (the default) the kinds' variance factors are estimated first, as
-        ``calibrate`` does, and every round's model carries them.
+        ``moving_sigma="estimate"`` the moving keyframes' gravity sigma is estimated first, as ``calibrate``
+        does, and every round's model carries it (the kinds' variance factors are not estimated here).
     diagnosis : DiagnosisOptions
     truth : graph_calib.records.experiment.Result, optional
         A simulator's truth: the error of the declared parameters before and after.
@@ -482,12 +483,13 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     options = CalibrationOptions() if options is None else options
     problem = build_problem(experiment, options=options)
     options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
-    if options.variance_components:
-        # the kinds' variance factors (and the moving keyframes' sigma) as calibrate estimates them, so that the
-        # loop starts from calibrate's calibration and its tests weigh the kinds as calibrate does
-        say("variance components ...")
+    if options.variance_components and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED:
+        # the moving keyframes' gravity sigma as calibrate estimates it (moving_sigma="estimate"); the kinds'
+        # factors stay the identified noise's: the rounds' tests measure a misfit against it, which factors
+        # estimated from the same residuals would absorb (on the MPU-6050 session the rotation kind's is 72)
+        say("the moving keyframes' gravity sigma ...")
         problem = estimate_variance_components(problem, options=options, solver=_primary(diagnosis),
-                                               fixed=tuple(problem.model.options.variance_factors or ())).problem
+                                               fixed=KINDS).problem
     say(f"declared model: {problem.model.layout.size} parameters, {problem.model.n_keyframes} keyframes; "
         f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
     graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis)
