@@ -13,7 +13,6 @@ import numpy as np
 from graph_calib.constants import omega_ie_n as _omega_ie_n
 from graph_calib.model.encoder_noise import dwell_scatter, noise_frame
 from graph_calib.navigation.rotations import exp_so3, quat_to_dcm
-from graph_calib.navigation.static_detection import _runs
 
 
 def _limited_derivative(y, t):
@@ -156,6 +155,23 @@ def _grid(a, b, per):
     return k0
 
 
+def _rest_cuts(runs, segment_bounds, per):
+    """Samples where a keyframe must start: both ends of each rest that holds no whole keyframe of the grid.
+
+    The grid starts at each segment's first sample and again at each cut; rests ``runs`` (R, 2) in order.
+    """
+    cuts = []
+    for a, b in segment_bounds:
+        origin = a
+        for s, e in runs[(runs[:, 0] >= a) & (runs[:, 1] <= b)]:
+            first = origin + -(-(s - origin) // per) * per        # the first grid start at or after s
+            if first + per <= e:
+                continue
+            cuts += [int(s), int(e)]
+            origin = int(e)
+    return np.asarray(cuts, dtype=np.int64)
+
+
 class PreparedRecord:
     """The data of one experiment cut into keyframes, ready for any layout.
 
@@ -167,9 +183,12 @@ class PreparedRecord:
     t_ref_degC : float, optional
         Reference temperature; default the mean of the six sensors' temperatures.
     static_mask : ndarray of bool, shape (N,), optional
-        Samples known to be static; None: every keyframe counts as static.  A run of static samples
-        (a rest) shorter than two keyframes starts and ends on a keyframe boundary, so that it is still
-        one static keyframe; between the boundaries keyframes are ``keyframe_s`` long.
+        Samples known to be static; None: every keyframe counts as static.
+    short_rests : array_like of int, shape (R, 2), optional
+        The short rests (:func:`graph_calib.noise.rests.segment_static_parts`; static in ``static_mask``
+        too).  One that holds no whole keyframe of the grid starts and ends on keyframe boundaries, so that
+        it is one static keyframe of its own length (a hand holds a face 0.5-1.5 s); the grid of
+        ``keyframe_s`` restarts at its end.  The other rests leave the grid as it is.
 
     Attributes
     ----------
@@ -202,14 +221,14 @@ class PreparedRecord:
     #: against the level frame, rad/s (about 0.06 deg/s, 14 times the Earth rate).
     LAG_RATE_THRESHOLD = 1e-3
 
-    def __init__(self, experiment, *, keyframe_s, t_ref_degC=None, static_mask=None):
+    def __init__(self, experiment, *, keyframe_s, t_ref_degC=None, static_mask=None, short_rests=None):
         self.experiment = experiment
         self.keyframe_s = float(keyframe_s)
         self.omega_ie_n = _omega_ie_n(experiment.latitude_rad)
         self.t_ref_degC = float(experiment.default_t_ref() if t_ref_degC is None else t_ref_degC)
         self.gravity = float(experiment.gravity_mps2)
         self._prepare_samples()
-        self._prepare_keyframes(static_mask)
+        self._prepare_keyframes(short_rests)
         self._prepare_table()
         self._static_keyframes(static_mask)
         self._prepare_reading_noise()
@@ -254,16 +273,13 @@ class PreparedRecord:
         self.dTdtg = np.ascontiguousarray(dTdt[:, :3])
         self.dTdta = np.ascontiguousarray(dTdt[:, 3:])
 
-    def _prepare_keyframes(self, static_mask):
+    def _prepare_keyframes(self, short_rests):
         e = self.experiment
         n = e.n_samples
         per = max(1, int(round(self.keyframe_s * e.rate_hz)))
-        # a short rest's first and last samples are keyframe boundaries: a rest shorter than two keyframes (a
-        # hand holds a face 0.5-1.5 s) still gets a static keyframe, its own length; longer rests keep the grid
-        cuts = np.zeros(0, dtype=np.int64)
-        if static_mask is not None:
-            runs = _runs(np.asarray(static_mask, dtype=bool))
-            cuts = runs[runs[:, 1] - runs[:, 0] < 2 * per].ravel()
+        runs = np.zeros((0, 2), dtype=np.int64) if short_rests is None else \
+            np.asarray(short_rests, dtype=np.int64).reshape(-1, 2)
+        cuts = _rest_cuts(runs[np.argsort(runs[:, 0])], self.segment_bounds, per)
         starts, seg_keys = [], []
         for a, b in self.segment_bounds:          # keyframes never span a segment boundary
             edges = np.unique(np.concatenate([[a, b], cuts[(cuts > a) & (cuts < b)]]))

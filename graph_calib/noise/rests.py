@@ -71,6 +71,8 @@ def short_window_s(rate_hz):
 def segment_static(piece, *, threshold):
     """The static intervals of one segment: ``detect_static``'s, and the short rests between them (module doc).
 
+    :func:`segment_static_parts` gives the two apart.
+
     Parameters
     ----------
     piece : graph_calib.records.experiment.Experiment
@@ -83,13 +85,20 @@ def segment_static(piece, *, threshold):
     ndarray of int, shape (P, 2)
         ``(start, stop)`` of the piece, stop exclusive, in time order.
     """
+    long, short = segment_static_parts(piece, threshold=threshold)
+    out = np.concatenate([long, short])
+    return out[np.argsort(out[:, 0], kind="stable")]
+
+
+def segment_static_parts(piece, *, threshold):
+    """``(detect_static's intervals, the short rests the short pass adds)`` of one segment, each shape (P, 2)."""
     long = np.asarray(detect_static(piece, threshold=threshold), dtype=np.int64).reshape(-1, 2)
     w = short_window_s(piece.rate_hz)
     th_g = quiet_threshold(piece.dtheta / piece.dt[:, None], rate_hz=piece.rate_hz, window_s=w)
     short = np.asarray(detect_static(piece, threshold=threshold, window_s=w, min_duration_s=SHORT_REST_WINDOWS * w,
                                      use_gyro=th_g is not None, gyro_threshold=th_g), dtype=np.int64).reshape(-1, 2)
     if not short.shape[0]:
-        return long
+        return long, short
     # a short rest counts only where the long pass found none: the long pass's extent (its core and a
     # half window each side) is taken
     h = max(1, int(round(WINDOW_S * piece.rate_hz / 2.0)))
@@ -100,8 +109,7 @@ def segment_static(piece, *, threshold):
     inside = np.cumsum(covered)[:-1] > 0
     c = np.concatenate([[0], np.cumsum(inside)])
     free = (c[short[:, 1]] - c[short[:, 0]]) == 0
-    out = np.concatenate([long, short[free]])
-    return out[np.argsort(out[:, 0], kind="stable")]
+    return long, short[free]
 
 
 def quiet_threshold(f, *, rate_hz, window_s=WINDOW_S, quantile=QUIET_QUANTILE, mult=THRESHOLD_MULT):
@@ -199,5 +207,5 @@ def find_rests(experiment, *, min_duration_s=2.0, use_gyro=True):
     return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
 
 
-__all__ = ["find_rests", "segment_static", "short_window_s", "SHORT_REST_WINDOWS", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
+__all__ = ["find_rests", "segment_static", "segment_static_parts", "short_window_s", "SHORT_REST_WINDOWS", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
            "START_LOUDER"]

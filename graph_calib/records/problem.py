@@ -13,7 +13,7 @@ import numpy as np
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.noise import find_rests, identify_noise, table_noise
 from graph_calib.noise.identify import TERMS
-from graph_calib.noise.rests import segment_static, segment_thresholds
+from graph_calib.noise.rests import segment_static_parts, segment_thresholds
 from graph_calib.options import CalibrationOptions
 from graph_calib.sensors.params import grade
 from graph_calib.navigation.alignment import Alignment, alignment
@@ -81,10 +81,15 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     segs = segment_thresholds(experiment)
     bounds = [(a, b) for a, b, _, _ in segs]
     pieces = [p for _, _, p, _ in segs]
-    # the rests as a hand makes them: detect_static's, and the short rests (0.5-2 s) between them
-    static_per = [segment_static(p, threshold=th) if th is not None else detect_static(p) for _, _, p, th in segs]
+    # the rests as a hand makes them: detect_static's, and the short rests (0.5-2 s) between them, each of which
+    # then gets a static keyframe of its own (PreparedRecord)
+    parts = [segment_static_parts(p, threshold=th) if th is not None else (detect_static(p), np.zeros((0, 2), int))
+             for _, _, p, th in segs]
+    static_per = [np.concatenate(lp) for lp in parts]
+    static_per = [st[np.argsort(st[:, 0], kind="stable")] for st in static_per]
     static = np.concatenate([np.asarray(st, dtype=np.int64).reshape(-1, 2) + a
                              for st, (a, _) in zip(static_per, bounds)])
+    short = np.concatenate([np.asarray(sh, dtype=np.int64).reshape(-1, 2) + a for (_, sh), (a, _) in zip(parts, bounds)])
     static_mask = None
     if experiment.table is None:
         static_mask = np.zeros(experiment.n_samples, dtype=bool)
@@ -123,7 +128,8 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             model_options = replace(model_options, initial_attitude_sigma=gyrocompass_attitude_sigma(
                 model_options, latitude_rad=experiment.latitude_rad))
         aligned.append(replace(al, interval=(al.interval[0] + a, al.interval[1] + a)) if a else al)
-    model = CalibrationModel(experiment, options=model_options, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
+    model = CalibrationModel(experiment, options=model_options, t_ref_degC=options.t_ref_degC, static_mask=static_mask,
+                             short_rests=short if static_mask is not None else None)
     enc, enc_dof = table_noise(model.record.reading_scatter)
     identified = replace(identified, encoder=enc, encoder_dof=enc_dof)
     if enc is not None and model_options.encoder_noise is None:

@@ -2,7 +2,10 @@
 
 import numpy as np
 
+from graph_calib.calibrate import build_problem
+from graph_calib.model import ModelOptions
 from graph_calib.model.record import PreparedRecord
+from graph_calib.options import CalibrationOptions
 from graph_calib.navigation.static_detection import detect_static
 from graph_calib.noise.rests import SHORT_REST_WINDOWS, segment_static, segment_thresholds, short_window_s
 from graph_calib.records.problem import sway_from_static
@@ -37,22 +40,36 @@ def test_every_short_rest_of_a_hand_held_ferraris_session_is_found():
     assert np.all(found[:, 1] - found[:, 0] >= 0.4 * exp.rate_hz)
 
 
-def test_a_short_rest_is_one_static_keyframe_and_a_long_rest_is_not_cut():
+def test_a_rest_without_a_whole_keyframe_is_one_and_the_others_keep_the_grid():
     exp = wobbly_experiment(rng=np.random.default_rng(0), n=1000, with_table=False)
     mask = np.zeros(exp.n_samples, dtype=bool)
-    mask[130:190] = True                 # 0.6 s: shorter than two keyframes
-    mask[400:700] = True                 # 3 s: the grid
-    rec = PreparedRecord(exp, keyframe_s=1.0, static_mask=mask)
+    mask[130:190] = True                 # 0.6 s: a short rest, its ends cut
+    mask[400:700] = True                 # 3 s: detect_static's, the grid
+    rec = PreparedRecord(exp, keyframe_s=1.0, static_mask=mask, short_rests=[[130, 190]])
     assert 130 in rec.k0 and 190 in rec.k0
-    static = np.flatnonzero(rec.static_key)
-    spans = [(int(rec.k0[k]), int(rec.k0[k + 1])) for k in static]
+    spans = [(int(rec.k0[k]), int(rec.k0[k + 1])) for k in np.flatnonzero(rec.static_key)]
     assert spans[0] == (130, 190)
-    # the long rest is not cut: the grid (restarted at 190) gives it two whole keyframes inside it
+    # the grid restarts at the cut: two whole keyframes inside the long rest
     assert spans[1:] == [(490, 590), (590, 690)]
-    assert np.isclose(rec.T_key[static[0]], 0.6)
-    assert np.all(np.diff(rec.k0) > 0)
-    plain = PreparedRecord(exp, keyframe_s=1.0, static_mask=None)
+    assert np.isclose(rec.T_key[np.flatnonzero(rec.static_key)[0]], 0.6)
+    # a rest that holds a whole keyframe of the grid leaves it as it is
+    mask[130:190] = False
+    mask[100:290] = True
+    plain = PreparedRecord(exp, keyframe_s=1.0, static_mask=mask, short_rests=[[100, 290]])
     assert np.array_equal(plain.k0, np.append(np.arange(0, 1000, 100), 1000))
+    assert [int(plain.k0[k]) for k in np.flatnonzero(plain.static_key)] == [100, 400, 500, 600]
+    # detect_static's rests never move it (the measured sessions keep their keyframes)
+    mask[:] = False
+    mask[130:190] = True
+    assert np.array_equal(PreparedRecord(exp, keyframe_s=1.0, static_mask=mask).k0, plain.k0)
+
+
+def test_every_short_rest_of_the_session_is_a_static_keyframe():
+    exp, holds = _short_session(2)
+    problem = build_problem(exp, options=CalibrationOptions(model=ModelOptions(grade="consumer")))
+    rec = problem.model.record
+    # every short rest a static keyframe at least (detect_static's long one, if any, holds one of the grid)
+    assert int(rec.static_key.sum()) >= holds.shape[0] - 1
 
 
 def test_the_sway_is_seen_on_short_rests():
