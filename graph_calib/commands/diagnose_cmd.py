@@ -27,6 +27,9 @@ def add_arguments(p):
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_sway(p)
     add_moving(p)
+    p.add_argument("--holdout", action="store_true",
+                   help="without a table, adopt an effect only when it does not make the held-out figures (two "
+                        "folds of the rests) worse (docs/diagnosis.md)")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals, printed with "
                         "the reason)")
@@ -73,7 +76,8 @@ def _options(args, *, grade="navigation"):
                                                  moving_sigma=moving_of(args)),
                                              graph=graph, t_ref_degC=args.t_ref)
     solvers = registry.primary_first(registry.parse_choice(args.solver)[0])
-    diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers)
+    diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers,
+                                         holdout=args.holdout)
     return calibration_options, diagnosis_options
 
 

@@ -46,12 +46,12 @@ def test_the_loop_does_not_add_an_effect_the_held_out_figures_refuse(monkeypatch
                             worse=("transitions_rms_deg",))
 
     monkeypatch.setattr(loop_module, "held_out_check", refuse)
-    diag = diagnose(exp, options=CONSUMER, diagnosis=DiagnosisOptions(solvers=("factor-graph",)))
+    diag = diagnose(exp, options=CONSUMER, diagnosis=DiagnosisOptions(solvers=("factor-graph",), holdout=True))
     assert seen, "the tests chose no effect: nothing for the guard to judge"
     assert diag.added == []
     last = diag.rounds[-1].to_json()
     assert last["added"] is None and last["held_out"]["adopted"] is False
     assert "not adopted" in last["decision"]
-    # without the guard the same tests add it
-    plain = diagnose(exp, options=CONSUMER, diagnosis=DiagnosisOptions(solvers=("factor-graph",), holdout=False))
+    # without the guard (the default) the same tests add it
+    plain = diagnose(exp, options=CONSUMER, diagnosis=DiagnosisOptions(solvers=("factor-graph",)))
     assert plain.added[:1] == seen[:1]
