@@ -26,9 +26,8 @@ within :data:`MOVING_SIGMA_BOUNDS`: a hand that turns the unit about itself acce
 and a guess twenty times that leaves the attitude in a turn, and so the gyro's cross-axis terms, to the
 rotation factors alone.  Not the default: on the MPU-6050 session it
 settles at 0.09 m/s^2 and the held-out transitions (two folds by pairs) grow from 2.24 to 3.61 deg while the
-|f| spread falls from 0.126 to 0.082 m/s^2 (docs/crossval.md).  Whenever the moving keyframes have a sigma of
-their own the gravity kind's factor is estimated from the static keyframes' ``chi2 / redundancy`` alone (the
-moving ones' would dilute it).
+|f| spread falls from 0.126 to 0.082 m/s^2 (docs/crossval.md).  While the moving keyframes' sigma is estimated
+the gravity kind's factor is estimated from the static keyframes' ``chi2 / redundancy`` alone.
 """
 
 from __future__ import annotations
@@ -149,7 +148,8 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         out = solve(solver, problem, options=options, progress=progress, initial=initial)
         initial = (out.attitudes, out.x)
         st = fit_statistics(problem.model, out.attitudes, out.x)
-        st = _static_gravity(st)
+        if estimate_moving:                # the moving rows have a factor of their own: the gravity kind's is the static's
+            st = _static_gravity(st)
         ratios = {k: f.chi2_per_redundancy for k, f in st.kinds.items()
                   if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY
                   and f.chi2 > 0}

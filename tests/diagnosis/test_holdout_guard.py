@@ -1,16 +1,15 @@
 """The loop's held-out guard (graph_calib.diagnosis.holdout, issue 22)."""
 
-import numpy as np
 import pytest
 
 from graph_calib.diagnosis import DiagnosisOptions, diagnose
 from graph_calib.diagnosis import loop as loop_module
 from graph_calib.diagnosis.holdout import GUARDED, HoldOutCheck, held_out_check
 from graph_calib.model import ModelOptions
-from graph_calib.options import CalibrationOptions
-from graph_calib.simulation.scenarios import SHORT_REST_FERRARIS, simulate
+from graph_calib.importers import import_mpu6050
+from graph_calib.options import CalibrationOptions, GraphOptions
 
-from _shared import make_experiment
+from _shared import REAL_DATA, make_experiment, require_real
 
 CONSUMER = CalibrationOptions(model=ModelOptions(grade="consumer"))
 
@@ -34,9 +33,11 @@ def test_a_record_with_a_table_is_not_guarded():
 
 
 @pytest.mark.slow
+@pytest.mark.measured
 def test_the_loop_does_not_add_an_effect_the_held_out_figures_refuse(monkeypatch):
-    exp = simulate("consumer-ferraris", rng=np.random.default_rng(1), effects=("gyro.g_sensitivity",),
-                   effect_scale=1e4, **SHORT_REST_FERRARIS).plans[0].make().experiment
+    # the MPU-6050 session: the loop's first effect is gyro.g_sensitivity (tests/diagnosis/test_diagnosis.py)
+    exp = import_mpu6050(require_real(REAL_DATA / "mpu6050_uncuyo" / "example_data_calibration.csv"))
+    options = CalibrationOptions(model=ModelOptions(grade="consumer"), graph=GraphOptions(max_iterations=300))
     seen = []
 
     def refuse(experiment, *, options, grown, solver, folds=2):
@@ -46,12 +47,9 @@ def test_the_loop_does_not_add_an_effect_the_held_out_figures_refuse(monkeypatch
                             worse=("transitions_rms_deg",))
 
     monkeypatch.setattr(loop_module, "held_out_check", refuse)
-    diag = diagnose(exp, options=CONSUMER, diagnosis=DiagnosisOptions(solvers=("factor-graph",), holdout=True))
-    assert seen, "the tests chose no effect: nothing for the guard to judge"
+    diag = diagnose(exp, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",), holdout=True))
+    assert seen == ["gyro.g_sensitivity"]
     assert diag.added == []
     last = diag.rounds[-1].to_json()
     assert last["added"] is None and last["held_out"]["adopted"] is False
     assert "not adopted" in last["decision"]
-    # without the guard (the default) the same tests add it
-    plain = diagnose(exp, options=CONSUMER, diagnosis=DiagnosisOptions(solvers=("factor-graph",)))
-    assert plain.added[:1] == seen[:1]
