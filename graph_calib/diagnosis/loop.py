@@ -35,6 +35,7 @@ from graph_calib.diagnosis.rounds import (
     Stage,
 )
 from graph_calib.diagnosis.drivers import DriverSums, keyframe_context
+from graph_calib.diagnosis.holdout import held_out_check
 from graph_calib.diagnosis.reduced_system import linearise
 from graph_calib.diagnosis.residuals import (
     error_against_truth,
@@ -48,6 +49,8 @@ from graph_calib.records.problem import build_problem
 from graph_calib.navigation.rotations import exp_so3
 from graph_calib.solvers.orchestration import run_solvers
 from graph_calib.solvers.registry import SOLVER_LABELS, comparison_order, solve
+from graph_calib.solvers.variance import KINDS, estimate_variance_components
+from graph_calib.records.problem import MOVING_ESTIMATED
 
 
 def _columns(layout, name):
@@ -430,6 +433,18 @@ def _add_effect(name, *, options, problem, graph, lin, diagnosis_options, say):
     return options, grown, graph
 
 
+def _guard(rnd, experiment, *, options, diagnosis, say):
+    """``rnd`` with its effect kept only when the held-out figures allow it (:mod:`graph_calib.diagnosis.holdout`)."""
+    say(f"round {rnd.index}: {rnd.added} passes its test; held-out check (two folds) ...")
+    check = held_out_check(experiment, options=options, solver=_primary(diagnosis),
+                           grown=_with_effects(options, tuple(options.model.extra_effects) + (rnd.added,)))
+    if check is None:
+        return rnd
+    if check.adopted:
+        return replace(rnd, held_out=check.to_json(), decision=f"{rnd.decision}; {check.text()}")
+    return replace(rnd, added=None, held_out=check.to_json(), decision=f"{rnd.added}: {check.text()}")
+
+
 def _context(experiment, *, model, options, diagnosis_options, truth):
     """The experiment and the run, for ``diagnosis.json`` (``model``: the declared model)."""
     e = experiment
@@ -450,7 +465,9 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     ----------
     experiment : graph_calib.records.experiment.Experiment
     options : graph_calib.calibrate.CalibrationOptions, optional
-        The declared model (grade, keyframes, effects already modelled, priors).
+        The declared model (grade, keyframes, effects already modelled, priors); with
+        ``moving_sigma="estimate"`` the moving keyframes' gravity sigma is estimated first, as ``calibrate``
+        does, and every round's model carries it (the kinds' variance factors are not estimated here).
     diagnosis : DiagnosisOptions
     truth : graph_calib.records.experiment.Result, optional
         A simulator's truth: the error of the declared parameters before and after.
@@ -466,6 +483,13 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     options = CalibrationOptions() if options is None else options
     problem = build_problem(experiment, options=options)
     options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
+    if options.variance_components and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED:
+        # the moving keyframes' gravity sigma as calibrate estimates it (moving_sigma="estimate"); the kinds'
+        # factors stay the identified noise's: the rounds' tests measure a misfit against it, which factors
+        # estimated from the same residuals would absorb (on the MPU-6050 session the rotation kind's is 72)
+        say("the moving keyframes' gravity sigma ...")
+        problem = estimate_variance_components(problem, options=options, solver=_primary(diagnosis),
+                                               fixed=KINDS).problem
     say(f"declared model: {problem.model.layout.size} parameters, {problem.model.n_keyframes} keyframes; "
         f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
     graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis)
@@ -541,6 +565,8 @@ def _loop_from(experiment, problem, graph, *, options, diagnosis, truth, max_add
         rnd, lin = _round(len(rounds) + 1, options=options, problem=problem, graph=graph,
                           diagnosis_options=diagnosis, candidates=candidates,
                           allow_add=len(added) < max_added, sums=sums, previous=lin)
+        if rnd.added is not None and diagnosis.holdout:
+            rnd = _guard(rnd, experiment, options=options, diagnosis=diagnosis, say=say)
         rounds.append(rnd)
         say(f"round {rnd.index}: {rnd.decision}")
         if before is None:      # the starting model's stage, its residuals from the first round's linearisation

@@ -54,6 +54,11 @@ class DiagnosisOptions:
         mimics a driver signature the catalogue lacks is not added).
     time_segments : int
         Cubic B-spline functions of the ``time`` driver.
+    holdout : bool
+        On a record without a table, adopt an effect only when it does not make the held-out figures
+        worse (:mod:`graph_calib.diagnosis.holdout`; two folds, four calibrations per added effect).  Off by
+        default: on the MPU-6050 session it refuses ``gyro.g_sensitivity`` (held-out transitions 2.23 ->
+        3.54 deg), which the loop's tests and the session's in-sample figures support.
     """
 
     alpha: float = 0.01
@@ -64,6 +69,7 @@ class DiagnosisOptions:
     solvers: tuple[str, ...] = primary_first(DEFAULT_SOLVERS)
     encompassing: bool = True
     time_segments: int = TIME_SEGMENTS
+    holdout: bool = False
 
 
 @dataclass(frozen=True)
@@ -204,6 +210,9 @@ class Round:
         The encompassing checks of the significant candidates (``diagnosis.json``'s
         ``encompassing_checks``).
     seconds : float
+    held_out : dict or None
+        The held-out guard's figures for the effect the tests chose
+        (:class:`graph_calib.diagnosis.holdout.HoldOutCheck`), None when not guarded.
     """
 
     index: int
@@ -216,6 +225,7 @@ class Round:
     decision: str = ""
     checks: list[dict] = field(default_factory=list)
     seconds: float = 0.0
+    held_out: dict | None = None
 
     def to_json(self):
         tested = [c for c in self.candidates if not c.skipped]
@@ -227,6 +237,7 @@ class Round:
             "drivers_significant": [d.to_json() for d in sorted(self.drivers, key=lambda d: d.log10_p)
                                     if d.significant],
             "encompassing_checks": self.checks, "seconds": self.seconds,
+            **({"held_out": self.held_out} if self.held_out is not None else {}),
         }
 
 

@@ -8,8 +8,8 @@ fold, with the calibration applied and without it (the raw samples).
 
 Folds
 -----
-The rests are the record's static intervals (:func:`graph_calib.navigation.static_detection.detect_static`,
-segment by segment, each with its own threshold).  They are grouped into units of consecutive rests, and
+The rests are the record's static intervals as the calibration finds them (:func:`record_rests`: segment
+by segment, each with its own threshold, rests down to 0.5 s included).  They are grouped into units of consecutive rests, and
 the units are dealt to the ``K`` folds:
 
 ``by="pairs"`` (default)
@@ -57,7 +57,8 @@ import numpy as np
 from graph_calib.constants import RAD_TO_DEG
 from graph_calib.errors import InputError
 from graph_calib.evaluation.imu_tk import transition_figures
-from graph_calib.navigation.static_detection import accelerometer_threshold, detect_static
+from graph_calib.navigation.static_detection import detect_static
+from graph_calib.noise.rests import segment_static, segment_thresholds
 from graph_calib.records.experiment import Table
 
 #: The figures compared between calibrated and raw, and whether smaller is better (all are).
@@ -162,13 +163,15 @@ class CrossValidation:
 
 
 def record_rests(experiment):
-    """The rests of a record, ``[start, stop)`` sample indices, shape (P, 2), each segment with its own threshold."""
+    """The rests of a record, ``[start, stop)`` sample indices, shape (P, 2): the calibration's static intervals.
+
+    Segment by segment, each with its own threshold (:func:`graph_calib.noise.rests.segment_thresholds`), the
+    short rests of a hand-held session included (:func:`graph_calib.noise.rests.segment_static`).
+    """
     out = []
-    for a, b in experiment.segment_bounds():
-        piece = experiment.slice(a, b) if (a, b) != (0, experiment.n_samples) else experiment
+    for a, _, piece, th in segment_thresholds(experiment):
         try:
-            th = accelerometer_threshold(piece)
-            st = detect_static(piece, threshold=th)
+            st = segment_static(piece, threshold=th) if th is not None else detect_static(piece)
         except InputError:
             continue
         out.extend((int(s) + a, int(e) + a) for s, e in np.asarray(st, dtype=np.int64).reshape(-1, 2))

@@ -85,6 +85,8 @@ class CalibrationModel:
         Reference temperature; default the mean of the six sensors' temperatures.
     static_mask : ndarray of bool, shape (N,), optional
         Samples known to be static (gravity counts only there when ``options.moving_sigma`` is set).
+    short_rests : array_like of int, shape (R, 2), optional
+        The short rests among them, each then a static keyframe (:class:`PreparedRecord`).
 
     Attributes
     ----------
@@ -98,9 +100,9 @@ class CalibrationModel:
         Prior sigma of the first keyframe attitude, rad.
     """
 
-    def __init__(self, experiment, *, options=ModelOptions(), t_ref_degC=None, static_mask=None):
+    def __init__(self, experiment, *, options=ModelOptions(), t_ref_degC=None, static_mask=None, short_rests=None):
         record = PreparedRecord(experiment, keyframe_s=options.keyframe_s, t_ref_degC=t_ref_degC,
-                                static_mask=static_mask)
+                                static_mask=static_mask, short_rests=short_rests)
         self._setup(record, options)
 
     @classmethod

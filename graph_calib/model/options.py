@@ -27,9 +27,11 @@ class ModelOptions:
     initial_attitude_sigma : float or None
         Prior sigma of the first keyframe attitude around the alignment, rad.
         None: what the alignment can know (:attr:`CalibrationModel.initial_attitude_sigma`).
-    moving_sigma : float or None
+    moving_sigma : float, ``"estimate"`` or None
         Without a table the bench may translate: gravity measurements of keyframes
-        that are not static get this sigma (m/s^2).  None: every keyframe counts.
+        that are not static get this sigma (m/s^2).  None: every keyframe counts (without a table
+        :func:`graph_calib.records.problem.build_problem` makes it 1 m/s^2); ``"estimate"``: 1 m/s^2 to
+        start with, then estimated with the variance components (:mod:`graph_calib.solvers.variance`).
     sway_sigma : float, ``"estimate"`` or None
         The bench's own acceleration at rest (a hand holding the unit sways it), averaged over a
         keyframe: one sigma (m/s^2) added in quadrature to every gravity measurement.  None: zero;
@@ -57,7 +59,7 @@ class ModelOptions:
     accel_noise: float | None = None
     encoder_noise: float | None = None
     initial_attitude_sigma: float | None = None
-    moving_sigma: float | None = None
+    moving_sigma: float | str | None = None
     sway_sigma: float | str | None = None
     n_newton: int = 2
     noise_source: dict = field(default_factory=dict)

@@ -147,6 +147,31 @@ def boundary_rate_correction(w_mean, k0, *, segment_keys=None):
     return fix
 
 
+def _grid(a, b, per):
+    """Keyframe starts in ``[a, b)``: every ``per`` samples, a last piece shorter than ``per / 2`` joined to the one before."""
+    k0 = np.arange(a, b, per, dtype=np.int64)
+    if b - k0[-1] < max(1, per // 2) and k0.size > 1:
+        k0 = k0[:-1]
+    return k0
+
+
+def _rest_cuts(runs, segment_bounds, per):
+    """Samples where a keyframe must start: both ends of each rest that holds no whole keyframe of the grid.
+
+    The grid starts at each segment's first sample and again at each cut; rests ``runs`` (R, 2) in order.
+    """
+    cuts = []
+    for a, b in segment_bounds:
+        origin = a
+        for s, e in runs[(runs[:, 0] >= a) & (runs[:, 1] <= b)]:
+            first = origin + -(-(s - origin) // per) * per        # the first grid start at or after s
+            if first + per <= e:
+                continue
+            cuts += [int(s), int(e)]
+            origin = int(e)
+    return np.asarray(cuts, dtype=np.int64)
+
+
 class PreparedRecord:
     """The data of one experiment cut into keyframes, ready for any layout.
 
@@ -159,6 +184,11 @@ class PreparedRecord:
         Reference temperature; default the mean of the six sensors' temperatures.
     static_mask : ndarray of bool, shape (N,), optional
         Samples known to be static; None: every keyframe counts as static.
+    short_rests : array_like of int, shape (R, 2), optional
+        The short rests (:func:`graph_calib.noise.rests.segment_static_parts`; static in ``static_mask``
+        too).  One that holds no whole keyframe of the grid starts and ends on keyframe boundaries, so that
+        it is one static keyframe of its own length (a hand holds a face 0.5-1.5 s); the grid of
+        ``keyframe_s`` restarts at its end.  The other rests leave the grid as it is.
 
     Attributes
     ----------
@@ -191,14 +221,14 @@ class PreparedRecord:
     #: against the level frame, rad/s (about 0.06 deg/s, 14 times the Earth rate).
     LAG_RATE_THRESHOLD = 1e-3
 
-    def __init__(self, experiment, *, keyframe_s, t_ref_degC=None, static_mask=None):
+    def __init__(self, experiment, *, keyframe_s, t_ref_degC=None, static_mask=None, short_rests=None):
         self.experiment = experiment
         self.keyframe_s = float(keyframe_s)
         self.omega_ie_n = _omega_ie_n(experiment.latitude_rad)
         self.t_ref_degC = float(experiment.default_t_ref() if t_ref_degC is None else t_ref_degC)
         self.gravity = float(experiment.gravity_mps2)
         self._prepare_samples()
-        self._prepare_keyframes()
+        self._prepare_keyframes(short_rests)
         self._prepare_table()
         self._static_keyframes(static_mask)
         self._prepare_reading_noise()
@@ -243,15 +273,17 @@ class PreparedRecord:
         self.dTdtg = np.ascontiguousarray(dTdt[:, :3])
         self.dTdta = np.ascontiguousarray(dTdt[:, 3:])
 
-    def _prepare_keyframes(self):
+    def _prepare_keyframes(self, short_rests):
         e = self.experiment
         n = e.n_samples
         per = max(1, int(round(self.keyframe_s * e.rate_hz)))
+        runs = np.zeros((0, 2), dtype=np.int64) if short_rests is None else \
+            np.asarray(short_rests, dtype=np.int64).reshape(-1, 2)
+        cuts = _rest_cuts(runs[np.argsort(runs[:, 0])], self.segment_bounds, per)
         starts, seg_keys = [], []
         for a, b in self.segment_bounds:          # keyframes never span a segment boundary
-            k0 = np.arange(a, b, per, dtype=np.int64)
-            if b - k0[-1] < max(1, per // 2) and k0.size > 1:
-                k0 = k0[:-1]
+            edges = np.unique(np.concatenate([[a, b], cuts[(cuts > a) & (cuts < b)]]))
+            k0 = np.concatenate([_grid(s, t, per) for s, t in zip(edges[:-1], edges[1:])])
             seg_keys.append(sum(s.size for s in starts))
             starts.append(k0)
         self.k0 = np.append(np.concatenate(starts), n).astype(np.int64)

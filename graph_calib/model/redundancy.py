@@ -131,6 +131,8 @@ def fit_statistics(model, attitudes, x):
     Returns
     -------
     FitStatistics
+        With, for a record whose moving keyframes have their own gravity sigma (``moving_sigma``), the
+        pseudo-kind :data:`MOVING`: those keyframes' gravity factors again, on their own.
     """
     R = np.asarray(attitudes, dtype=float)
     x = np.asarray(x, dtype=float)
@@ -138,8 +140,15 @@ def fit_statistics(model, attitudes, x):
     n_keys = R.shape[0]
     rows = {}
 
+    moving = ~np.asarray(model.record.static_key, dtype=bool) if model.options.moving_sigma is not None else None
+
     def keep_rows(kind, res, sl, r, A, B, X, cols, ne):
         rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X))
+        if kind.name == "gravity" and moving is not None:
+            # the moving keyframes' gravity factors again, on their own (their sigma is moving_sigma's)
+            m = moving[res.key[sl]]
+            if np.any(m):
+                rows.setdefault(MOVING, []).append((r[m], res.key[sl][m], A[m], None if B is None else B[m], X[m]))
 
     prior = model.calibration_prior(x)
     system = linearise(model, model.preintegrate(x), R, x, R_prior=R[np.asarray(model.segment_keys, dtype=np.int64)],
@@ -169,7 +178,8 @@ def fit_statistics(model, attitudes, x):
                 h += 2.0 * np.einsum("fij,fjl,fil->fi", A, Zo[key], B)
                 h += np.einsum("fij,fjl,fil->fi", B, Zd[key + 1], B)
             h += np.sum((V @ L) ** 2, axis=2)
-            trace += float(h.sum())
+            if name != MOVING:                    # counted once, in "gravity"
+                trace += float(h.sum())
             chi2 += float(np.sum(r**2))
             redundancy += float(np.sum(1.0 - h))
             count += int(r.shape[0])
@@ -183,4 +193,8 @@ def fit_statistics(model, attitudes, x):
     return FitStatistics(kinds=kinds, n_unknowns=3 * n_keys + P, trace=trace)
 
 
-__all__ = ["KindFit", "FitStatistics", "fit_statistics"]
+#: The pseudo-kind of :func:`fit_statistics`: the gravity factors of the moving keyframes (also counted in
+#: ``"gravity"``), whose sigma is ``ModelOptions.moving_sigma`` (:mod:`graph_calib.solvers.variance`).
+MOVING = "gravity.moving"
+
+__all__ = ["KindFit", "FitStatistics", "fit_statistics", "MOVING"]

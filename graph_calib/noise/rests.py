@@ -19,6 +19,14 @@ swaying ones.  A rest is therefore also required to be *white*: over each window
 ``f`` (and of the rate) may be at most :data:`WHITE_RATIO` times what its sample-to-sample differences
 show (``var(f) ~ var(diff f) / 2`` for white noise; a motion of a few hertz or slower raises the first
 and barely the second).  That test needs no threshold from the record.
+
+Short rests (:func:`segment_static`).  A hand holds a face for 0.5-1.5 s (the Ferraris protocol as labs do
+it), too short for the 1 s window and the 2 s minimum of ``detect_static``'s defaults.  The static
+intervals the calibration uses as gravity factors and rotation anchors are therefore detected twice: as
+before, and with a short window (:func:`short_window_s`) whose length follows from the noise statistics of
+the scatter it estimates; the short pass adds the rests the first left out, at least two short windows
+long.  The noise identification (:func:`find_rests`, Allan variances) keeps its 2 s rests: a record with
+only short rests has no identified noise and falls back to its grade's (said in the result).
 """
 
 from __future__ import annotations
@@ -39,6 +47,69 @@ SEGMENT_CAP = 2.0
 WHITE_RATIO = 2.0
 #: Moving window, s (detect_static's default).
 WINDOW_S = 1.0
+#: The short pass's window holds enough samples that white noise's window scatter is known to this
+#: relative standard deviation, ``1 / sqrt(6 (L - 1))`` for three axes of ``L`` samples (:func:`short_window_s`).
+SHORT_SCATTER_REL_SD = 0.085
+#: The short pass's window is never shorter than this, s (a hand's tremor, 8-12 Hz, spans it).
+SHORT_WINDOW_MIN_S = 0.2
+#: A short rest is kept when it spans at least this many short windows.
+SHORT_REST_WINDOWS = 2.0
+
+
+def short_window_s(rate_hz):
+    """Window of the short pass, s: the fewest samples ``L`` with ``1 / sqrt(6 (L - 1)) <= SHORT_SCATTER_REL_SD``.
+
+    With a threshold of :data:`THRESHOLD_MULT` times the resting scatter, a white rest's window scatter
+    then lies about 12 of its standard deviations below it (``(2 - 1) / 0.085``): the short window misses no
+    rest for its noise.  At least :data:`SHORT_WINDOW_MIN_S` (at 100 Hz: 25 samples, 0.25 s, so that the
+    shortest rest kept is 0.5 s).
+    """
+    L = int(np.ceil(1.0 + 1.0 / (6.0 * SHORT_SCATTER_REL_SD**2)))
+    return max(SHORT_WINDOW_MIN_S, L / float(rate_hz))
+
+
+def segment_static(piece, *, threshold):
+    """The static intervals of one segment: ``detect_static``'s, and the short rests between them (module doc).
+
+    :func:`segment_static_parts` gives the two apart.
+
+    Parameters
+    ----------
+    piece : graph_calib.records.experiment.Experiment
+        One segment.
+    threshold : float
+        Its accelerometer threshold (:func:`segment_threshold`), m/s^2.
+
+    Returns
+    -------
+    ndarray of int, shape (P, 2)
+        ``(start, stop)`` of the piece, stop exclusive, in time order.
+    """
+    long, short = segment_static_parts(piece, threshold=threshold)
+    out = np.concatenate([long, short])
+    return out[np.argsort(out[:, 0], kind="stable")]
+
+
+def segment_static_parts(piece, *, threshold):
+    """``(detect_static's intervals, the short rests the short pass adds)`` of one segment, each shape (P, 2)."""
+    long = np.asarray(detect_static(piece, threshold=threshold), dtype=np.int64).reshape(-1, 2)
+    w = short_window_s(piece.rate_hz)
+    th_g = quiet_threshold(piece.dtheta / piece.dt[:, None], rate_hz=piece.rate_hz, window_s=w)
+    short = np.asarray(detect_static(piece, threshold=threshold, window_s=w, min_duration_s=SHORT_REST_WINDOWS * w,
+                                     use_gyro=th_g is not None, gyro_threshold=th_g), dtype=np.int64).reshape(-1, 2)
+    if not short.shape[0]:
+        return long, short
+    # a short rest counts only where the long pass found none: the long pass's extent (its core and a
+    # half window each side) is taken
+    h = max(1, int(round(WINDOW_S * piece.rate_hz / 2.0)))
+    covered = np.zeros(piece.n_samples + 1, dtype=np.int64)
+    for a, b in long:
+        covered[max(a - h, 0)] += 1
+        covered[min(b + h, piece.n_samples)] -= 1
+    inside = np.cumsum(covered)[:-1] > 0
+    c = np.concatenate([[0], np.cumsum(inside)])
+    free = (c[short[:, 1]] - c[short[:, 0]]) == 0
+    return long, short[free]
 
 
 def quiet_threshold(f, *, rate_hz, window_s=WINDOW_S, quantile=QUIET_QUANTILE, mult=THRESHOLD_MULT):
@@ -136,5 +207,5 @@ def find_rests(experiment, *, min_duration_s=2.0, use_gyro=True):
     return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
 
 
-__all__ = ["find_rests", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
+__all__ = ["find_rests", "segment_static", "segment_static_parts", "short_window_s", "SHORT_REST_WINDOWS", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
            "START_LOUDER"]

@@ -13,7 +13,7 @@ import numpy as np
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.noise import find_rests, identify_noise, table_noise
 from graph_calib.noise.identify import TERMS
-from graph_calib.noise.rests import segment_thresholds
+from graph_calib.noise.rests import segment_static_parts, segment_thresholds
 from graph_calib.options import CalibrationOptions
 from graph_calib.sensors.params import grade
 from graph_calib.navigation.alignment import Alignment, alignment
@@ -81,9 +81,15 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     segs = segment_thresholds(experiment)
     bounds = [(a, b) for a, b, _, _ in segs]
     pieces = [p for _, _, p, _ in segs]
-    static_per = [detect_static(p, threshold=th) for _, _, p, th in segs]
+    # the rests as a hand makes them: detect_static's, and the short rests (0.5-2 s) between them, each of which
+    # then gets a static keyframe of its own (PreparedRecord)
+    parts = [segment_static_parts(p, threshold=th) if th is not None else (detect_static(p), np.zeros((0, 2), int))
+             for _, _, p, th in segs]
+    static_per = [np.concatenate(lp) for lp in parts]
+    static_per = [st[np.argsort(st[:, 0], kind="stable")] for st in static_per]
     static = np.concatenate([np.asarray(st, dtype=np.int64).reshape(-1, 2) + a
                              for st, (a, _) in zip(static_per, bounds)])
+    short = np.concatenate([np.asarray(sh, dtype=np.int64).reshape(-1, 2) + a for (_, sh), (a, _) in zip(parts, bounds)])
     static_mask = None
     if experiment.table is None:
         static_mask = np.zeros(experiment.n_samples, dtype=bool)
@@ -93,6 +99,14 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             model_options = replace(model_options, moving_sigma=1.0)
     identified = identify_noise(experiment, keyframe_s=model_options.keyframe_s, rests=find_rests(experiment))
     model_options = noise_options(identified, model_options)
+    if isinstance(model_options.moving_sigma, str):
+        if model_options.moving_sigma != "estimate":
+            raise InputError(f"moving_sigma must be a number of m/s^2, 'estimate' or None, not "
+                             f"{model_options.moving_sigma!r}", dataset="moving_sigma")
+        # 1 m/s^2 to start with, the variance components estimate it (solvers/variance.py; here, after
+        # noise_options, which writes noise_source afresh); a table's record has every keyframe static
+        model_options = replace(model_options, moving_sigma=None) if static_mask is None else replace(
+            model_options, moving_sigma=1.0, noise_source={**model_options.noise_source, "moving": MOVING_ESTIMATED})
     if isinstance(model_options.sway_sigma, str):
         if model_options.sway_sigma != "estimate":
             raise InputError(f"sway_sigma must be a number of m/s^2, 'estimate' or None, not "
@@ -114,7 +128,8 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             model_options = replace(model_options, initial_attitude_sigma=gyrocompass_attitude_sigma(
                 model_options, latitude_rad=experiment.latitude_rad))
         aligned.append(replace(al, interval=(al.interval[0] + a, al.interval[1] + a)) if a else al)
-    model = CalibrationModel(experiment, options=model_options, t_ref_degC=options.t_ref_degC, static_mask=static_mask)
+    model = CalibrationModel(experiment, options=model_options, t_ref_degC=options.t_ref_degC, static_mask=static_mask,
+                             short_rests=short if static_mask is not None else None)
     enc, enc_dof = table_noise(model.record.reading_scatter)
     identified = replace(identified, encoder=enc, encoder_dof=enc_dof)
     if enc is not None and model_options.encoder_noise is None:
@@ -137,6 +152,9 @@ def _align(experiment, *, interval, method):
         return alignment(experiment, interval=interval, method="gyrocompass"), True
 
 
+#: ``noise_source["moving"]`` of a model whose moving keyframes' gravity sigma the variance components estimate.
+MOVING_ESTIMATED = "variance components"
+
 #: The sway is estimated only when the keyframe means scatter this much more than white noise would
 #: (in variance); below, it is taken as zero.
 SWAY_VARIANCE_FACTOR = 2.0
@@ -145,12 +163,13 @@ SWAY_VARIANCE_FACTOR = 2.0
 def sway_from_static(experiment, static, *, keyframe_s, accel_noise):
     """The bench's own acceleration at rest over a keyframe, one sigma, m/s^2 (0 when not seen).
 
-    In every static interval the specific force is averaged over blocks of one keyframe; the sample
-    variance of those block means about their interval's mean, pooled over the intervals and the
-    axes, is what a gravity factor of a resting keyframe sees.  White noise explains
-    ``accel_noise^2 / keyframe_s`` of it; a hand's sway (coloured, 0.3-3 Hz, which a per-sample
-    variance does not reach) the rest.  When the pooled variance exceeds the white part by more than
-    :data:`SWAY_VARIANCE_FACTOR` the difference's root is returned, else 0.
+    In every static interval the specific force is averaged over blocks of one keyframe (a rest
+    shorter than two keyframes: over its two halves); the sample variance of those block means about
+    their interval's mean, less what white noise explains (``accel_noise^2 / T_block``), pooled over
+    the intervals and the axes, is the hand's sway (coloured, 0.3-3 Hz, which a per-sample variance
+    does not reach) a gravity factor of a resting keyframe sees.  When that, plus the white part of a
+    keyframe (``accel_noise^2 / keyframe_s``), exceeds the white part by more than
+    :data:`SWAY_VARIANCE_FACTOR` the sway's root is returned, else 0.
 
     Parameters
     ----------
@@ -165,20 +184,21 @@ def sway_from_static(experiment, static, *, keyframe_s, accel_noise):
     -------
     float
     """
-    m = max(1, int(round(keyframe_s * experiment.rate_hz)))
+    per = max(1, int(round(keyframe_s * experiment.rate_hz)))
     f = experiment.dv / experiment.dt[:, None]
-    ss, dof = 0.0, 0
+    excess, dof = 0.0, 0
     for a, b in np.asarray(static, dtype=np.int64).reshape(-1, 2):
-        nb = (b - a) // m
-        if nb < 2:
+        m = min(per, (b - a) // 2)          # a rest shorter than two keyframes: two blocks of half its length
+        if m < 1:
             continue
+        nb = (b - a) // m
         means = f[a:a + nb * m].reshape(nb, m, 3).mean(axis=1)
-        ss += float(np.sum((means - means.mean(axis=0)) ** 2))
+        excess += float(np.sum((means - means.mean(axis=0)) ** 2)) - 3 * (nb - 1) * accel_noise**2 / (m / experiment.rate_hz)
         dof += 3 * (nb - 1)
     if dof == 0:
         return 0.0
-    white = accel_noise**2 / (m / experiment.rate_hz)
-    var = ss / dof
+    white = accel_noise**2 / (per / experiment.rate_hz)
+    var = excess / dof + white
     return float(np.sqrt(var - white)) if var > SWAY_VARIANCE_FACTOR * white else 0.0
 
 

@@ -42,6 +42,14 @@ def face_attitude(up_b, heading_rad):
     return _rot_z(heading_rad) @ C
 
 
+def _length(rng, spec):
+    """A length in s: ``spec`` itself when a number, else drawn uniformly from the range ``(lo, hi)``."""
+    if np.ndim(spec) == 0:
+        return float(spec)
+    lo, hi = (float(v) for v in spec)
+    return lo if hi == lo else float(rng.uniform(lo, hi))
+
+
 def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=(1.5, 2.5),
                     rotation_s=(3.0, 5.0), rest_s=5.0):
     """The Ferraris-style programme as a hand-held motion.
@@ -52,15 +60,16 @@ def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=
     rng : numpy.random.Generator
         Headings and the lengths of the turns.
     initial_static_s : float
-        Rest on the first face before anything moves, s.
-    face_s : float
-        Rest on each face, s.
+        Rest on the first face before anything moves, s; 0: the record starts in motion (the hand
+        turning the unit onto its first face from a random attitude, then ``face_s`` on it).
+    face_s : float or (float, float)
+        Rest on each face, s (a range: drawn per face, as a hand holds it 0.5-1.5 s).
     turn_s : (float, float)
         Range of a turn's length between faces, s.
     rotation_s : (float, float)
         Range of a full turn's length, s.
-    rest_s : float
-        Rest before and after each full turn, s.
+    rest_s : float or (float, float)
+        Rest before and after each full turn, s (a range: drawn per rest).
 
     Returns
     -------
@@ -68,8 +77,12 @@ def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=
     rotations : tuple of int
         Index (among the motion's turns) of each full turn about a body axis x, y, z.
     """
-    motion = HandheldMotion(rate_hz, face_attitude(FACES[0], rng.uniform(0.0, 2.0 * np.pi)))
-    motion.hold(initial_static_s)
+    C_first = face_attitude(FACES[0], rng.uniform(0.0, 2.0 * np.pi))
+    in_motion = initial_static_s <= 0
+    # starting in motion: from a random attitude 60-120 deg away from the first face
+    C_start = C_first @ exp_so3(_unit(rng.normal(size=3)) * np.radians(rng.uniform(60.0, 120.0))) \
+        if in_motion else C_first
+    motion = HandheldMotion(rate_hz, C_start)
     n_turns = 0
 
     def go(C_target, seconds):
@@ -77,20 +90,30 @@ def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=
         motion.turn(log_so3(motion.attitude_now.T @ C_target), seconds)
         n_turns += 1
 
+    if in_motion:
+        go(C_first, rng.uniform(*turn_s))
+        motion.hold(_length(rng, face_s))
+    else:
+        motion.hold(initial_static_s)
+
     for up in FACES[1:]:
         go(face_attitude(up, rng.uniform(0.0, 2.0 * np.pi)), rng.uniform(*turn_s))
-        motion.hold(face_s)
+        motion.hold(_length(rng, face_s))
     rotations = []
     for axis in range(3):
         go(face_attitude(ROTATION_FACES[axis], rng.uniform(0.0, 2.0 * np.pi)), rng.uniform(*turn_s))
-        motion.hold(rest_s)
+        motion.hold(_length(rng, rest_s))
         phi = np.zeros(3)
         phi[axis] = 2.0 * np.pi * (1.0 if rng.uniform() < 0.5 else -1.0)
         motion.turn(phi, rng.uniform(*rotation_s))
         rotations.append(n_turns)
         n_turns += 1
-        motion.hold(rest_s)
+        motion.hold(_length(rng, rest_s))
     return motion, tuple(rotations)
+
+
+def _unit(v):
+    return v / np.linalg.norm(v)
 
 
 __all__ = ["FACES", "ROTATION_FACES", "face_attitude", "ferraris_motion"]

@@ -339,7 +339,7 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
 
 def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                       initial_static_s=20.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
-                      cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag="", noise_factor=1.0):
+                      cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag="", noise_factor=1.0, face_s=10.0, rest_s=5.0):
     """A Ferraris-style session of a consumer MEMS IMU by hand, no table (about 2.5 min).
 
     Six static faces (10 s each, the first 20 s) joined by hand turns, then a
@@ -349,6 +349,10 @@ def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
     every face and every full turn a segment (``/imu/segment``), as sections of a
     session cut together.  ``pivot_m`` and ``hand_accel_mps2`` as for
     ``consumer-handheld``.  The programme has its own length: ``hours`` is refused.
+    ``face_s`` and ``rest_s`` (s, a number or a range ``(lo, hi)`` drawn per rest) set the rests on the
+    faces and around the full turns; ``initial_static_s=0`` starts the record in motion.  A session as
+    a hand makes it: ``face_s=rest_s=(0.5, 1.5), initial_static_s=0, hand_accel_mps2=0.05``
+    (:data:`SHORT_REST_FERRARIS`).
     """
     if hours is not None:
         raise InputError("consumer-ferraris has a fixed programme (six faces, three full turns): no --hours")
@@ -367,13 +371,28 @@ def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
         latitude_rad=np.radians(latitude_deg), gravity_mps2=float(gravity_mps2), noise=noise, description=desc,
         tag=tag, cut=bool(cut), pivot_m=float(pivot_m), hand_accel_mps2=float(hand_accel_mps2), program="ferraris",
         noise_factor=_noise_keywords(noise_factor=noise_factor)["noise_factor"],
+        face_s=_rest_length(face_s, "face_s"), rest_s=_rest_length(rest_s, "rest_s"),
     )
     plan = ExperimentPlan(file_name="ferraris.h5", make=make, summary="six faces and three full turns by hand"
                           + (", cut together" if cut else ""))
     info = {"rate_hz": rate_hz, "noise": noise, "errors": errors, "effects": list(effects), "cut": bool(cut),
-            "pivot_m": pivot_m, "hand_accel_mps2": hand_accel_mps2}
+            "pivot_m": pivot_m, "hand_accel_mps2": hand_accel_mps2, "face_s": face_s, "rest_s": rest_s,
+            "initial_static_s": initial_static_s}
     return Simulation(scenario="consumer-ferraris", imu_id="SIM-MEMS 0002", grade="consumer", plans=(plan,),
                       imu=imu, exclude=exclude, info=info)
+
+
+#: consumer-ferraris as a hand makes it (issue 22): rests of 0.5-1.5 s on the faces and around the full
+#: turns, a swaying hand, the record starting in motion.
+SHORT_REST_FERRARIS = {"face_s": (0.5, 1.5), "rest_s": (0.5, 1.5), "initial_static_s": 0.0, "hand_accel_mps2": 0.05}
+
+
+def _rest_length(spec, name):
+    """A rest length option checked: a positive number of s, or a range ``(lo, hi)`` with ``0 < lo <= hi``."""
+    v = np.atleast_1d(np.asarray(spec, dtype=float))
+    if v.size not in (1, 2) or not np.all(np.isfinite(v)) or np.any(v <= 0) or (v.size == 2 and v[1] < v[0]):
+        raise InputError(f"{name} must be a positive number of s or a range (lo, hi), got {spec!r}")
+    return float(v[0]) if v.size == 1 else (float(v[0]), float(v[1]))
 
 
 @dataclass(frozen=True)
@@ -472,5 +491,5 @@ def simulate(name, *, rng, **options):
 __all__ = [
     "ExperimentPlan", "Simulation", "Scenario", "SCENARIOS", "scenario_names", "get_scenario", "simulate",
     "nav_subrange", "nav_subrange_short", "nav_campaign", "nav_campaign_cubic", "consumer_handheld", "consumer_ferraris", "effect_scenario",
-    "CAMPAIGN_SUBRANGES", "DEFAULT_LATITUDE_DEG", "DEFAULT_GRAVITY_MPS2",
+    "SHORT_REST_FERRARIS", "CAMPAIGN_SUBRANGES", "DEFAULT_LATITUDE_DEG", "DEFAULT_GRAVITY_MPS2",
 ]

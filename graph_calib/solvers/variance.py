@@ -17,6 +17,18 @@ solution), so that it does not depend on a solver's internals; the factors live 
 solves the problem uses the same ones.  A kind whose redundancy is below :data:`MIN_REDUNDANCY` keeps its
 factor (too few degrees of freedom to estimate one), and so does a kind the caller fixes; no factor goes
 below :data:`FACTOR_MIN` or above :data:`FACTOR_MAX`.
+
+Moving keyframes.  Without a table the gravity factor of a keyframe in motion has the sigma
+``ModelOptions.moving_sigma`` (default 1 m/s^2), a guess at what the hand's own acceleration adds.  With
+``ModelOptions(moving_sigma="estimate")`` (``--moving-sigma estimate``) it is estimated the same way, from
+the moving keyframes' own ``chi2 / redundancy`` (the pseudo-kind :data:`graph_calib.model.redundancy.MOVING`),
+within :data:`MOVING_SIGMA_BOUNDS`: a hand that turns the unit about itself accelerates it by a few cm/s^2,
+and a guess twenty times that leaves the attitude in a turn, and so the gyro's cross-axis terms, to the
+rotation factors alone.  Not the default: on the MPU-6050 session it
+settles at 0.09 m/s^2 and the held-out transitions (two folds by pairs) grow from 2.24 to 3.61 deg while the
+|f| spread falls from 0.126 to 0.082 m/s^2 (measured while every rest shorter than two keyframes had keyframes of its
+own; by default, as on main, 2.48 deg and 0.155 m/s^2).  While the moving keyframes' sigma is estimated
+the gravity kind's factor is estimated from the static keyframes' ``chi2 / redundancy`` alone.
 """
 
 from __future__ import annotations
@@ -26,7 +38,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel
-from graph_calib.model.redundancy import fit_statistics
+from graph_calib.model.redundancy import MOVING, fit_statistics
+from graph_calib.records.problem import MOVING_ESTIMATED
 from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
 
 #: The kinds that get a factor.
@@ -44,6 +57,14 @@ FACTOR_MIN = 1e-2
 FACTOR_MAX = 1e4
 #: Smallest exponent of a kind's response to its factor used for the step (module doc of the iteration).
 MIN_EXPONENT = 0.25
+#: Bounds of the moving keyframes' gravity sigma, m/s^2 (module doc).
+MOVING_SIGMA_BOUNDS = (1e-3, 10.0)
+#: The moving keyframes' ``chi2 / redundancy`` counts as settled within this of 1 (their sigma's order is what matters).
+MOVING_TOLERANCE = 0.5
+#: Largest step of the moving keyframes' log variance factor before it is bracketed (a factor of e^3, 20, per solve).
+MOVING_STEP = 3.0
+#: Further solves the loop may take when it estimates the moving keyframes' sigma.
+MOVING_EXTRA_SOLVES = 3
 
 
 @dataclass(frozen=True)
@@ -56,6 +77,8 @@ class VarianceComponents:
         The problem with ``ModelOptions.variance_factors`` set.
     factors : dict of str to float
         Each kind's variance factor (1 where not estimated).
+    moving_sigma : float or None
+        The moving keyframes' gravity sigma the problem carries, m/s^2 (None: every keyframe static).
     solves : int
     converged : bool
         Whether every estimated kind's ``chi2 / redundancy`` came within :data:`TOLERANCE` of 1.
@@ -67,16 +90,19 @@ class VarianceComponents:
 
     problem: object
     factors: dict
+    moving_sigma: object
     solves: int
     converged: bool
     history: tuple
     initial: tuple
 
 
-def with_variance_factors(problem, factors):
-    """``problem`` whose model carries the variance ``factors`` (the same prepared record)."""
+def with_variance_factors(problem, factors, *, moving_sigma=None):
+    """``problem`` whose model carries the variance ``factors`` (and ``moving_sigma`` when given; the same record)."""
     model = problem.model
     options = replace(model.options, variance_factors=dict(factors))
+    if moving_sigma is not None:
+        options = replace(options, moving_sigma=float(moving_sigma))
     return replace(problem, model=CalibrationModel.from_record(model.record, options=options))
 
 
@@ -102,23 +128,47 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
     """
     factors = {k: float(v) for k, v in (problem.model.options.variance_factors or {}).items()}
     fixed = set(fixed)
+    moving = problem.model.options.moving_sigma
+    estimate_moving = (moving is not None and MOVING not in fixed
+                       and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED)
+    factors.pop(MOVING, None)          # a fixed moving sigma is the options' own, not a factor
+    if estimate_moving:
+        # estimated as a factor on the moving rows' effective variance (moving_sigma^2 times the gravity
+        # kind's factor, which scales every gravity row), turned back into a sigma below
+        moving0 = float(moving)
+        factors[MOVING] = factors.get("gravity", 1.0)
     history = []
     initial = None
     converged = False
     previous = {}                      # kind -> (log factor, log ratio) of the previous solve
+    bracket = [None, None]             # log factors of MOVING known too small (ratio > 1) and too large
+    if estimate_moving and max_solves == MAX_SOLVES:
+        max_solves += MOVING_EXTRA_SOLVES
     n = 0
     for n in range(1, max_solves + 1):
         out = solve(solver, problem, options=options, progress=progress, initial=initial)
         initial = (out.attitudes, out.x)
         st = fit_statistics(problem.model, out.attitudes, out.x)
+        if estimate_moving:                # the moving rows have a factor of their own: the gravity kind's is the static's
+            st = _static_gravity(st)
         ratios = {k: f.chi2_per_redundancy for k, f in st.kinds.items()
-                  if k in KINDS and k not in fixed and f.redundancy >= MIN_REDUNDANCY and f.chi2 > 0}
+                  if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY
+                  and f.chi2 > 0}
         history.append(dict(ratios))
-        converged = all(abs(v - 1.0) <= tolerance for v in ratios.values())
+        converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance) for k, v in ratios.items())
         for k, v in ratios.items():
             if not np.isfinite(v):
                 continue
             lf, lr = np.log(factors.get(k, 1.0)), np.log(v)
+            if k == MOVING:
+                # the moving rows' residuals are absorbed by the attitudes the more, the more weight they get: their
+                # chi2 / redundancy answers a factor far from any power law; bracketed, then halved (in logs)
+                bracket[0 if v > 1.0 else 1] = lf
+                if bracket[0] is not None and bracket[1] is not None:
+                    factors[k] = float(np.exp(0.5 * (bracket[0] + bracket[1])))
+                else:
+                    factors[k] = float(np.exp(lf + np.clip(lr, -MOVING_STEP, MOVING_STEP)))
+                continue
             # chi2 / redundancy ~ c / factor^a: a kind whose residuals the attitudes partly absorb (a < 1) needs
             # a larger step than Helmert's (a = 1); a from the last two solves (secant in logs), within bounds
             a = 1.0
@@ -127,12 +177,31 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             previous[k] = (lf, lr)
             factors[k] = float(np.clip(np.exp(lf + lr / a), FACTOR_MIN, FACTOR_MAX))
         # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
-        problem = with_variance_factors(problem, factors)
+        if estimate_moving:
+            moving = float(np.clip(moving0 * np.sqrt(factors[MOVING] / factors.get("gravity", 1.0)),
+                                   *MOVING_SIGMA_BOUNDS))
+            factors[MOVING] = factors.get("gravity", 1.0) * (moving / moving0) ** 2
+        problem = with_variance_factors(problem, {k: v for k, v in factors.items() if k in KINDS},
+                                        moving_sigma=moving)
         if converged:
             break
-    return VarianceComponents(problem=problem, factors={k: factors.get(k, 1.0) for k in KINDS}, solves=n,
-                              converged=converged, history=tuple(history), initial=initial)
+    return VarianceComponents(problem=problem, factors={k: factors.get(k, 1.0) for k in KINDS}, moving_sigma=moving,
+                              solves=n, converged=converged, history=tuple(history), initial=initial)
 
 
-__all__ = ["VarianceComponents", "estimate_variance_components", "with_variance_factors", "KINDS",
+def _static_gravity(st):
+    """``st`` whose ``"gravity"`` counts the static keyframes only when the moving ones are apart (MOVING)."""
+    g, m = st.kinds.get("gravity"), st.kinds.get(MOVING)
+    if g is None or m is None:
+        return st
+    static = replace(g, count=g.count - m.count, chi2=g.chi2 - m.chi2, redundancy=g.redundancy - m.redundancy)
+    return replace(st, kinds={**st.kinds, "gravity": static})
+
+
+def factors_estimated(factors):
+    """The kinds whose factor the loop estimates: :data:`KINDS` and, when the record has moving keyframes, MOVING."""
+    return KINDS + ((MOVING,) if MOVING in factors else ())
+
+
+__all__ = ["VarianceComponents", "estimate_variance_components", "with_variance_factors", "KINDS", "MOVING_SIGMA_BOUNDS",
            "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]

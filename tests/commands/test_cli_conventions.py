@@ -84,3 +84,17 @@ def test_the_sway_term_is_reachable_from_the_command_line():
     from graph_calib.errors import InputError
     with pytest.raises(InputError, match="--sway-sigma: must be 'estimate' or a non-negative number of m/s"):
         calibrate_cmd.options_from_args(args)
+
+
+@pytest.mark.parametrize("command", ["calibrate", "crossval"])
+def test_the_moving_sigma_is_reachable_from_the_command_line(command):
+    from graph_calib.commands import calibrate_cmd
+    from graph_calib.errors import InputError
+    p = cli.build_parser(only=command)
+    args = p.parse_args([command, "x.h5", "--out", "o", "--moving-sigma", "estimate"])
+    assert calibrate_cmd.options_from_args(args).model.moving_sigma == "estimate"
+    args = p.parse_args([command, "x.h5", "--out", "o", "--moving-sigma", "0.1"])
+    assert calibrate_cmd.options_from_args(args).model.moving_sigma == 0.1
+    args = p.parse_args([command, "x.h5", "--out", "o", "--moving-sigma", "small"])
+    with pytest.raises(InputError, match="--moving-sigma: must be 'estimate' or a non-negative number of m/s"):
+        calibrate_cmd.options_from_args(args)

@@ -1,0 +1,97 @@
+"""The loop's held-out guard: an effect is adopted only when it does not make the held-out figures worse.
+
+On a record without a table (a hand-held session), a score test that passes at the loop's ``alpha`` may still
+fit the record's few poses rather than the sensor (issue 22: one fold of a six-face session gained
+``accel.nonlinearity``, passed, and its held-out transitions grew from 1.27 to 6.8 deg).  Before the loop adds
+an effect there, it cross-validates the current model and the grown one on the same two folds
+(:func:`graph_calib.evaluation.crossval.cross_validate`, by pairs of rests; ``calibrate`` with the primary
+solver, the variance components, no structure tests) and adopts the effect only when neither pooled held-out
+figure of IMU-TK's, the transitions' rms and the static |f| spread, is larger with it (:data:`GUARDED`).  A
+record whose rests are too few for two folds of two is not guarded (the check says so).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from graph_calib.compensation.calibration import Calibration
+from graph_calib.errors import InputError
+from graph_calib.evaluation.crossval import cross_validate
+
+#: The pooled held-out figures the guard compares (the static rate is left out: on a still unit it is the
+#: Earth rate and the noise, which an effect moves by chance).
+GUARDED = ("transitions_rms_deg", "static_norm_std_mps2")
+
+
+@dataclass(frozen=True)
+class HoldOutCheck:
+    """The held-out figures without and with a candidate effect.
+
+    Attributes
+    ----------
+    effect : str
+    before, after : dict
+        Pooled held-out figures (:meth:`graph_calib.evaluation.crossval.CrossValidation.pooled`) of the
+        current model and of the model with ``effect``.
+    worse : tuple of str
+        The :data:`GUARDED` figures the effect makes larger.
+    """
+
+    effect: str
+    before: dict
+    after: dict
+    worse: tuple
+
+    @property
+    def adopted(self):
+        return not self.worse
+
+    def text(self):
+        parts = ", ".join(f"{k} {self.before[k]:.4g} -> {self.after[k]:.4g}" for k in GUARDED
+                          if np.isfinite(self.before[k]) and np.isfinite(self.after[k]))
+        return (f"held out (2 folds): {parts}" if self.adopted
+                else f"not adopted: held out it makes {', '.join(self.worse)} worse ({parts})")
+
+    def to_json(self):
+        return {"effect": self.effect, "before": self.before, "after": self.after, "worse": list(self.worse),
+                "adopted": self.adopted}
+
+
+def held_out_check(experiment, *, options, grown, solver, folds=2):
+    """:class:`HoldOutCheck` of ``grown`` (the options with the candidate) against ``options``; None when unguarded.
+
+    Parameters
+    ----------
+    experiment : graph_calib.records.experiment.Experiment
+    options, grown : graph_calib.options.CalibrationOptions
+        The current model's and the grown model's.
+    solver : str
+        The registered solver that fits each fold.
+    folds : int
+
+    Returns
+    -------
+    HoldOutCheck or None
+        None for a record with a table, or with too few rests for the folds.
+    """
+    if experiment.table is not None:
+        return None
+    from graph_calib.calibrate import calibrate      # the loop is imported by calibrate's package
+
+    def fitter(opts):
+        opts = replace(opts, structure_tests=False)
+        return lambda train: Calibration.from_result(calibrate(train, options=opts, solvers=(solver,)).results[solver])
+
+    try:
+        cv_before = cross_validate(experiment, fit=fitter(options), folds=folds, by="pairs")
+    except InputError:
+        return None
+    cv_after = cross_validate(experiment, fit=fitter(grown), folds=folds, by="pairs")
+    before, after = cv_before.pooled("calibrated"), cv_after.pooled("calibrated")
+    worse = tuple(k for k in GUARDED if np.isfinite(before[k]) and np.isfinite(after[k]) and after[k] > before[k])
+    return HoldOutCheck(effect=grown.model.extra_effects[-1], before=before, after=after, worse=worse)
+
+
+__all__ = ["GUARDED", "HoldOutCheck", "held_out_check"]

@@ -1,0 +1,55 @@
+"""The loop's held-out guard (graph_calib.diagnosis.holdout, issue 22)."""
+
+import pytest
+
+from graph_calib.diagnosis import DiagnosisOptions, diagnose
+from graph_calib.diagnosis import loop as loop_module
+from graph_calib.diagnosis.holdout import GUARDED, HoldOutCheck, held_out_check
+from graph_calib.model import ModelOptions
+from graph_calib.importers import import_mpu6050
+from graph_calib.options import CalibrationOptions, GraphOptions
+
+from _shared import REAL_DATA, make_experiment, require_real
+
+CONSUMER = CalibrationOptions(model=ModelOptions(grade="consumer"))
+
+
+def test_a_check_is_adopted_only_when_no_guarded_figure_grows():
+    before = {"transitions_rms_deg": 0.5, "static_norm_std_mps2": 1e-3, "static_rate_rms_dps": 0.01}
+    better = HoldOutCheck(effect="gyro.g_sensitivity", before=before,
+                          after={**before, "transitions_rms_deg": 0.2, "static_rate_rms_dps": 0.02}, worse=())
+    assert better.adopted and "0.5 -> 0.2" in better.text()
+    worse = HoldOutCheck(effect="accel.nonlinearity", before=before,
+                         after={**before, "static_norm_std_mps2": 3e-3}, worse=("static_norm_std_mps2",))
+    assert not worse.adopted and worse.text().startswith("not adopted") and "static_norm_std_mps2" in worse.text()
+    assert worse.to_json()["adopted"] is False
+    assert "static_rate_rms_dps" not in GUARDED
+
+
+def test_a_record_with_a_table_is_not_guarded():
+    exp = make_experiment(n=3000, with_table=True)
+    grown = CalibrationOptions(model=ModelOptions(grade="consumer", extra_effects=("gyro.g_sensitivity",)))
+    assert held_out_check(exp, options=CONSUMER, grown=grown, solver="factor-graph") is None
+
+
+@pytest.mark.slow
+@pytest.mark.measured
+def test_the_loop_does_not_add_an_effect_the_held_out_figures_refuse(monkeypatch):
+    # the MPU-6050 session: the loop's first effect is gyro.g_sensitivity (tests/diagnosis/test_diagnosis.py)
+    exp = import_mpu6050(require_real(REAL_DATA / "mpu6050_uncuyo" / "example_data_calibration.csv"))
+    options = CalibrationOptions(model=ModelOptions(grade="consumer"), graph=GraphOptions(max_iterations=300))
+    seen = []
+
+    def refuse(experiment, *, options, grown, solver, folds=2):
+        seen.append(grown.model.extra_effects[-1])
+        f = {"transitions_rms_deg": 0.1, "static_norm_std_mps2": 1e-3, "static_rate_rms_dps": 0.01}
+        return HoldOutCheck(effect=seen[-1], before=f, after={**f, "transitions_rms_deg": 0.2},
+                            worse=("transitions_rms_deg",))
+
+    monkeypatch.setattr(loop_module, "held_out_check", refuse)
+    diag = diagnose(exp, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",), holdout=True))
+    assert seen == ["gyro.g_sensitivity"]
+    assert diag.added == []
+    last = diag.rounds[-1].to_json()
+    assert last["added"] is None and last["held_out"]["adopted"] is False
+    assert "not adopted" in last["decision"]
