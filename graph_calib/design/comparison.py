@@ -126,7 +126,9 @@ class CampaignPoint:
 
     ``metrics``: ``{family: {metric: value}}``, SI; ``sigma_curve`` / ``model_error_curve``:
     ``{family: ndarray (G,)}`` the largest over the axes at each temperature of the grid; ``sigma_axes``:
-    ``{family: ndarray (3, G)}`` per axis.
+    ``{family: ndarray (3, G)}`` per axis; ``node_covariance``: ``{family: ndarray (3, 4, 4)}`` the
+    stitched cubic's covariance at the four :func:`check_nodes` of the range, per axis (the cubic is fixed
+    by its values there: what the simulated check whitens its errors with).
     """
 
     procedure: str
@@ -137,6 +139,7 @@ class CampaignPoint:
     t_ref_degC: tuple
     sigma_axes: dict
     seconds: float
+    node_covariance: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -206,6 +209,12 @@ def _projection_rows(T_s, t_ref, center, slope_known):
     X = np.stack([np.ones_like(d), d], axis=1)
     B, *_ = np.linalg.lstsq(X, Y, rcond=None)
     return B
+
+
+def check_nodes(range_degC):
+    """The four Chebyshev nodes of ``range_degC`` (degC): a cubic over the range is fixed by its values there."""
+    lo, hi = (float(v) for v in range_degC)
+    return 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.cos((2 * np.arange(4) + 1) * np.pi / 8)
 
 
 def _curve_samples(curve, T, n, rng):
@@ -282,11 +291,16 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
     st = stitch(results, names=names, sensor_ranges=ranges)
     G = grid_degC.size
     sigma = {f: np.zeros((3, G)) for f in FAMILIES}
+    node_cov = {f: np.zeros((3, 4, 4)) for f in FAMILIES}
+    nodes = check_nodes((grid_degC[0], grid_degC[-1]))
     noise = {f: [] for f in FAMILIES}
     for f in FAMILIES:
         for i, ax in enumerate(AXES):
             cv = st.curves[f"{f}.{ax}"]
             sigma[f][i] = cv.evaluate(grid_degC)[1]
+            fit = cv.fit()
+            A = fit.rows(nodes)
+            node_cov[f][i] = A @ (0.5 * (fit.cov + fit.cov.T)) @ A.T
             noise[f].append(_curve_samples(cv, grid_degC, noise_draws * len(next(iter(truths.values()))), rng))
     n_draws = len(next(iter(truths.values())))
     merr = _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC)
@@ -306,7 +320,7 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
         me_curve[f] = me_rms.max(axis=0)
     pt = CampaignPoint(procedure=procedure.name, length_s=float(length_s), metrics=metrics, sigma_curve=sig_curve,
                        model_error_curve=me_curve, t_ref_degC=tuple(r.t_ref_degC for r in results), sigma_axes=sigma,
-                       seconds=time.perf_counter() - t0)
+                       seconds=time.perf_counter() - t0, node_covariance=node_cov)
     if progress:
         progress(f"  {procedure.name}, {length_s / 3600:g} h per experiment: gyro bias largest sigma "
                  f"{metrics['gyro.bias']['largest_sigma'] * c.RS_TO_DH:.4f} deg/h, accel bias "
@@ -430,5 +444,5 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
 
 
 __all__ = ["PREDICTION_RATE_HZ", "FAMILIES", "METRICS", "DISPLAY", "TruthFamily", "CampaignPoint", "Comparison",
-           "campaign_point",
+           "campaign_point", "check_nodes",
            "equal_accuracy_duration", "equal_accuracy", "compare"]

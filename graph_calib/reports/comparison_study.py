@@ -171,32 +171,37 @@ def comparison_markdown(doc, comparison, *, path, command, intro="", closing="")
     sc = doc.get("simulated_check")
     if sc:
         out += ["## Simulated check", "", sc["what"], "", f"**{sc['verdict']['text']}**", "",
-                "| procedure | h per experiment | family | realisations | predicted largest | simulated largest | "
-                "simulated / predicted | simulated where predicted largest | simulated / predicted | predicted RMS | "
-                "simulated RMS | simulated / predicted |",
-                "| --- " * 12 + "|"]
+                "| procedure | h per experiment | family | realisations | scale (95 % band) | scale at the four nodes "
+                "(band) | predicted largest | simulated largest (scaled) | raw largest over the range | raw / predicted "
+                "| predicted RMS | raw RMS | raw / predicted |",
+                "| --- " * 13 + "|"]
         for name, per in sc["campaigns"].items():
             for L, v in per.items():
                 for f in ("gyro.bias", "accel.bias"):
                     k = DISPLAY[f][0]
                     x = v[f]
+                    ws = x["whitened"]
                     out.append(f"| {name} | {float(L) / 3600:g} | {f} | {x['realisations']} | "
+                               f"{ws['scale']:.3f} ({ws['band'][0]:.2f}-{ws['band'][1]:.2f}) | "
+                               f"{', '.join(f'{n:.2f}' for n in ws['node_scale'])} "
+                               f"({ws['node_band'][0]:.2f}-{ws['node_band'][1]:.2f}) | "
                                f"{x['predicted_largest_sigma'] * k:.3g} | {x['largest_sigma'] * k:.3g} | "
-                               f"{x['largest_sigma'] / x['predicted_largest_sigma']:.3f} | "
-                               f"{x['worst_point_sigma'] * k:.3g} | "
-                               f"{x['worst_point_sigma'] / x['predicted_largest_sigma']:.3f} | "
-                               f"{x['predicted_rms_sigma'] * k:.3g} | {x['rms_sigma'] * k:.3g} | "
-                               f"{x['rms_sigma'] / x['predicted_rms_sigma']:.3f} |")
-        out += ["", "| family | metric | reference h per step | predicted ratio | simulated ratio | "
-                "simulated / predicted | status (predicted / simulated) |", "| --- " * 7 + "|"]
+                               f"{x['largest_sigma_raw'] * k:.3g} | "
+                               f"{x['largest_sigma_raw'] / x['predicted_largest_sigma']:.3f} | "
+                               f"{x['predicted_rms_sigma'] * k:.3g} | {x['rms_sigma_raw'] * k:.3g} | "
+                               f"{x['rms_sigma_raw'] / x['predicted_rms_sigma']:.3f} |")
+        out += ["", "| family | metric | judged | reference h per step | predicted ratio | simulated ratio | "
+                "simulated / predicted | standard error | status (predicted / simulated) |", "| --- " * 9 + "|"]
         for f, per in sc["ratios"].items():
             if f not in ("gyro.bias", "accel.bias"):
                 continue
             for m, rows in per.items():
                 for r in rows:
                     fmt = lambda v: "-" if v is None else f"{v:.3f}"
-                    out.append(f"| {f} | {m} | {r['reference_length_s'] / 3600:g} | {fmt(r['predicted'])} | "
-                               f"{fmt(r['simulated'])} | {fmt(r['agreement'])} | {r['status']} |")
+                    se = "-" if r.get("relative_se") is None else f"{r['relative_se']:.0%}"
+                    out.append(f"| {f} | {m} | {'yes' if r.get('judged') else 'no'} | "
+                               f"{r['reference_length_s'] / 3600:g} | {fmt(r['predicted'])} | "
+                               f"{fmt(r['simulated'])} | {fmt(r['agreement'])} | {se} | {r['status']} |")
         out.append("")
     if closing:
         out += [closing.strip(), ""]
