@@ -169,6 +169,8 @@ def test_report_and_study_page(small, tmp_path):
     doc = small.to_dict()
     html = comparison_report_html(doc, small)
     assert html.count("<img") == 4 and "Equal-accuracy ratios" in html
+    # one self-contained file: every figure embedded, nothing to fetch when it opens in a browser
+    assert html.count('src="data:image/png;base64,') == 4 and "http" not in html.replace("http-equiv", "")
     page = tmp_path / "study.md"
     text = comparison_markdown(doc, small, path=page, command="graph-calib compare st.toml rp.toml", closing="## Notes")
     assert page.read_text() == text and text.rstrip().endswith("## Notes")
