@@ -155,6 +155,7 @@ class Comparison:
     draws: int
     ratios: dict
     seconds: float
+    cpu_seconds: float = float("nan")
 
     def durations(self, name, *, soak_s=None):
         proc = next(p for p in self.procedures if p.name == name)
@@ -166,7 +167,7 @@ class Comparison:
 
         return {
             "range_degC": list(self.range_degC), "soaks_s": list(self.soaks_s), "truth_family": self.truth.to_dict(),
-            "truth_draws": self.draws, "seconds": self.seconds,
+            "truth_draws": self.draws, "seconds": self.seconds, "cpu_seconds": self.cpu_seconds,
             "procedures": [p.to_dict() for p in self.procedures],
             "campaigns": {name: [{"length_s": pt.length_s,
                                   "duration_s": {f"{w:g}": p.duration_s(pt.length_s, soak_s=w) for w in self.soaks_s}
@@ -415,7 +416,7 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
     -------
     Comparison
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     procedures = tuple(procedures)
     if len(procedures) < 2:
         raise ValueError("a comparison needs at least two procedures")
@@ -440,7 +441,8 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
     soaks_s = tuple(float(w) for w in soaks_s)
     ratios = equal_accuracy(procedures, points, soaks_s=soaks_s)
     return Comparison(procedures=procedures, points=points, range_degC=(lo, hi), grid_degC=grid, soaks_s=soaks_s,
-                      truth=truth, draws=int(draws), ratios=ratios, seconds=time.perf_counter() - t0)
+                      truth=truth, draws=int(draws), ratios=ratios, seconds=time.perf_counter() - t0,
+                      cpu_seconds=time.process_time() - c0)
 
 
 __all__ = ["PREDICTION_RATE_HZ", "FAMILIES", "METRICS", "DISPLAY", "TruthFamily", "CampaignPoint", "Comparison",

@@ -117,7 +117,7 @@ def comparison_report_html(doc, comparison):
         f"Noise: the shared model's Fisher information of each experiment (graph-calib predict), stitched as the "
         f"campaign stitches (cubic over temperature). Model error: each procedure's temperature model against "
         f"{doc['truth_draws']} truth curves of the stated family (cubic in every bias and scale factor). Reference "
-        f"procedure: {ref}. Predicted part: {doc['seconds']:.0f} s.")]
+        f"procedure: {ref}. Predicted part: {doc['seconds']:.0f} s wall, {doc.get('cpu_seconds', float('nan')):.0f} s CPU.")]
     rows = []
     for p in doc["procedures"]:
         rows.append([p["name"], p["kind"], p["experiments"], ", ".join(f"{L / 3600:.3g}" for L in p["lengths_s"]),

@@ -187,6 +187,7 @@ def test_predict_command_writes_the_result_layout(short_file, tmp_path):
     (["--accel-noise", "0"], "--accel-noise"),
     (["--encoder-noise", "nan"], "--encoder-noise"),
     (["--keyframe", "0"], "--keyframe"),
+    (["--variance-components", "--seed", "-1"], "--seed"),
 ])
 def test_predict_refuses_bad_arguments(short_file, tmp_path, capsys, args, message):
     out = tmp_path / "p.json"
