@@ -127,9 +127,9 @@ class CampaignPoint:
 
     ``metrics``: ``{family: {metric: value}}``, SI; ``sigma_curve`` / ``model_error_curve``:
     ``{family: ndarray (G,)}`` the largest over the axes at each temperature of the grid; ``sigma_axes``:
-    ``{family: ndarray (3, G)}`` per axis; ``node_covariance``: ``{family: ndarray (3, 4, 4)}`` the
-    stitched cubic's covariance at the four :func:`check_nodes` of the range, per axis (the cubic is fixed
-    by its values there: what the simulated check whitens its errors with).
+    ``{family: ndarray (3, G)}`` per axis; ``node_covariance``: ``{family: ndarray (12, 12)}`` the
+    stitched cubics' joint covariance at the four :func:`check_nodes` of the range over the three axes
+    (axis-major; a cubic is fixed by its values there: what the simulated check whitens its errors with).
     """
 
     procedure: str
@@ -230,12 +230,16 @@ def _curve_samples(curve, T, n, rng):
     return (z @ L.T) @ A.T
 
 
-def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC):
-    """Stitched minus truth over the grid for every truth draw, ``{family: ndarray (draws, 3, G)}``.
+def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC, nodes_degC):
+    """Stitched minus truth over the grid for every truth draw, ``{family: ndarray (draws, 3, G)}``, and the
+    stitched curves' joint covariance at ``nodes_degC`` over the axes, ``{family: ndarray (3 N, 3 N)}``
+    (axis-major).
 
     The stitched curve is linear in the experiments' values (generalised least squares with fixed
     weights), so the campaign is stitched once per (experiment, coefficient) slot with a unit value in
-    every element, and each draw's curve is the sum of those responses weighted by its projections.
+    every element, and each draw's curve is the sum of those responses weighted by its projections.  The
+    same responses at the nodes carry each experiment's full covariance (the axes' correlations included,
+    which the per-element stitch does not keep) to the nodes.
     """
     n_coef = 2 if any(n.rsplit(".", 1)[0] in _TC.values() for n in results[0].values) else 1
     elements = [f"{f}.{ax}" for f in FAMILIES for ax in AXES]
@@ -252,7 +256,21 @@ def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC)
                 rs.append(replace(r, values=vals))
             st = stitch(rs, names=names, sensor_ranges=ranges)
             for el in elements:
-                response[(el, k, j)] = st.curves[el].evaluate(grid_degC)[0]
+                response[(el, k, j)] = st.curves[el].evaluate(np.concatenate([grid_degC, nodes_degC]))[0]
+    G, N = grid_degC.size, len(nodes_degC)
+    node_cov = {}
+    for f in FAMILIES:
+        C = np.zeros((3 * N, 3 * N))
+        for k, r in enumerate(results):
+            slots = [(i, j, f"{f}.{ax}" if j == 0 else f"{_TC[f]}.{ax}") for i, ax in enumerate(AXES)
+                     for j in range(n_coef)]
+            idx = [r.covariance_names.index(n) for _, _, n in slots]
+            S = np.asarray(r.covariance)[np.ix_(idx, idx)]
+            Gm = np.zeros((3 * N, len(slots)))
+            for c, (i, j, _) in enumerate(slots):
+                Gm[i * N:(i + 1) * N, c] = response[(f"{f}.{AXES[i]}", k, j)][G:]
+            C += Gm @ S @ Gm.T
+        node_cov[f] = 0.5 * (C + C.T)
     out = {f: np.zeros((len(next(iter(truths.values()))), 3, grid_degC.size)) for f in FAMILIES}
     for f in FAMILIES:
         for i, ax in enumerate(AXES):
@@ -264,9 +282,9 @@ def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC)
                                         slope_known=f"{_TC[f]}.{ax}" in r.values)
                 y = coef @ rows.T                                        # (D, n_coef)
                 for j in range(rows.shape[0]):
-                    out[f][:, i] += y[:, [j]] * response[(el, k, j)][None, :]
+                    out[f][:, i] += y[:, [j]] * response[(el, k, j)][None, :G]
             out[f][:, i] -= coef @ np.stack([u, u**2, u**3])
-    return out
+    return out, node_cov
 
 
 def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise_draws=20, rng,
@@ -293,19 +311,15 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
     st = stitch(results, names=names, sensor_ranges=ranges)
     G = grid_degC.size
     sigma = {f: np.zeros((3, G)) for f in FAMILIES}
-    node_cov = {f: np.zeros((3, 4, 4)) for f in FAMILIES}
     nodes = check_nodes((grid_degC[0], grid_degC[-1]))
     noise = {f: [] for f in FAMILIES}
     for f in FAMILIES:
         for i, ax in enumerate(AXES):
             cv = st.curves[f"{f}.{ax}"]
             sigma[f][i] = cv.evaluate(grid_degC)[1]
-            fit = cv.fit()
-            A = fit.rows(nodes)
-            node_cov[f][i] = A @ (0.5 * (fit.cov + fit.cov.T)) @ A.T
             noise[f].append(_curve_samples(cv, grid_degC, noise_draws * len(next(iter(truths.values()))), rng))
     n_draws = len(next(iter(truths.values())))
-    merr = _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC)
+    merr, node_cov = _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC, nodes)
     metrics, sig_curve, me_curve = {}, {}, {}
     for f in FAMILIES:
         s = sigma[f]

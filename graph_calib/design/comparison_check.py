@@ -12,14 +12,15 @@ sigma is a chi with ``R`` degrees of freedom (within 0.57-1.43 of the true one 9
 ``R = 10``), and the largest over 3 axes and the range picks the most extreme of them, a statistic whose
 bias and spread depend on the correlations over temperature and are known to nobody.  What is judged is
 the **scale** of the simulated errors against the prediction: the stitched cubic is fixed by its values at
-the four :func:`graph_calib.design.comparison.check_nodes` of the range, and its error there, whitened by
-the predicted covariance of those four values, gives ``q = sum e^T C^-1 e`` over the realisations and
-axes, chi-square with ``n = 4 x 3 x R`` degrees of freedom if the prediction holds.  ``scale =
+the four :func:`graph_calib.design.comparison.check_nodes` of the range, and its error there on the three
+axes, whitened by the predicted joint covariance of those twelve values (the axes' correlations
+included), gives ``q = sum e^T C^-1 e`` over the realisations, chi-square with ``n = 12 R`` degrees of
+freedom if the prediction holds.  ``scale =
 sqrt(q / n)`` has known spread (relative standard error ``1 / sqrt(2 n)``: 6.5 % at ``R = 10``, its 95 %
 band from the chi-square quantiles), and the simulated ``largest_sigma`` and ``rms_sigma`` are the
 predicted ones times it.  That takes the shape over temperature from the prediction, so the shape is tested
-too: at each node the whitened squared error averaged over realisations and axes (chi-square with ``3 R``
-degrees of freedom) must lie within its band at the family-wise level :data:`SHAPE_ALPHA` (Bonferroni over
+too: at each node the three axes' error whitened together and averaged over the realisations (chi-square
+with ``3 R`` degrees of freedom) must lie within its band at the family-wise level :data:`SHAPE_ALPHA` (Bonferroni over
 the nodes, families and campaigns); a stitching that placed the ends differently from the prediction
 fails there.  The equal-accuracy ratios follow from the scaled metrics by the same interpolation; each is
 given with its approximate standard error (the scales' errors through the log-log interpolation).
@@ -134,10 +135,10 @@ def whitened_scale(node_errors, node_covariance, *, alpha=SHAPE_ALPHA, n_tests=1
 
     Parameters
     ----------
-    node_errors : ndarray (R, 3, 4)
+    node_errors : ndarray (R, 3, N)
         Stitched errors at the check nodes, per realisation and axis.
-    node_covariance : ndarray (3, 4, 4)
-        Their predicted covariance per axis.
+    node_covariance : ndarray (3 N, 3 N)
+        Their predicted joint covariance over the axes (axis-major).
     alpha : float
         Family-wise false-alarm rate of the node tests, shared over ``n_tests`` sets of nodes (Bonferroni).
     n_tests : int
@@ -146,23 +147,28 @@ def whitened_scale(node_errors, node_covariance, *, alpha=SHAPE_ALPHA, n_tests=1
     -------
     dict
         ``scale`` (sqrt of the whitened mean square), ``dof``, ``band`` (its 95 % band if the prediction
-        holds), ``relative_se`` (``1 / sqrt(2 dof)``), ``node_scale`` (4,) the scale at each node alone,
-        ``node_band`` (its band at the Bonferroni level) and ``shape_ok``.
+        holds), ``relative_se`` (``1 / sqrt(2 dof)``), ``node_scale`` (N,) the scale at each node alone
+        (its three axes whitened together), ``node_band`` (its band at the Bonferroni level) and ``shape_ok``.
     """
     e = np.asarray(node_errors, dtype=float)
-    R = e.shape[0]
-    q, dof = 0.0, 0
-    for i in range(e.shape[1]):
-        w, V = np.linalg.eigh(0.5 * (node_covariance[i] + node_covariance[i].T))
+    R, A, N = e.shape
+    C = 0.5 * (np.asarray(node_covariance) + np.asarray(node_covariance).T)
+
+    def quad(cov, x):            # sum over rows of x^T cov^-1 x, on the covariance's range; and its rank
+        w, V = np.linalg.eigh(cov)
         keep = w > w.max() * 1e-10
-        z = (e[:, i] @ V[:, keep]) / np.sqrt(w[keep])
-        q += float(np.sum(z**2))
-        dof += int(keep.sum()) * R
-    node_var = np.einsum("aii->ai", node_covariance)                       # (3, 4)
-    node_ms = np.mean(e**2 / node_var[None], axis=(0, 1))                  # (4,), chi2(3R) / 3R each
-    k = 3 * R
-    a = alpha / (4 * max(int(n_tests), 1))
-    lo, hi = stats.chi2.ppf([a / 2, 1 - a / 2], k) / k
+        z = (x @ V[:, keep]) / np.sqrt(w[keep])
+        return float(np.sum(z**2)), int(keep.sum())
+
+    q, rank = quad(C, e.reshape(R, A * N))
+    dof = rank * R
+    node_ms, node_dof = np.zeros(N), 0
+    for n in range(N):
+        ii = [a * N + n for a in range(A)]
+        qn, rn = quad(C[np.ix_(ii, ii)], e[:, :, n])
+        node_ms[n], node_dof = qn / (rn * R), rn * R
+    a = alpha / (N * max(int(n_tests), 1))
+    lo, hi = stats.chi2.ppf([a / 2, 1 - a / 2], node_dof) / node_dof
     return {"scale": float(np.sqrt(q / dof)), "dof": dof,
             "band": [float(np.sqrt(v / dof)) for v in stats.chi2.ppf([0.025, 0.975], dof)],
             "relative_se": float(1.0 / np.sqrt(2.0 * dof)), "node_scale": np.sqrt(node_ms).tolist(),

@@ -181,23 +181,22 @@ def test_report_and_study_page(small, tmp_path):
 
 
 def _fake_metrics(small, scale, node_shape=(1.0, 1.0, 1.0, 1.0)):
-    """``simulated_metrics`` stand-in for 8 realisations: errors whose sample covariance at the nodes is exactly
-    ``scale^2`` times the predicted one (the rows of a 4 x 4 Hadamard matrix, twice, on a square root of
-    it), optionally bent node by node."""
-    H = np.array([[1, 1, 1, 1], [1, -1, 1, -1], [1, 1, -1, -1], [1, -1, -1, 1]], dtype=float)
+    """``simulated_metrics`` stand-in for 16 realisations: errors whose sample covariance at the nodes is exactly
+    ``scale^2`` times the predicted joint one (12 orthogonal columns of a 16 x 16 Hadamard matrix on a square
+    root of it), optionally bent node by node."""
+    from scipy.linalg import hadamard
+
+    z = hadamard(16)[:, 1:13].astype(float)
 
     def fake(procedure, length_s, **kw):
         pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
         k = scale(procedure.name) if callable(scale) else scale
         out = {"failed": []}
         R = kw["realisations"]
-        assert R == 8
-        z = np.concatenate([H, H])
+        assert R == 16
         for f, m in pt.metrics.items():
-            e = np.zeros((R, 3, 4))
-            for i in range(3):
-                w, V = np.linalg.eigh(pt.node_covariance[f][i])
-                e[:, i] = z @ (V * np.sqrt(np.clip(w, 0, None))).T
+            w, V = np.linalg.eigh(pt.node_covariance[f])
+            e = (z @ (V * np.sqrt(np.clip(w, 0, None))).T).reshape(R, 3, 4)
             e = k * e * np.asarray(node_shape)
             out[f] = {"largest_sigma": m["largest_sigma"] * k, "sigma_axes": pt.sigma_axes[f] * k,
                       "rms_sigma": m["rms_sigma"] * k, "realisations": R, "node_errors": e}
@@ -205,16 +204,31 @@ def _fake_metrics(small, scale, node_shape=(1.0, 1.0, 1.0, 1.0)):
     return fake
 
 
+def test_node_covariance_is_the_stitched_curves(small):
+    # the joint covariance's per-axis blocks are the stitched curves' own covariance at the nodes
+    from graph_calib.design.comparison import check_nodes
+
+    pt = small.points["rp"][0]
+    nodes = check_nodes(small.range_degC)
+    C = pt.node_covariance["gyro.bias"]
+    assert C.shape == (12, 12) and np.all(np.linalg.eigvalsh(C) > -1e-12 * np.max(np.diag(C)))
+    grid_sigma = pt.sigma_axes["gyro.bias"]
+    for i in range(3):
+        s_nodes = np.sqrt(np.diag(C)[4 * i:4 * i + 4])
+        s_grid = np.interp(nodes, small.grid_degC, grid_sigma[i])
+        assert np.allclose(s_nodes, s_grid, rtol=0.02), (i, s_nodes, s_grid)
+
+
 def test_whitened_scale_has_its_stated_spread():
     from graph_calib.design.comparison_check import whitened_scale
 
     rng = np.random.default_rng(5)
-    A = rng.normal(size=(3, 4, 4))
-    cov = A @ np.swapaxes(A, 1, 2) + 0.1 * np.eye(4)
+    A = rng.normal(size=(12, 12))
+    cov = A @ A.T + 0.1 * np.eye(12)                       # axes correlated
     L = np.linalg.cholesky(cov)
     scales, shapes = [], []
     for _ in range(400):
-        e = np.einsum("aij,raj->rai", L, rng.standard_normal((10, 3, 4)))
+        e = (rng.standard_normal((10, 12)) @ L.T).reshape(10, 3, 4)
         ws = whitened_scale(e, cov)
         scales.append(ws["scale"])
         shapes.append(ws["shape_ok"])
@@ -224,8 +238,7 @@ def test_whitened_scale_has_its_stated_spread():
     assert 0.92 <= inside <= 0.98
     assert np.mean(shapes) >= 0.97                         # the node tests' false alarms at alpha = 1 %
     # one node's errors doubled (a stitching that bends the curve at one end): the shape test fails
-    e = np.einsum("aij,raj->rai", L, rng.standard_normal((10, 3, 4)))
-    w, V = np.linalg.eigh(cov[0])
+    e = (rng.standard_normal((10, 12)) @ L.T).reshape(10, 3, 4)
     bent = e.copy()
     bent[..., 3] *= 2.0
     assert whitened_scale(e, cov)["shape_ok"] and not whitened_scale(bent, cov)["shape_ok"]
@@ -236,20 +249,20 @@ def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tm
 
     # the candidate's simulated sigma far off
     monkeypatch.setattr(cc, "simulated_metrics", _fake_metrics(small, lambda name: 1.0 if name == "st" else 1.6))
-    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=8, work=tmp_path)
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=16, work=tmp_path)
     assert not sc["verdict"]["passed"] and sc["verdict"]["text"].startswith("verdict: FAIL: ")
     assert "simulated ratio" in sc["verdict"]["text"]
     assert sc["campaigns"]["rp"]["600"]["gyro.bias"]["whitened"]["scale"] == pytest.approx(1.6)
     # the same scale everywhere: the ratios agree exactly and the check passes, with its standard errors
     monkeypatch.setattr(cc, "simulated_metrics", _fake_metrics(small, 0.9))
-    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=8, work=tmp_path)
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=16, work=tmp_path)
     assert sc["verdict"]["passed"], sc["verdict"]["text"]
     rows = [r for f in ("gyro.bias", "accel.bias") for m in ("largest_sigma", "rms_sigma")
             for r in sc["ratios"][f][m] if r["agreement"] is not None]
     assert rows and all(abs(r["agreement"] - 1.0) < 1e-9 and 0.02 < r["relative_se"] < 0.5 for r in rows)
     # the right scale but the curve bent at one end of the range: the shape test fails in words
     monkeypatch.setattr(cc, "simulated_metrics", _fake_metrics(small, 1.0, node_shape=(1.0, 1.0, 1.0, 1.8)))
-    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=8, work=tmp_path)
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=16, work=tmp_path)
     assert not sc["verdict"]["passed"] and "shape over temperature is not the predicted one" in sc["verdict"]["text"]
     # the report and the study page show the check: its scales, the node shape and the judged ratios
     from graph_calib.reports.comparison_report import comparison_report_html
