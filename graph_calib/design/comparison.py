@@ -129,7 +129,9 @@ class CampaignPoint:
     ``{family: ndarray (G,)}`` the largest over the axes at each temperature of the grid; ``sigma_axes``:
     ``{family: ndarray (3, G)}`` per axis; ``node_covariance``: ``{family: ndarray (12, 12)}`` the
     stitched cubics' joint covariance at the four :func:`check_nodes` of the range over the three axes
-    (axis-major; a cubic is fixed by its values there: what the simulated check whitens its errors with).
+    (axis-major; a cubic is fixed by its values there: what the simulated check whitens its errors with);
+    ``experiment_covariance``: ``(names, matrix)`` one experiment's predicted covariance of the compared
+    families' elements (every experiment of the campaign has it: one program shifted in temperature).
     """
 
     procedure: str
@@ -141,6 +143,7 @@ class CampaignPoint:
     sigma_axes: dict
     seconds: float
     node_covariance: dict = field(default_factory=dict)
+    experiment_covariance: tuple = ((), None)
 
 
 @dataclass(frozen=True)
@@ -336,7 +339,8 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
         me_curve[f] = me_rms.max(axis=0)
     pt = CampaignPoint(procedure=procedure.name, length_s=float(length_s), metrics=metrics, sigma_curve=sig_curve,
                        model_error_curve=me_curve, t_ref_degC=tuple(r.t_ref_degC for r in results), sigma_axes=sigma,
-                       seconds=time.perf_counter() - t0, node_covariance=node_cov)
+                       seconds=time.perf_counter() - t0, node_covariance=node_cov,
+                       experiment_covariance=(tuple(base.covariance_names), np.asarray(base.covariance)))
     if progress:
         progress(f"  {procedure.name}, {length_s / 3600:g} h per experiment: gyro bias largest sigma "
                  f"{metrics['gyro.bias']['largest_sigma'] * c.RS_TO_DH:.4f} deg/h, accel bias "

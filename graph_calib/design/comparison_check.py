@@ -11,18 +11,22 @@ largest over the range and the axes are reported, but not judged: with ``R`` rea
 sigma is a chi with ``R`` degrees of freedom (within 0.57-1.43 of the true one 95 % of the time at
 ``R = 10``), and the largest over 3 axes and the range picks the most extreme of them, a statistic whose
 bias and spread depend on the correlations over temperature and are known to nobody.  What is judged is
-the **scale** of the simulated errors against the prediction: the stitched cubic is fixed by its values at
+the **scale** of the simulated errors against the prediction, from the experiments themselves
+(:func:`experiment_scale`): every experiment's errors in a family's values and temperature coefficients,
+whitened by their predicted covariance, chi-square with 3 (steps) or 6 (ramps) degrees of freedom per
+experiment, 210-360 per family at ``R = 10`` (relative standard error 3.7-4.9 %); the stitched curve is
+linear in those values, so the simulated ``largest_sigma`` and ``rms_sigma`` are the predicted ones times
+that scale.  The stitching is checked on its own: the stitched cubic is fixed by its values at
 the four :func:`graph_calib.design.comparison.check_nodes` of the range, and its error there on the three
 axes, whitened by the predicted joint covariance of those twelve values (the axes' correlations
 included), gives ``q = sum e^T C^-1 e`` over the realisations, chi-square with ``n = 12 R`` degrees of
-freedom if the prediction holds.  ``scale =
-sqrt(q / n)`` has known spread (relative standard error ``1 / sqrt(2 n)``: 6.5 % at ``R = 10``, its 95 %
-band from the chi-square quantiles), and the simulated ``largest_sigma`` and ``rms_sigma`` are the
-predicted ones times it.  That takes the shape over temperature from the prediction, so the shape is tested
-too: at each node the three axes' error whitened together and averaged over the realisations (chi-square
-with ``3 R`` degrees of freedom) must lie within its band at the family-wise level :data:`SHAPE_ALPHA` (Bonferroni over
-the nodes, families and campaigns); a stitching that placed the ends differently from the prediction
-fails there.  The equal-accuracy ratios follow from the scaled metrics by the same interpolation; each is
+freedom if the prediction holds.  ``scale = sqrt(q / n)`` has known spread (relative standard error
+``1 / sqrt(2 n)``: 6.5 % at ``R = 10``, its 95 % band from the chi-square quantiles; reported, with the
+ratios it gives, ``largest_sigma_stitched``).  Both scales take the shape over temperature from the
+prediction, so the shape is tested too: at each node the three axes' error whitened together and averaged
+over the realisations (chi-square with ``3 R`` degrees of freedom) must lie within its band at the
+family-wise level :data:`SHAPE_ALPHA` (Bonferroni over the nodes, families and campaigns); a stitching
+that placed the ends differently from the prediction fails there.  The equal-accuracy ratios follow from the scaled metrics by the same interpolation; each is
 given with its approximate standard error (the scales' errors through the log-log interpolation).
 
 Every calibration is cached in ``work`` (one result file each), so a check can be run in parts and
@@ -104,18 +108,21 @@ def simulated_metrics(procedure, length_s, *, realisations, grid_degC, work, see
     """Empirical ``largest_sigma`` and ``rms_sigma`` per family over ``realisations`` simulated campaigns.
 
     Per family also ``node_errors`` (R, 3, 4): each realisation's stitched error at the four
-    :func:`graph_calib.design.comparison.check_nodes` of the grid's range.  ``out["failed"]``: the
+    :func:`graph_calib.design.comparison.check_nodes` of the grid's range.  ``out["estimates"]``: every
+    experiment's estimates (``{element: value}``, the errors: the truth is zero); ``out["failed"]``: the
     calibrations whose verdict failed (not converged, residuals inconsistent).
     """
     nodes = check_nodes((grid_degC[0], grid_degC[-1]))
     errs = {f: [] for f in FAMILIES}
     at_nodes = {f: [] for f in FAMILIES}
+    estimates = []
     failed = []
     for r in range(int(realisations)):
         results, ranges, labels = calibrate_realisation(procedure, length_s, r, work=work, seed=seed,
                                                         progress=progress)
         failed += [f"{procedure.name} {length_s / 3600:g} h r{r} {lab}: {res.extra['verdict']['text']}"
                    for res, lab in zip(results, labels) if not res.extra.get("verdict", {}).get("passed", False)]
+        estimates += [dict(res.values) for res in results]
         st = stitch(results, names=labels, sensor_ranges=ranges)
         for f in FAMILIES:
             errs[f].append(np.stack([st.curves[f"{f}.{ax}"].evaluate(grid_degC)[0] for ax in AXES]))
@@ -127,6 +134,7 @@ def simulated_metrics(procedure, length_s, *, realisations, grid_degC, work, see
         out[f] = {"largest_sigma": float(s.max()), "rms_sigma": float(np.sqrt(np.mean(s**2))),
                   "realisations": int(e.shape[0]), "sigma_axes": s, "node_errors": np.stack(at_nodes[f])}
     out["failed"] = failed
+    out["estimates"] = estimates
     return out
 
 
@@ -174,6 +182,27 @@ def whitened_scale(node_errors, node_covariance, *, alpha=SHAPE_ALPHA, n_tests=1
             "relative_se": float(1.0 / np.sqrt(2.0 * dof)), "node_scale": np.sqrt(node_ms).tolist(),
             "node_band": [float(np.sqrt(lo)), float(np.sqrt(hi))],
             "shape_ok": bool(np.all((node_ms >= lo) & (node_ms <= hi)))}
+
+
+def experiment_scale(estimates, names, covariance, family):
+    """The scale of the experiments' own errors in ``family`` against their predicted covariance.
+
+    Every experiment's value and temperature-coefficient errors of the family's three axes, whitened by the
+    predicted covariance of those elements (the experiments are independent): chi-square with ``dof``
+    degrees of freedom if the prediction holds.  Returns ``{"scale", "dof", "band", "relative_se"}`` as
+    :func:`whitened_scale`.
+    """
+    idx = [i for i, n in enumerate(names) if n.rsplit(".", 1)[0] in (family, family + "_tc")]
+    sel = [names[i] for i in idx]
+    C = np.asarray(covariance)[np.ix_(idx, idx)]
+    w, V = np.linalg.eigh(0.5 * (C + C.T))
+    keep = w > w.max() * 1e-10
+    X = np.array([[est[n] for n in sel] for est in estimates])
+    z = (X @ V[:, keep]) / np.sqrt(w[keep])
+    dof = int(z.size)
+    return {"scale": float(np.sqrt(np.mean(z**2))), "dof": dof,
+            "band": [float(np.sqrt(v / dof)) for v in stats.chi2.ppf([0.025, 0.975], dof)],
+            "relative_se": float(1.0 / np.sqrt(2.0 * dof)), "elements": len(sel)}
 
 
 def simulated_ratios(reference, candidate, ref_metrics, cand_metrics, *, soak_s, metric="largest_sigma"):
@@ -241,19 +270,22 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
             for f in FAMILIES:
                 m = pt.metrics[f]
                 ws = whitened_scale(sm[f]["node_errors"], pt.node_covariance[f], n_tests=n_tests)
+                es = experiment_scale(sm["estimates"], *pt.experiment_covariance, f)
                 i, g = np.unravel_index(int(np.argmax(pt.sigma_axes[f])), pt.sigma_axes[f].shape)
-                sm[f].update(whitened=ws, worst_point_sigma=float(sm[f]["sigma_axes"][i, g]))
-                sim_view[name][L][f] = {"largest_sigma": ws["scale"] * m["largest_sigma"],
-                                        "rms_sigma": ws["scale"] * m["rms_sigma"],
+                sm[f].update(whitened=ws, experiment=es, worst_point_sigma=float(sm[f]["sigma_axes"][i, g]))
+                sim_view[name][L][f] = {"largest_sigma": es["scale"] * m["largest_sigma"],
+                                        "rms_sigma": es["scale"] * m["rms_sigma"],
+                                        "largest_sigma_stitched": ws["scale"] * m["largest_sigma"],
                                         "largest_sigma_raw": sm[f]["largest_sigma"],
                                         "worst_point_sigma": sm[f]["worst_point_sigma"]}
                 pred_view[name][L][f] = {"largest_sigma": m["largest_sigma"], "rms_sigma": m["rms_sigma"],
+                                         "largest_sigma_stitched": m["largest_sigma"],
                                          "largest_sigma_raw": m["largest_sigma"],
                                          "worst_point_sigma": m["largest_sigma"]}
-                ses[name][L][f] = ws["relative_se"]
+                ses[name][L][f] = es["relative_se"]
     w = comparison.soaks_s[0] if soak_s is None else float(soak_s)
     ref, cand = comparison.procedures[0], comparison.procedures[1]
-    metrics = ("largest_sigma", "rms_sigma", "largest_sigma_raw", "worst_point_sigma")
+    metrics = ("largest_sigma", "rms_sigma", "largest_sigma_stitched", "largest_sigma_raw", "worst_point_sigma")
     judged_metrics = ("largest_sigma", "rms_sigma")
     ratios = {}
     if ref.name in sims and cand.name in sims:
@@ -309,7 +341,7 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
 
     def campaign_doc(name, L, f):
         x = sims[name][L][f]
-        return {"realisations": x["realisations"], "whitened": x["whitened"],
+        return {"realisations": x["realisations"], "whitened": x["whitened"], "experiment": x["experiment"],
                 "largest_sigma": sim_view[name][L][f]["largest_sigma"],
                 "rms_sigma": sim_view[name][L][f]["rms_sigma"],
                 "largest_sigma_raw": x["largest_sigma"], "rms_sigma_raw": x["rms_sigma"],
@@ -332,4 +364,4 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
 
 
 __all__ = ["AGREEMENT_TOLERANCE", "SHAPE_ALPHA", "JUDGED", "shifted_program", "calibrate_realisation",
-           "simulated_metrics", "whitened_scale", "simulated_ratios", "simulated_check"]
+           "simulated_metrics", "whitened_scale", "experiment_scale", "simulated_ratios", "simulated_check"]

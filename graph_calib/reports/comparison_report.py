@@ -180,8 +180,9 @@ def comparison_report_html(doc, comparison):
         for name, per in sc["campaigns"].items():
             for L, v in per.items():
                 for f in ("gyro.bias", "accel.bias"):
-                    ws = v[f]["whitened"]
+                    ws, es = v[f]["whitened"], v[f]["experiment"]
                     srows.append([name, f"{float(L) / 3600:g}", f, v[f]["realisations"],
+                                  f"{es['scale']:.3f} ({es['band'][0]:.2f}-{es['band'][1]:.2f})",
                                   f"{ws['scale']:.3f} ({ws['band'][0]:.2f}-{ws['band'][1]:.2f})",
                                   ", ".join(f"{n:.2f}" for n in ws["node_scale"])
                                   + f" ({ws['node_band'][0]:.2f}-{ws['node_band'][1]:.2f})",
@@ -198,7 +199,8 @@ def comparison_report_html(doc, comparison):
                                  "-" if r["agreement"] is None else f"{r['agreement']:.3f}",
                                  "-" if r.get("relative_se") is None else f"{r['relative_se']:.0%}", r["status"]])
         parts.append(section("Simulated check", paragraph(sc["what"]), paragraph(sc["verdict"]["text"]),
-                             table(["procedure", "h per experiment", "family", "realisations", "scale (95 % band)",
+                             table(["procedure", "h per experiment", "family", "realisations",
+                                    "scale of the experiments (95 % band)", "scale of the stitched curve (band)",
                                     "scale at the nodes (band)", "predicted largest", "simulated largest (scaled)",
                                     "raw largest", "predicted RMS", "raw RMS"], srows),
                              table(["family", "metric", "judged", "reference h", "predicted ratio", "simulated ratio",

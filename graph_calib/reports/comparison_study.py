@@ -171,17 +171,19 @@ def comparison_markdown(doc, comparison, *, path, command, intro="", closing="")
     sc = doc.get("simulated_check")
     if sc:
         out += ["## Simulated check", "", sc["what"], "", f"**{sc['verdict']['text']}**", "",
-                "| procedure | h per experiment | family | realisations | scale (95 % band) | scale at the four nodes "
-                "(band) | predicted largest | simulated largest (scaled) | raw largest over the range | raw / predicted "
-                "| predicted RMS | raw RMS | raw / predicted |",
-                "| --- " * 13 + "|"]
+                "| procedure | h per experiment | family | realisations | scale of the experiments (95 % band) | "
+                "scale of the stitched curve (band) | scale at the four nodes (band) | predicted largest | simulated "
+                "largest (scaled) | raw largest over the range | raw / predicted | predicted RMS | raw RMS | "
+                "raw / predicted |",
+                "| --- " * 14 + "|"]
         for name, per in sc["campaigns"].items():
             for L, v in per.items():
                 for f in ("gyro.bias", "accel.bias"):
                     k = DISPLAY[f][0]
                     x = v[f]
-                    ws = x["whitened"]
+                    ws, es = x["whitened"], x["experiment"]
                     out.append(f"| {name} | {float(L) / 3600:g} | {f} | {x['realisations']} | "
+                               f"{es['scale']:.3f} ({es['band'][0]:.2f}-{es['band'][1]:.2f}) | "
                                f"{ws['scale']:.3f} ({ws['band'][0]:.2f}-{ws['band'][1]:.2f}) | "
                                f"{', '.join(f'{n:.2f}' for n in ws['node_scale'])} "
                                f"({ws['node_band'][0]:.2f}-{ws['node_band'][1]:.2f}) | "

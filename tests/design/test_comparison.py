@@ -200,6 +200,13 @@ def _fake_metrics(small, scale, node_shape=(1.0, 1.0, 1.0, 1.0)):
             e = k * e * np.asarray(node_shape)
             out[f] = {"largest_sigma": m["largest_sigma"] * k, "sigma_axes": pt.sigma_axes[f] * k,
                       "rms_sigma": m["rms_sigma"] * k, "realisations": R, "node_errors": e}
+        # every experiment's estimates with exactly the predicted covariance times k^2 (Hadamard columns again)
+        names, C = pt.experiment_covariance
+        rows = R * procedure.n_experiments
+        zz = hadamard(rows)[:, 1:len(names) + 1].astype(float)
+        w, V = np.linalg.eigh(C)
+        X = k * zz @ (V * np.sqrt(np.clip(w, 0, None))).T
+        out["estimates"] = [dict(zip(names, x)) for x in X]
         return out
     return fake
 
@@ -253,6 +260,8 @@ def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tm
     assert not sc["verdict"]["passed"] and sc["verdict"]["text"].startswith("verdict: FAIL: ")
     assert "simulated ratio" in sc["verdict"]["text"]
     assert sc["campaigns"]["rp"]["600"]["gyro.bias"]["whitened"]["scale"] == pytest.approx(1.6)
+    assert sc["campaigns"]["rp"]["600"]["gyro.bias"]["experiment"]["scale"] == pytest.approx(1.6)
+    assert sc["campaigns"]["st"]["600"]["accel.bias"]["experiment"]["scale"] == pytest.approx(1.0)
     # the same scale everywhere: the ratios agree exactly and the check passes, with its standard errors
     monkeypatch.setattr(cc, "simulated_metrics", _fake_metrics(small, 0.9))
     sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=16, work=tmp_path)
