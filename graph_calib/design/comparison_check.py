@@ -306,11 +306,14 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
                     se = [None if a["ratio"] is None or b["ratio"] is None or c["ratio"] is None else
                           float(np.hypot(b["ratio"] - a["ratio"], c["ratio"] - a["ratio"]) / a["ratio"])
                           for a, b, c in zip(s, s_r, s_c)]
+                # a ratio at the end of the simulated campaigns ("below" the shortest: only a bound) is not compared
+                formed = [a["ratio"] is not None and b["ratio"] is not None and "below" not in (a["status"], b["status"])
+                          for a, b in zip(s, p)]
                 ratios[f][m] = [{"reference_length_s": a["reference_length_s"], "predicted": b["ratio"],
                                  "simulated": a["ratio"],
-                                 "agreement": None if a["ratio"] is None or b["ratio"] is None
-                                 else a["ratio"] / b["ratio"], "relative_se": e, "judged": m in judged_metrics,
-                                 "status": f"{b['status']} / {a['status']}"} for a, b, e in zip(s, p, se)]
+                                 "agreement": a["ratio"] / b["ratio"] if ok else None,
+                                 "relative_se": e if ok else None, "judged": m in judged_metrics,
+                                 "status": f"{b['status']} / {a['status']}"} for a, b, e, ok in zip(s, p, se, formed)]
     failed = [x for name in sims for L in sims[name] for x in sims[name][L]["failed"]]
     problems = [f"{len(failed)} simulated calibrations failed their verdict (first: {failed[0]})"] if failed else []
     for name in sims:
@@ -354,11 +357,13 @@ def simulated_check(comparison, *, lengths, realisations, work, seed=1, soak_s=N
             f"error), every experiment calibrated by the factor graph and stitched as the campaign does; campaigns: "
             + "; ".join(f"{n} at {', '.join(f'{L / 3600:g}' for L in Ls)} h per experiment"
                         for n, Ls in lengths.items())
-            + f". Ratios over these campaigns only, soak {w / 3600:g} h. Judged: the scale of the simulated errors "
-              "against the predicted covariance (whitened at four nodes of the range, chi-square with 12 R degrees "
-              "of freedom per family: known spread), the predicted largest and RMS sigma times it, and the shape "
-              "over temperature node by node; the raw largest over the range of R realisations is reported, not "
-              "judged (its spread is unknown).")
+            + f". Ratios over these campaigns only, soak {w / 3600:g} h. Judged: the scale of the experiments' errors "
+              "against their predicted covariance (each experiment's values and temperature coefficients of a family "
+              "whitened: chi-square, known spread), the predicted largest and RMS sigma times it, and the stitched "
+              "curve's shape over temperature node by node (its errors at four nodes of the range whitened by their "
+              "predicted covariance); the stitched curve's own scale and the raw largest over the range of R "
+              "realisations are reported, not judged (the first has 12 R degrees of freedom, the second an unknown "
+              "spread). A ratio that falls below the shortest simulated campaign is a bound and is not compared.")
     return {"what": what, "realisations": int(realisations), "soak_s": w, "campaigns": camp, "ratios": ratios,
             "verdict": verdict}
 
