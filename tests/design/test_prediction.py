@@ -39,8 +39,9 @@ def _problem(se, **model_options):
 
 
 def _graph(problem, opts):
-    # the noise identified from the record, as the prediction takes it: no variance factors estimated (they
-    # need a solve; with them calibrate's sigmas differ from the prediction by up to 14 % here)
+    # the noise identified from the record, as the plain prediction takes it: no variance factors estimated
+    # (with them calibrate's sigmas are up to 17 % below the plain prediction; predict(variance_factors=...)
+    # follows them: test_prediction_with_variance_factors_...)
     opts = replace(opts, variance_components=False, structure_tests=False)
     return solve_problem(problem, options=opts, solvers=("factor-graph",)).results["factor-graph"]
 
