@@ -138,7 +138,7 @@ def _command_line(args):
 def comparison_text(doc):
     """The equal-accuracy ratios on the largest 1-sigma, a few lines."""
     ref = doc["procedures"][0]["name"]
-    lines = [f"predicted part: {doc['seconds']:.0f} s; reference {ref}"]
+    lines = [f"predicted part: {doc['seconds']:.0f} s wall, {doc['cpu_seconds']:.0f} s CPU; reference {ref}"]
     several = {p["name"] for p in doc["procedures"] if len(p["lengths_s"]) >= 2}
     for cand, by_soak in doc["equal_accuracy"].items():
         if cand not in several:

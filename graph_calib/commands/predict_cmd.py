@@ -1,7 +1,9 @@
-"""``graph-calib predict INPUT --out prediction.json [--grade G] [--gyro-noise ...] [--effect ...]``.
+"""``graph-calib predict INPUT --out prediction.json [--grade G] [--gyro-noise ...] [--effect ...] [--variance-components]``.
 
 The predicted accuracy of the calibration of an experiment file or of a bench program (:mod:`graph_calib.design.prediction`): the Fisher
-information of the model at the nominal calibration, no noise simulated and no solver run.
+information of the model at the nominal calibration, no noise simulated and no solver run.  With
+``--variance-components`` the kinds' variance factors calibrate would apply are estimated first (on the
+record, or on one simulated noise realisation of a program, ``--seed``) and the prediction is calibrate's.
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
-from graph_calib.design.prediction import predict, prediction_result
+from graph_calib.design.prediction import expected_variance_factors, predict, prediction_result
 from graph_calib.records.problem import build_problem
 from graph_calib.simulation.program import nominal_experiment, read_program
 
@@ -39,6 +41,11 @@ def add_arguments(p):
                    help="further effects of model.md to include (repeatable)")
     p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
+    p.add_argument("--variance-components", action="store_true",
+                   help="apply the variance factors calibrate estimates (solves the record, or one simulated noise "
+                        "realisation of a program): the sigmas calibrate reports (docs/design.md)")
+    p.add_argument("--seed", type=int, default=1,
+                   help="seed of a program's simulated realisation for --variance-components (default 1)")
 
 
 def options_from_args(args, *, grade=None):
@@ -50,6 +57,8 @@ def options_from_args(args, *, grade=None):
                     ("--accel-noise", args.accel_noise), ("--encoder-noise", args.encoder_noise)):
         if v is not None and not (np.isfinite(v) and v > 0):
             raise InputError(f"must be a positive number, got {v!r}", dataset=flag)
+    if getattr(args, "seed", 0) < 0:
+        raise InputError(f"must be a non-negative integer, got {args.seed}", dataset="--seed")
     model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade or "navigation",
                          extra_effects=tuple(args.effect), gyro_noise=args.gyro_noise,
                          accel_noise=args.accel_noise, encoder_noise=args.encoder_noise)
@@ -61,7 +70,7 @@ def run(args):
     if not path.exists():
         raise InputError("no such file", path=path)
     options_from_args(args)                       # bad arguments refused before the file is read
-    choice = None
+    choice, program = None, None
     if path.suffix.lower() == ".toml":
         program = read_program(path)
         exp = nominal_experiment(program)         # the program's motion and temperatures, no noise, no errors
@@ -77,7 +86,15 @@ def run(args):
     m = problem.model
     print(f"{path.name}: {exp.n_samples} samples, {m.n_keyframes} keyframes, {m.layout.size} parameters, "
           f"T_ref {m.t_ref_degC:.2f} degC", file=sys.stderr)
-    prediction = predict(problem)
+    factors = None
+    if args.variance_components:
+        factors = expected_variance_factors(
+            problem, options=options, program=program,
+            rng=np.random.default_rng(args.seed) if program is not None else None)
+        print("variance factors (" + ("one simulated realisation of the program" if program is not None else
+                                      "estimated on the record") + "): "
+              + ", ".join(f"{k} {v:.3f}" for k, v in factors.items()), file=sys.stderr)
+    prediction = predict(problem, variance_factors=factors)
     extra = {"grade_choice": choice.to_json()} if choice is not None else None
     result = prediction_result(problem, prediction, extra=extra)
     out = Path(args.out)

@@ -57,8 +57,9 @@ METRICS = ("largest_sigma", "rms_sigma", "model_error_largest", "largest_total",
 #: IMU sample rate of the predicted records, Hz.  The information per keyframe is set by the noise densities,
 #: not the sample rate: at 20 Hz every bias, scale-factor and temperature-coefficient sigma of a 30 min step
 #: or ramp is within 0.02 % of its 100 Hz value (every element within 0.7 %, the lever arm the furthest),
-#: for a third of the time.
-PREDICTION_RATE_HZ = 20.0
+#: for a third of the time; at 10 Hz every compared metric (largest and RMS sigma, model error) is within
+#: 0.1 % of its 20 Hz value (steps 0.25 h 0.07 %, ramps 0.25 h 0.09 %, 1 h 0.03 %) for 0.7 of the time.
+PREDICTION_RATE_HZ = 10.0
 
 #: Display unit per family: (factor from SI, unit name).
 DISPLAY = {"gyro.bias": (c.RS_TO_DH, "deg/h"), "accel.bias": (1.0 / c.UG_TO_MPS2, "micro-g"),
@@ -126,7 +127,11 @@ class CampaignPoint:
 
     ``metrics``: ``{family: {metric: value}}``, SI; ``sigma_curve`` / ``model_error_curve``:
     ``{family: ndarray (G,)}`` the largest over the axes at each temperature of the grid; ``sigma_axes``:
-    ``{family: ndarray (3, G)}`` per axis.
+    ``{family: ndarray (3, G)}`` per axis; ``node_covariance``: ``{family: ndarray (12, 12)}`` the
+    stitched cubics' joint covariance at the four :func:`check_nodes` of the range over the three axes
+    (axis-major; a cubic is fixed by its values there: what the simulated check whitens its errors with);
+    ``experiment_covariance``: ``(names, matrix)`` one experiment's predicted covariance of the compared
+    families' elements (every experiment of the campaign has it: one program shifted in temperature).
     """
 
     procedure: str
@@ -137,6 +142,8 @@ class CampaignPoint:
     t_ref_degC: tuple
     sigma_axes: dict
     seconds: float
+    node_covariance: dict = field(default_factory=dict)
+    experiment_covariance: tuple = ((), None)
 
 
 @dataclass(frozen=True)
@@ -152,6 +159,7 @@ class Comparison:
     draws: int
     ratios: dict
     seconds: float
+    cpu_seconds: float = float("nan")
 
     def durations(self, name, *, soak_s=None):
         proc = next(p for p in self.procedures if p.name == name)
@@ -163,7 +171,7 @@ class Comparison:
 
         return {
             "range_degC": list(self.range_degC), "soaks_s": list(self.soaks_s), "truth_family": self.truth.to_dict(),
-            "truth_draws": self.draws, "seconds": self.seconds,
+            "truth_draws": self.draws, "seconds": self.seconds, "cpu_seconds": self.cpu_seconds,
             "procedures": [p.to_dict() for p in self.procedures],
             "campaigns": {name: [{"length_s": pt.length_s,
                                   "duration_s": {f"{w:g}": p.duration_s(pt.length_s, soak_s=w) for w in self.soaks_s}
@@ -208,6 +216,12 @@ def _projection_rows(T_s, t_ref, center, slope_known):
     return B
 
 
+def check_nodes(range_degC):
+    """The four Chebyshev nodes of ``range_degC`` (degC): a cubic over the range is fixed by its values there."""
+    lo, hi = (float(v) for v in range_degC)
+    return 0.5 * (lo + hi) + 0.5 * (hi - lo) * np.cos((2 * np.arange(4) + 1) * np.pi / 8)
+
+
 def _curve_samples(curve, T, n, rng):
     """``n`` draws of the stitched curve's error at ``T`` from its fit covariance, shape (n, G)."""
     fit = curve.fit()
@@ -219,12 +233,16 @@ def _curve_samples(curve, T, n, rng):
     return (z @ L.T) @ A.T
 
 
-def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC):
-    """Stitched minus truth over the grid for every truth draw, ``{family: ndarray (draws, 3, G)}``.
+def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC, nodes_degC):
+    """Stitched minus truth over the grid for every truth draw, ``{family: ndarray (draws, 3, G)}``, and the
+    stitched curves' joint covariance at ``nodes_degC`` over the axes, ``{family: ndarray (3 N, 3 N)}``
+    (axis-major).
 
     The stitched curve is linear in the experiments' values (generalised least squares with fixed
     weights), so the campaign is stitched once per (experiment, coefficient) slot with a unit value in
-    every element, and each draw's curve is the sum of those responses weighted by its projections.
+    every element, and each draw's curve is the sum of those responses weighted by its projections.  The
+    same responses at the nodes carry each experiment's full covariance (the axes' correlations included,
+    which the per-element stitch does not keep) to the nodes.
     """
     n_coef = 2 if any(n.rsplit(".", 1)[0] in _TC.values() for n in results[0].values) else 1
     elements = [f"{f}.{ax}" for f in FAMILIES for ax in AXES]
@@ -241,7 +259,21 @@ def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC)
                 rs.append(replace(r, values=vals))
             st = stitch(rs, names=names, sensor_ranges=ranges)
             for el in elements:
-                response[(el, k, j)] = st.curves[el].evaluate(grid_degC)[0]
+                response[(el, k, j)] = st.curves[el].evaluate(np.concatenate([grid_degC, nodes_degC]))[0]
+    G, N = grid_degC.size, len(nodes_degC)
+    node_cov = {}
+    for f in FAMILIES:
+        C = np.zeros((3 * N, 3 * N))
+        for k, r in enumerate(results):
+            slots = [(i, j, f"{f}.{ax}" if j == 0 else f"{_TC[f]}.{ax}") for i, ax in enumerate(AXES)
+                     for j in range(n_coef)]
+            idx = [r.covariance_names.index(n) for _, _, n in slots]
+            S = np.asarray(r.covariance)[np.ix_(idx, idx)]
+            Gm = np.zeros((3 * N, len(slots)))
+            for c, (i, j, _) in enumerate(slots):
+                Gm[i * N:(i + 1) * N, c] = response[(f"{f}.{AXES[i]}", k, j)][G:]
+            C += Gm @ S @ Gm.T
+        node_cov[f] = 0.5 * (C + C.T)
     out = {f: np.zeros((len(next(iter(truths.values()))), 3, grid_degC.size)) for f in FAMILIES}
     for f in FAMILIES:
         for i, ax in enumerate(AXES):
@@ -253,9 +285,9 @@ def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC)
                                         slope_known=f"{_TC[f]}.{ax}" in r.values)
                 y = coef @ rows.T                                        # (D, n_coef)
                 for j in range(rows.shape[0]):
-                    out[f][:, i] += y[:, [j]] * response[(el, k, j)][None, :]
+                    out[f][:, i] += y[:, [j]] * response[(el, k, j)][None, :G]
             out[f][:, i] -= coef @ np.stack([u, u**2, u**3])
-    return out
+    return out, node_cov
 
 
 def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise_draws=20, rng,
@@ -282,6 +314,7 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
     st = stitch(results, names=names, sensor_ranges=ranges)
     G = grid_degC.size
     sigma = {f: np.zeros((3, G)) for f in FAMILIES}
+    nodes = check_nodes((grid_degC[0], grid_degC[-1]))
     noise = {f: [] for f in FAMILIES}
     for f in FAMILIES:
         for i, ax in enumerate(AXES):
@@ -289,7 +322,7 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
             sigma[f][i] = cv.evaluate(grid_degC)[1]
             noise[f].append(_curve_samples(cv, grid_degC, noise_draws * len(next(iter(truths.values()))), rng))
     n_draws = len(next(iter(truths.values())))
-    merr = _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC)
+    merr, node_cov = _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC, nodes)
     metrics, sig_curve, me_curve = {}, {}, {}
     for f in FAMILIES:
         s = sigma[f]
@@ -306,7 +339,8 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
         me_curve[f] = me_rms.max(axis=0)
     pt = CampaignPoint(procedure=procedure.name, length_s=float(length_s), metrics=metrics, sigma_curve=sig_curve,
                        model_error_curve=me_curve, t_ref_degC=tuple(r.t_ref_degC for r in results), sigma_axes=sigma,
-                       seconds=time.perf_counter() - t0)
+                       seconds=time.perf_counter() - t0, node_covariance=node_cov,
+                       experiment_covariance=(tuple(base.covariance_names), np.asarray(base.covariance)))
     if progress:
         progress(f"  {procedure.name}, {length_s / 3600:g} h per experiment: gyro bias largest sigma "
                  f"{metrics['gyro.bias']['largest_sigma'] * c.RS_TO_DH:.4f} deg/h, accel bias "
@@ -401,7 +435,7 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
     -------
     Comparison
     """
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     procedures = tuple(procedures)
     if len(procedures) < 2:
         raise ValueError("a comparison needs at least two procedures")
@@ -426,9 +460,10 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
     soaks_s = tuple(float(w) for w in soaks_s)
     ratios = equal_accuracy(procedures, points, soaks_s=soaks_s)
     return Comparison(procedures=procedures, points=points, range_degC=(lo, hi), grid_degC=grid, soaks_s=soaks_s,
-                      truth=truth, draws=int(draws), ratios=ratios, seconds=time.perf_counter() - t0)
+                      truth=truth, draws=int(draws), ratios=ratios, seconds=time.perf_counter() - t0,
+                      cpu_seconds=time.process_time() - c0)
 
 
 __all__ = ["PREDICTION_RATE_HZ", "FAMILIES", "METRICS", "DISPLAY", "TruthFamily", "CampaignPoint", "Comparison",
-           "campaign_point",
+           "campaign_point", "check_nodes",
            "equal_accuracy_duration", "equal_accuracy", "compare"]

@@ -117,7 +117,7 @@ def comparison_report_html(doc, comparison):
         f"Noise: the shared model's Fisher information of each experiment (graph-calib predict), stitched as the "
         f"campaign stitches (cubic over temperature). Model error: each procedure's temperature model against "
         f"{doc['truth_draws']} truth curves of the stated family (cubic in every bias and scale factor). Reference "
-        f"procedure: {ref}. Predicted part: {doc['seconds']:.0f} s.")]
+        f"procedure: {ref}. Predicted part: {doc['seconds']:.0f} s wall, {doc.get('cpu_seconds', float('nan')):.0f} s CPU.")]
     rows = []
     for p in doc["procedures"]:
         rows.append([p["name"], p["kind"], p["experiments"], ", ".join(f"{L / 3600:.3g}" for L in p["lengths_s"]),
@@ -180,24 +180,31 @@ def comparison_report_html(doc, comparison):
         for name, per in sc["campaigns"].items():
             for L, v in per.items():
                 for f in ("gyro.bias", "accel.bias"):
+                    ws, es = v[f]["whitened"], v[f]["experiment"]
                     srows.append([name, f"{float(L) / 3600:g}", f, v[f]["realisations"],
+                                  f"{es['scale']:.3f} ({es['band'][0]:.2f}-{es['band'][1]:.2f})",
+                                  f"{ws['scale']:.3f} ({ws['band'][0]:.2f}-{ws['band'][1]:.2f})",
+                                  ", ".join(f"{n:.2f}" for n in ws["node_scale"])
+                                  + f" ({ws['node_band'][0]:.2f}-{ws['node_band'][1]:.2f})",
                                   _fmt(v[f]["predicted_largest_sigma"], f), _fmt(v[f]["largest_sigma"], f),
-                                  f"{v[f]['largest_sigma'] / v[f]['predicted_largest_sigma']:.3f}",
-                                  _fmt(v[f]["predicted_rms_sigma"], f), _fmt(v[f]["rms_sigma"], f),
-                                  f"{v[f]['rms_sigma'] / v[f]['predicted_rms_sigma']:.3f}"])
+                                  _fmt(v[f]["largest_sigma_raw"], f),
+                                  _fmt(v[f]["predicted_rms_sigma"], f), _fmt(v[f]["rms_sigma_raw"], f)])
         crow = []
         for f, rows in sc["ratios"].items():
             for m, rr in rows.items():
                 for r in rr:
-                    crow.append([f, m, f"{r['reference_length_s'] / 3600:g}",
+                    crow.append([f, m, "yes" if r.get("judged") else "no", f"{r['reference_length_s'] / 3600:g}",
                                  "-" if r["predicted"] is None else f"{r['predicted']:.3f}",
                                  "-" if r["simulated"] is None else f"{r['simulated']:.3f}",
-                                 "-" if r["agreement"] is None else f"{r['agreement']:.3f}", r["status"]])
+                                 "-" if r["agreement"] is None else f"{r['agreement']:.3f}",
+                                 "-" if r.get("relative_se") is None else f"{r['relative_se']:.0%}", r["status"]])
         parts.append(section("Simulated check", paragraph(sc["what"]), paragraph(sc["verdict"]["text"]),
-                             table(["procedure", "h per experiment", "family", "realisations", "predicted largest",
-                                    "simulated largest", "ratio", "predicted RMS", "simulated RMS", "ratio"], srows),
-                             table(["family", "metric", "reference h", "predicted ratio", "simulated ratio",
-                                    "simulated / predicted", "status"], crow)))
+                             table(["procedure", "h per experiment", "family", "realisations",
+                                    "scale of the experiments (95 % band)", "scale of the stitched curve (band)",
+                                    "scale at the nodes (band)", "predicted largest", "simulated largest (scaled)",
+                                    "raw largest", "predicted RMS", "raw RMS"], srows),
+                             table(["family", "metric", "judged", "reference h", "predicted ratio", "simulated ratio",
+                                    "simulated / predicted", "standard error", "status"], crow)))
     return page("graph-calib compare", *parts)
 
 

@@ -169,6 +169,8 @@ def test_report_and_study_page(small, tmp_path):
     doc = small.to_dict()
     html = comparison_report_html(doc, small)
     assert html.count("<img") == 4 and "Equal-accuracy ratios" in html
+    # one self-contained file: every figure embedded, nothing to fetch when it opens in a browser
+    assert html.count('src="data:image/png;base64,') == 4 and "http" not in html.replace("http-equiv", "")
     page = tmp_path / "study.md"
     text = comparison_markdown(doc, small, path=page, command="graph-calib compare st.toml rp.toml", closing="## Notes")
     assert page.read_text() == text and text.rstrip().endswith("## Notes")
@@ -178,28 +180,106 @@ def test_report_and_study_page(small, tmp_path):
     assert sum("rp, soak 1 h, gyro.bias:" in line for line in text.splitlines()) == 2
 
 
-def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tmp_path):
-    from graph_calib.design import comparison_check as cc
+def _fake_metrics(small, scale, node_shape=(1.0, 1.0, 1.0, 1.0)):
+    """``simulated_metrics`` stand-in for 16 realisations: errors whose sample covariance at the nodes is exactly
+    ``scale^2`` times the predicted joint one (12 orthogonal columns of a 16 x 16 Hadamard matrix on a square
+    root of it), optionally bent node by node."""
+    from scipy.linalg import hadamard
+
+    z = hadamard(16)[:, 1:13].astype(float)
 
     def fake(procedure, length_s, **kw):
         pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
-        scale = 1.0 if procedure.name == "st" else 1.6            # the candidate's simulated sigma far off
-        out = {f: {"largest_sigma": pt.metrics[f]["largest_sigma"] * scale, "sigma_axes": pt.sigma_axes[f] * scale,
-                   "rms_sigma": pt.metrics[f]["rms_sigma"] * scale, "realisations": 10} for f in pt.metrics}
-        out["failed"] = []
+        k = scale(procedure.name) if callable(scale) else scale
+        out = {"failed": []}
+        R = kw["realisations"]
+        assert R == 16
+        for f, m in pt.metrics.items():
+            w, V = np.linalg.eigh(pt.node_covariance[f])
+            e = (z @ (V * np.sqrt(np.clip(w, 0, None))).T).reshape(R, 3, 4)
+            e = k * e * np.asarray(node_shape)
+            out[f] = {"largest_sigma": m["largest_sigma"] * k, "sigma_axes": pt.sigma_axes[f] * k,
+                      "rms_sigma": m["rms_sigma"] * k, "realisations": R, "node_errors": e}
+        # every experiment's estimates with exactly the predicted covariance times k^2 (Hadamard columns again)
+        names, C = pt.experiment_covariance
+        rows = R * procedure.n_experiments
+        zz = hadamard(rows)[:, 1:len(names) + 1].astype(float)
+        w, V = np.linalg.eigh(C)
+        X = k * zz @ (V * np.sqrt(np.clip(w, 0, None))).T
+        out["estimates"] = [dict(zip(names, x)) for x in X]
         return out
+    return fake
 
-    monkeypatch.setattr(cc, "simulated_metrics", fake)
-    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
+
+def test_node_covariance_is_the_stitched_curves(small):
+    # the joint covariance's per-axis blocks are the stitched curves' own covariance at the nodes
+    from graph_calib.design.comparison import check_nodes
+
+    pt = small.points["rp"][0]
+    nodes = check_nodes(small.range_degC)
+    C = pt.node_covariance["gyro.bias"]
+    assert C.shape == (12, 12) and np.all(np.linalg.eigvalsh(C) > -1e-12 * np.max(np.diag(C)))
+    grid_sigma = pt.sigma_axes["gyro.bias"]
+    for i in range(3):
+        s_nodes = np.sqrt(np.diag(C)[4 * i:4 * i + 4])
+        s_grid = np.interp(nodes, small.grid_degC, grid_sigma[i])
+        assert np.allclose(s_nodes, s_grid, rtol=0.02), (i, s_nodes, s_grid)
+
+
+def test_whitened_scale_has_its_stated_spread():
+    from graph_calib.design.comparison_check import whitened_scale
+
+    rng = np.random.default_rng(5)
+    A = rng.normal(size=(12, 12))
+    cov = A @ A.T + 0.1 * np.eye(12)                       # axes correlated
+    L = np.linalg.cholesky(cov)
+    scales, shapes = [], []
+    for _ in range(400):
+        e = (rng.standard_normal((10, 12)) @ L.T).reshape(10, 3, 4)
+        ws = whitened_scale(e, cov)
+        scales.append(ws["scale"])
+        shapes.append(ws["shape_ok"])
+    assert ws["dof"] == 120 and abs(ws["relative_se"] - 1 / np.sqrt(240)) < 1e-12
+    assert abs(np.mean(scales) - 1.0) < 0.01 and abs(np.std(scales) / ws["relative_se"] - 1.0) < 0.15
+    inside = np.mean([(ws["band"][0] <= s <= ws["band"][1]) for s in scales])
+    assert 0.92 <= inside <= 0.98
+    assert np.mean(shapes) >= 0.97                         # the node tests' false alarms at alpha = 1 %
+    # one node's errors doubled (a stitching that bends the curve at one end): the shape test fails
+    e = (rng.standard_normal((10, 12)) @ L.T).reshape(10, 3, 4)
+    bent = e.copy()
+    bent[..., 3] *= 2.0
+    assert whitened_scale(e, cov)["shape_ok"] and not whitened_scale(bent, cov)["shape_ok"]
+
+
+def test_simulated_check_fails_in_words_when_it_disagrees(small, monkeypatch, tmp_path):
+    from graph_calib.design import comparison_check as cc
+
+    # the candidate's simulated sigma far off
+    monkeypatch.setattr(cc, "simulated_metrics", _fake_metrics(small, lambda name: 1.0 if name == "st" else 1.6))
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=16, work=tmp_path)
     assert not sc["verdict"]["passed"] and sc["verdict"]["text"].startswith("verdict: FAIL: ")
     assert "simulated ratio" in sc["verdict"]["text"]
-    def same(procedure, length_s, **kw):
-        pt = next(p for p in small.points[procedure.name] if p.length_s == length_s)
-        return {**{f: {"largest_sigma": v["largest_sigma"], "rms_sigma": v["rms_sigma"], "realisations": 10,
-                       "sigma_axes": pt.sigma_axes[f]} for f, v in pt.metrics.items()}, "failed": []}
-
-    monkeypatch.setattr(cc, "simulated_metrics", same)
-    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=10, work=tmp_path)
+    assert sc["campaigns"]["rp"]["600"]["gyro.bias"]["whitened"]["scale"] == pytest.approx(1.6)
+    assert sc["campaigns"]["rp"]["600"]["gyro.bias"]["experiment"]["scale"] == pytest.approx(1.6)
+    assert sc["campaigns"]["st"]["600"]["accel.bias"]["experiment"]["scale"] == pytest.approx(1.0)
+    # the same scale everywhere: the ratios agree exactly and the check passes, with its standard errors
+    monkeypatch.setattr(cc, "simulated_metrics", _fake_metrics(small, 0.9))
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=16, work=tmp_path)
     assert sc["verdict"]["passed"], sc["verdict"]["text"]
-    assert all(abs(r["agreement"] - 1.0) < 1e-9 for f in ("gyro.bias", "accel.bias")
-               for rows in sc["ratios"][f].values() for r in rows if r["agreement"] is not None)
+    rows = [r for f in ("gyro.bias", "accel.bias") for m in ("largest_sigma", "rms_sigma")
+            for r in sc["ratios"][f][m] if r["agreement"] is not None]
+    assert rows and all(abs(r["agreement"] - 1.0) < 1e-9 and 0.02 < r["relative_se"] < 0.5 for r in rows)
+    # the right scale but the curve bent at one end of the range: the shape test fails in words
+    monkeypatch.setattr(cc, "simulated_metrics", _fake_metrics(small, 1.0, node_shape=(1.0, 1.0, 1.0, 1.8)))
+    sc = cc.simulated_check(small, lengths={"st": [600.0], "rp": [600.0, 1200.0]}, realisations=16, work=tmp_path)
+    assert not sc["verdict"]["passed"] and "shape over temperature is not the predicted one" in sc["verdict"]["text"]
+    # the report and the study page show the check: its scales, the node shape and the judged ratios
+    from graph_calib.reports.comparison_report import comparison_report_html
+    from graph_calib.reports.comparison_study import comparison_markdown
+
+    doc = {**small.to_dict(), "simulated_check": sc}
+    json.dumps(doc)
+    html = comparison_report_html(doc, small)
+    assert "scale at the nodes" in html and "standard error" in html
+    text = comparison_markdown(doc, small, path=tmp_path / "study.md", command="graph-calib compare")
+    assert "shape over temperature is not the predicted one" in text and "scale at the four nodes" in text
