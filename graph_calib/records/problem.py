@@ -208,8 +208,12 @@ def noise_options(identified, model_options):
     (:func:`graph_calib.noise.identify_noise`, the density that governs a keyframe) is ``identified``;
     a record whose rests are too short to show it, or that shows less than
     :data:`IDENTIFIED_FLOOR_FRACTION` of the grade's (noise-free simulated data), takes the grade's
-    (``grade``).  The table readings' noise is identified later, from the
-    prepared record's dwells (:func:`build_problem`).
+    (``grade``).  An identified gyro density is split (unless ``gyro_quantization`` is declared): the
+    white rate noise ``N`` (the IEEE term, floored at :data:`IDENTIFIED_FLOOR_FRACTION` of the grade's)
+    becomes ``gyro_noise`` and the quantization ``Q`` ``gyro_quantization``, since the keyframe attitudes
+    absorb ``Q`` (:class:`graph_calib.model.factors.Noise`); without quantization ``N`` is the
+    density.  The table readings' noise is identified later, from the prepared record's dwells
+    (:func:`build_problem`).
 
     Parameters
     ----------
@@ -219,10 +223,12 @@ def noise_options(identified, model_options):
     Returns
     -------
     graph_calib.model.ModelOptions
-        With ``gyro_noise``, ``accel_noise``, ``noise_source`` and ``noise_identified`` set.
+        With ``gyro_noise``, ``accel_noise``, ``gyro_quantization``, ``noise_source`` and ``noise_identified``
+        set.
     """
     g = grade(model_options.grade)
     source, figures, values = {}, {}, {}
+    quantization = model_options.gyro_quantization
     for sensor, declared, floor in (("gyro", model_options.gyro_noise, g.gyro_noise),
                                     ("accel", model_options.accel_noise, g.accel_noise)):
         sn = getattr(identified, sensor)
@@ -232,11 +238,17 @@ def noise_options(identified, model_options):
             values[sensor], source[sensor] = float(declared), "declared"
         elif sn is not None and sn.density >= IDENTIFIED_FLOOR_FRACTION * floor:
             values[sensor], source[sensor] = sn.density, "identified"
+            if sensor == "gyro" and quantization is None:
+                # the keyframe attitudes absorb the angle's quantization (graph_calib.model.factors.Noise): the
+                # rotation factors get the white rate noise N, the attitude's readers Q
+                # (q_eff^2 = N^2 + 2 Q^2 / T, graph_calib.noise.identify)
+                quantization = sn.term("quantization")
+                values[sensor] = max(sn.term("white"), IDENTIFIED_FLOOR_FRACTION * floor)
         else:
             values[sensor], source[sensor] = floor, "grade"
     source["encoder"] = "declared" if model_options.encoder_noise is not None else "grade"
     return replace(model_options, gyro_noise=values["gyro"], accel_noise=values["accel"], noise_source=source,
-                   noise_identified=figures)
+                   noise_identified=figures, gyro_quantization=quantization)
 
 
 __all__ = ["Problem", "SWAY_VARIANCE_FACTOR", "IDENTIFIED_FLOOR_FRACTION", "build_problem", "noise_options",
