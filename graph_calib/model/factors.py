@@ -33,7 +33,9 @@ Gravity measurement
     where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} + h_j/2 - t_k) dR_{j-1} u_j``
     are preintegrated once per calibration.  Covariance
     ``q_a^2 / T_k`` per axis plus ``g^2 q_g^2 T_k / 3`` on the horizontal axes
-    (attitude noise inside the interval).
+    (attitude noise inside the interval), plus ``2/3 |l|^2 (s_k^2 + s_{k+1}^2) / T_k^2`` on every axis,
+    ``s`` the boundary rates' scatter (:func:`graph_calib.model.record.local_rates`) and ``l`` the lever
+    arm at the preintegration's linearisation point.
 
 Encoder measurement
     A valid table reading at ``t_m`` (sample ``j``, ``dt_m = t_m - t_j``; the
@@ -240,6 +242,13 @@ def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None, s
         # each sample's specific force is rotated with the indicated attitude: the mean of n independent
         # angle errors Q tilts the keyframe's (the attitude at its start holds its own)
         var[:, :2] += ((record.gravity * noise.gyro_quantization) ** 2 / np.diff(record.k0))[:, None]
+    if "lever_arm" in layout:
+        # the boundary rates' scatter (record.local_rates: a ring-laser gyro's quantization leaves some at a
+        # ramp, where a short fit is kept) through the lever-arm term, C (dw x l) at each end, taken isotropic
+        # with the lever arm of the linearisation point (fixed while the preintegration is)
+        l_lin = layout.get(preint.x_lin, "lever_arm", np.zeros(3))
+        sw = record.w_b_sigma
+        var += ((2.0 / 3.0) * float(l_lin @ l_lin) * np.sum(sw[:-1] ** 2 + sw[1:] ** 2, axis=1) / (3.0 * T**2))[:, None]
     if sway_sigma:
         var += float(sway_sigma) ** 2
     sigma = np.sqrt(var)

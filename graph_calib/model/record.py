@@ -149,7 +149,7 @@ def boundary_rate_correction(w_mean, k0, *, segment_keys=None):
 
 #: Half-widths of the local fits that give the rate and angular acceleration at an instant (a keyframe
 #: boundary, a table reading), s, shortest first (:func:`local_rates`).
-RATE_FIT_HALF_WINDOWS_S = (0.05, 0.1, 0.2, 0.4, 0.8)
+RATE_FIT_HALF_WINDOWS_S = (0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.2)
 #: Degree of those fits' polynomial in the angle (exact for a cubic rate).
 RATE_FIT_DEGREE = 4
 #: Half-width of the confidence intervals of the window choice, in standard deviations.
@@ -167,7 +167,7 @@ def local_rates(dtheta, t, dt, *, bounds, t_eval, segment, half_windows_s=RATE_F
     in time over the ``2 m + 1`` sample ends nearest each instant (the window moved inside the segment
     at its ends); the fit's first and second derivatives at the instant are the rate and the angular
     acceleration.  The window is chosen per instant among ``half_windows_s`` by the intersection of
-    confidence intervals (Katkovnik's ICI rule): the longest whose rate lies, with every shorter one's,
+    confidence intervals (Katkovnik's ICI rule), axis by axis: the longest whose rate lies, with every shorter one's,
     within ``ici`` standard deviations of a common value, the standard deviations those of the fits'
     rate for the angle scatter of the segment (the median of the shortest fits' residual variance).
     At rest and at a constant rate every window agrees and the longest is taken; near a ramp the
@@ -208,11 +208,13 @@ def local_rates(dtheta, t, dt, *, bounds, t_eval, segment, half_windows_s=RATE_F
         rad/s.
     accel : ndarray, shape (B, 3)
         rad/s^2.
+    sigma : ndarray, shape (B, 3)
+        The chosen fits' rate scatter for the segment's angle scatter, rad/s.
     """
     t_eval = np.asarray(t_eval, dtype=float)
     segment = np.asarray(segment, dtype=np.int64)
     B = t_eval.size
-    rate, accel = np.zeros((B, 3)), np.zeros((B, 3))
+    rate, accel, sigma = np.zeros((B, 3)), np.zeros((B, 3)), np.zeros((B, 3))
     for s, (a, b) in enumerate(np.asarray(bounds).reshape(-1, 2)):
         sel = np.flatnonzero(segment == s)
         if sel.size == 0:
@@ -235,17 +237,20 @@ def local_rates(dtheta, t, dt, *, bounds, t_eval, segment, half_windows_s=RATE_F
         dof = [2 * m + 1 - min(int(degree), 2 * m) - 1 for m in ms]
         judge = next((i for i, d in enumerate(dof) if d >= _SCATTER_DOF), len(ms) - 1)
         scatter = float(np.sqrt(max(np.median(fits[judge][3]) if dof[judge] > 0 else 0.0, RATE_FIT_FLOOR_RAD**2)))
+        # axis by axis: during a turn about one axis the other two keep the long windows
         r_out, a_out = fits[0][0].copy(), fits[0][1].copy()
+        g_out = np.repeat(fits[0][2][:, None], 3, axis=1)
         lo = fits[0][0] - ici * scatter * fits[0][2][:, None]
         hi = fits[0][0] + ici * scatter * fits[0][2][:, None]
-        alive = np.ones(sel.size, dtype=bool)
+        alive = np.ones((sel.size, 3), dtype=bool)
         for r_j, a_j, g_j, _ in fits[1:]:
             lo = np.maximum(lo, r_j - ici * scatter * g_j[:, None])
             hi = np.minimum(hi, r_j + ici * scatter * g_j[:, None])
-            alive &= np.all(lo <= hi, axis=1)
+            alive &= lo <= hi
             r_out[alive], a_out[alive] = r_j[alive], a_j[alive]
-        rate[sel], accel[sel] = r_out, a_out
-    return rate, accel
+            g_out[alive] = np.broadcast_to(g_j[:, None], alive.shape)[alive]
+        rate[sel], accel[sel], sigma[sel] = r_out, a_out, scatter * g_out
+    return rate, accel, sigma
 
 
 def _poly_fit(nodes_t, theta, te, centre, m, p, h):
@@ -279,7 +284,7 @@ def _poly_fit(nodes_t, theta, te, centre, m, p, h):
 #: Least residual degrees of freedom of the fit whose residuals give the angle scatter in :func:`local_rates`.
 _SCATTER_DOF = 10
 #: Instants fitted at a time in :func:`local_rates` (bounds its (b, W, 3) temporaries).
-_FIT_BLOCK = 8192
+_FIT_BLOCK = 1024
 
 
 class PreparedRecord:
@@ -417,8 +422,11 @@ class PreparedRecord:
         keep = ~np.isin(keys, self.segment_keys[1:])
         keys = keys[keep]
         seg = np.searchsorted(self.segment_keys, np.minimum(keys, K - 1), side="right") - 1
-        rate, _ = local_rates(e.dtheta, e.t, self.dt, bounds=self.segment_bounds, t_eval=self.t_key[keys],
-                              segment=seg)
+        rate, _, sigma = local_rates(e.dtheta, e.t, self.dt, bounds=self.segment_bounds, t_eval=self.t_key[keys],
+                                     segment=seg)
+        #: the boundary rates' scatter per axis (K+1, 3), rad/s (the lever-arm term's noise in the gravity factors)
+        self.w_b_sigma = np.zeros((K + 1, 3))
+        self.w_b_sigma[keys] = sigma
         w = self.w_raw
         base = np.empty((keys.size, 3))
         inner = (keys > 0) & (keys < K)
@@ -484,7 +492,7 @@ class PreparedRecord:
             # and the lag, estimated from that scatter, came out 60 sigma off)
             h = self.dt[nxt]
             seg = np.searchsorted(self.segment_keys, self.reading_key, side="right") - 1
-            w_at, self.reading_alpha = local_rates(e.dtheta, e.t, self.dt, bounds=self.segment_bounds, t_eval=tm,
+            w_at, self.reading_alpha, _ = local_rates(e.dtheta, e.t, self.dt, bounds=self.segment_bounds, t_eval=tm,
                                                    segment=seg)
             self.reading_phi_shape = self.reading_alpha * (0.5 * self.reading_dt * (self.reading_dt - h))[:, None]
             self.reading_f = self.f_raw[nxt]

@@ -12,7 +12,7 @@ import numpy as np
 
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.noise import find_rests, identify_noise, table_noise
-from graph_calib.noise.identify import TERMS
+from graph_calib.noise.identify import ENCODER_NOISE_FLOOR, MIN_DWELL_DOF, TERMS
 from graph_calib.noise.rests import segment_thresholds
 from graph_calib.options import CalibrationOptions
 from graph_calib.sensors.params import grade
@@ -121,6 +121,13 @@ def build_problem(experiment, *, options=CalibrationOptions()):
         model_options = replace(model_options, encoder_noise=enc, noise_source={
             **model_options.noise_source, "encoder": "identified"},
             noise_identified={**model_options.noise_identified, "encoder": {"sigma_rad": enc, "dof": enc_dof}})
+        model = CalibrationModel.from_record(model.record, options=model_options)
+    elif enc is None and enc_dof >= MIN_DWELL_DOF and model_options.encoder_noise is None:
+        # the dwells' readings do not scatter (below ENCODER_NOISE_FLOOR): their noise is not identified, and the
+        # grade's is no measurement of it (the verdict says what that does to the sigmas: solvers/verdict.py)
+        model_options = replace(model_options, noise_identified={
+            **model_options.noise_identified,
+            "encoder": {"sigma_rad": None, "dof": enc_dof, "below_rad": ENCODER_NOISE_FLOOR}})
         model = CalibrationModel.from_record(model.record, options=model_options)
     q_nb0 = aligned[0].q_nb0 if len(aligned) == 1 else np.array([al.q_nb0 for al in aligned])
     return Problem(model=model, q_nb0=q_nb0, alignment=aligned[0], segment_alignments=tuple(aligned),
