@@ -18,7 +18,12 @@ brought to 1 by a variance factor; the factor itself is then the test: a kind wh
 outside ``1 / VARIANCE_FACTOR_LIMIT .. VARIANCE_FACTOR_LIMIT`` of the noise identified from the record
 fails, naming the kind and the factor (its residuals are that many times, in variance, what the
 identified noise explains).  A kind whose sensor's noise was the grade's (nothing identified) is not
-judged by its factor: the grade's table value is no measurement.
+judged by its factor: the grade's table value is no measurement.  One case of it fails all the same:
+table readings whose static dwells do not scatter (below the identification floor: noise-free
+readings).  Their residuals are then the gyro's angle random walk from the keyframe to each reading,
+correlated from reading to reading, which the encoder factors take as independent; no variance factor
+makes that right (docs/model.md measures the sigmas 1.4 times optimistic at the factor the residuals
+ask for), and the verdict says so in words.
 
 Without variance factors (``residuals.variance_components`` false: a campaign's tasks) a kind below
 its lower limit is a note, not a failure: the kinds' own approximations keep a right model's rotation
