@@ -149,7 +149,10 @@ def boundary_rate_correction(w_mean, k0, *, segment_keys=None):
 
 #: Half-widths of the local fits that give the rate and angular acceleration at an instant (a keyframe
 #: boundary, a table reading), s, shortest first (:func:`local_rates`).
-RATE_FIT_HALF_WINDOWS_S = (0.05, 0.1, 0.2, 0.4, 0.8, 1.6, 3.2)
+RATE_FIT_HALF_WINDOWS_S = (0.05, 0.1, 0.2, 0.4, 0.8, 1.6)
+#: The same at a table reading: its rate tells readings at rest from readings in motion and turns the lag,
+#: neither of which needs the long windows (a 3-h record's 10 Hz readings: 0.1 million instants).
+READING_FIT_HALF_WINDOWS_S = (0.05, 0.1)
 #: Degree of those fits' polynomial in the angle (exact for a cubic rate).
 RATE_FIT_DEGREE = 4
 #: Half-width of the confidence intervals of the window choice, in standard deviations.
@@ -231,11 +234,13 @@ def local_rates(dtheta, t, dt, *, bounds, t_eval, segment, half_windows_s=RATE_F
         centre = np.clip(np.searchsorted(nodes_t, te), 0, n - 1)
         before = np.clip(centre - 1, 0, n - 1)
         centre = np.where(np.abs(nodes_t[before] - te) < np.abs(nodes_t[centre] - te), before, centre)
-        fits = [_poly_fit(nodes_t, theta, te, centre, m, min(int(degree), 2 * m), h) for m in ms]
+        uniform = bool(np.ptp(dt[a:b]) <= 1e-9 * h)
         # the segment's angle scatter, from the residuals of the shortest fit with some degrees of freedom
         # left (median: ramps and steps aside)
         dof = [2 * m + 1 - min(int(degree), 2 * m) - 1 for m in ms]
         judge = next((i for i, d in enumerate(dof) if d >= _SCATTER_DOF), len(ms) - 1)
+        fits = [_poly_fit(nodes_t, theta, te, centre, m, min(int(degree), 2 * m), h, uniform=uniform,
+                          want_resid=(i == judge)) for i, m in enumerate(ms)]
         scatter = float(np.sqrt(max(np.median(fits[judge][3]) if dof[judge] > 0 else 0.0, RATE_FIT_FLOOR_RAD**2)))
         # axis by axis: during a turn about one axis the other two keep the long windows
         r_out, a_out = fits[0][0].copy(), fits[0][1].copy()
@@ -253,9 +258,12 @@ def local_rates(dtheta, t, dt, *, bounds, t_eval, segment, half_windows_s=RATE_F
     return rate, accel, sigma
 
 
-def _poly_fit(nodes_t, theta, te, centre, m, p, h):
+def _poly_fit(nodes_t, theta, te, centre, m, p, h, *, uniform, want_resid):
     """One window of :func:`local_rates`: rate (b, 3), acceleration (b, 3), the rate's standard deviation
-    per unit angle scatter (b,), and the residual variance per axis-mean (b,) of the fit."""
+    per unit angle scatter (b,), and the residual variance per axis-mean (b,) of the fit (zeros unless
+    ``want_resid``).  On equally spaced samples (``uniform``) the fit is a fixed linear filter of the window
+    (its polynomial in the window's own coordinate, evaluated at the instant); otherwise each instant's
+    normal equations are solved."""
     n = nodes_t.size
     width = 2 * m + 1
     lo = np.clip(centre - m, 0, n - width)
@@ -264,27 +272,44 @@ def _poly_fit(nodes_t, theta, te, centre, m, p, h):
     rate, accel = np.zeros((b, 3)), np.zeros((b, 3))
     gain, resid = np.zeros(b), np.zeros(b)
     powers = np.arange(p + 1)
+    if uniform:
+        V = ((np.arange(width) - m) / m)[:, None] ** powers                # (W, p+1), window-centred
+        N_inv = np.linalg.inv(V.T @ V)
+        P = N_inv @ V.T                                                    # (p+1, W)
     for c0 in range(0, b, _FIT_BLOCK):
         blk = slice(c0, c0 + _FIT_BLOCK)
         idx = lo[blk, None] + np.arange(width)                            # (b, W)
-        u = (nodes_t[idx] - te[blk, None]) / scale                         # instant at u = 0
         y = theta[idx] - theta[idx[:, m]][:, None, :]                       # (b, W, 3)
-        V = u[..., None] ** powers                                         # (b, W, p+1)
-        N_inv = np.linalg.inv(np.swapaxes(V, 1, 2) @ V)                    # (b, p+1, p+1)
-        coef = N_inv @ (np.swapaxes(V, 1, 2) @ y)                          # (b, p+1, 3)
+        if uniform:
+            v = (te[blk] - nodes_t[lo[blk] + m]) / scale                   # the instant in window units
+            coef = np.einsum("pw,bwc->bpc", P, y)                          # (b, p+1, 3)
+            d1 = powers[None, :] * v[:, None] ** np.maximum(powers - 1, 0)[None, :]
+            d2 = (powers * (powers - 1))[None, :] * v[:, None] ** np.maximum(powers - 2, 0)[None, :]
+            rate[blk] = np.einsum("bp,bpc->bc", d1, coef) / scale
+            accel[blk] = np.einsum("bp,bpc->bc", d2, coef) / scale**2
+            gain[blk] = np.sqrt(np.einsum("bp,pq,bq->b", d1, N_inv, d1)) / scale
+            if want_resid:
+                res = y - np.einsum("wp,bpc->bwc", V, coef)
+                resid[blk] = np.mean(res**2, axis=(1, 2)) * width / max(width - p - 1, 1)
+            continue
+        u = (nodes_t[idx] - te[blk, None]) / scale                         # instant at u = 0
+        Vb = u[..., None] ** powers                                        # (b, W, p+1)
+        Nb = np.linalg.inv(np.swapaxes(Vb, 1, 2) @ Vb)                     # (b, p+1, p+1)
+        coef = Nb @ (np.swapaxes(Vb, 1, 2) @ y)                            # (b, p+1, 3)
         rate[blk] = coef[:, 1] / scale
         if p >= 2:
             accel[blk] = 2.0 * coef[:, 2] / scale**2
-        gain[blk] = np.sqrt(N_inv[:, 1, 1]) / scale
-        res = y - V @ coef
-        resid[blk] = np.mean(res**2, axis=(1, 2)) * width / max(width - p - 1, 1)
+        gain[blk] = np.sqrt(Nb[:, 1, 1]) / scale
+        if want_resid:
+            res = y - Vb @ coef
+            resid[blk] = np.mean(res**2, axis=(1, 2)) * width / max(width - p - 1, 1)
     return rate, accel, gain, resid
 
 
 #: Least residual degrees of freedom of the fit whose residuals give the angle scatter in :func:`local_rates`.
 _SCATTER_DOF = 10
 #: Instants fitted at a time in :func:`local_rates` (bounds its (b, W, 3) temporaries).
-_FIT_BLOCK = 1024
+_FIT_BLOCK = 2048
 
 
 class PreparedRecord:
@@ -493,7 +518,7 @@ class PreparedRecord:
             h = self.dt[nxt]
             seg = np.searchsorted(self.segment_keys, self.reading_key, side="right") - 1
             w_at, self.reading_alpha, _ = local_rates(e.dtheta, e.t, self.dt, bounds=self.segment_bounds, t_eval=tm,
-                                                   segment=seg)
+                                                      segment=seg, half_windows_s=READING_FIT_HALF_WINDOWS_S)
             self.reading_phi_shape = self.reading_alpha * (0.5 * self.reading_dt * (self.reading_dt - h))[:, None]
             self.reading_f = self.f_raw[nxt]
             #: the share of the sample ends' angle errors in the attitude interpolated to the reading
