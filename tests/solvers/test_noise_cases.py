@@ -2,7 +2,7 @@
 without noise, and the table noise identified (6-min nav-subrange-short, both solvers, variance components).
 
 Measured on this code (docs/model.md, "Noise from the record"): with 0.5 arcsec quantization, seeds 1-8, the
-RMS normalised error over the elements that are not prior-dominated was 0.73-1.00 per seed, 0.87 pooled, every
+RMS normalised error over the elements that are not prior-dominated was 0.72-1.01 per seed, 0.86 pooled, every
 kind's chi2/redundancy 0.99-1.02 and every verdict passed (before: time_lag.table 64 sigma off, the gravity
 kind's factor 4.9, the verdict failed).
 """
