@@ -125,8 +125,10 @@ class CalibrationModel:
         self.accel_noise = float(options.accel_noise if options.accel_noise is not None else self.grade.accel_noise)
         self.encoder_noise = float(options.encoder_noise if options.encoder_noise is not None
                                    else self.grade.encoder_noise)
+        self.gyro_quantization = float(options.gyro_quantization or 0.0)
         self.noise = factors.Noise(gyro=self.gyro_noise, accel=self.accel_noise, encoder=self.encoder_noise,
-                                   variance_factors=dict(options.variance_factors or {}))
+                                   variance_factors=dict(options.variance_factors or {}),
+                                   gyro_quantization=self.gyro_quantization)
         # what the record can inform decides the layout
         self.auto_excluded = self._unobservable()
         exclude = tuple(sorted(set(options.exclude) | set(self.auto_excluded)))

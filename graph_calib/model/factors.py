@@ -9,7 +9,12 @@ Rotation (process) model
     rotation of the corrected increments (two-sample coning correction) and
     ``E(T) = Exp(-omega_ie_n * T)`` the turn of the level frame with the Earth.
     Residual ``Log((E R_k dR_k)^T R_{k+1})``, covariance ``q_g^2 T_k I``
-    (``q_g`` the gyro angle random walk).
+    (``q_g`` the gyro angle random walk).  A gyro whose integrated angle carries a white error ``Q``
+    at each sample end (a ring-laser gyro's quantization, ``Noise.gyro_quantization``) adds
+    ``Q_{k+1} - Q_k`` to this residual, but the keyframe attitudes absorb it (they are the gyros'
+    indicated attitudes): the rotation factors keep ``q_g`` alone, and ``Q`` reaches the factors that
+    read the attitude between keyframes: ``Q^2 ((1 - a)^2 + a^2)`` on an encoder reading a fraction
+    ``a`` into its sample interval, ``g^2 Q^2 / n`` on a gravity factor's horizontal axes (n samples).
 
 Gravity measurement
     The specific force integrated in the level frame over the interval, each
@@ -28,7 +33,9 @@ Gravity measurement
     where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} + h_j/2 - t_k) dR_{j-1} u_j``
     are preintegrated once per calibration.  Covariance
     ``q_a^2 / T_k`` per axis plus ``g^2 q_g^2 T_k / 3`` on the horizontal axes
-    (attitude noise inside the interval).
+    (attitude noise inside the interval), plus ``2/3 |l|^2 (s_k^2 + s_{k+1}^2) / T_k^2`` on every axis,
+    ``s`` the boundary rates' scatter (:func:`graph_calib.model.record.local_rates`) and ``l`` the lever
+    arm at the preintegration's linearisation point.
 
 Encoder measurement
     A valid table reading at ``t_m`` (sample ``j``, ``dt_m = t_m - t_j``; the
@@ -88,12 +95,18 @@ class Noise:
         dwell shows it, and the scale of the floor where one does (:mod:`graph_calib.model.encoder_noise`).
     variance_factors : dict
         ``{kind: factor}`` multiplying each kind's covariance (variance components; 1 where absent).
+    gyro_quantization : float
+        White error of the gyros' integrated angle at each sample end, rad (a ring-laser gyro's
+        quantization, IEEE ``Q``; 0: none).  The keyframe attitudes are the gyros' *indicated* ones,
+        which carry it, so the rotation factors see only ``gyro`` (the angle random walk) and the
+        measurements that read the attitude between keyframes see ``Q`` (module doc).
     """
 
     gyro: float
     accel: float
     encoder: float
     variance_factors: dict = field(default_factory=dict)
+    gyro_quantization: float = 0.0
 
     def scaled(self, kind, res):
         """``res`` (:class:`Residuals` of ``kind``) with its covariance times the kind's variance factor."""
@@ -225,6 +238,17 @@ def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None, s
     var = np.empty((K, 3))
     var[:] = (noise.accel**2 / T)[:, None]
     var[:, :2] += (record.gravity * noise.gyro) ** 2 * T[:, None] / 3.0
+    if noise.gyro_quantization:
+        # each sample's specific force is rotated with the indicated attitude: the mean of n independent
+        # angle errors Q tilts the keyframe's (the attitude at its start holds its own)
+        var[:, :2] += ((record.gravity * noise.gyro_quantization) ** 2 / np.diff(record.k0))[:, None]
+    if "lever_arm" in layout:
+        # the boundary rates' scatter (record.local_rates: a ring-laser gyro's quantization leaves some at a
+        # ramp, where a short fit is kept) through the lever-arm term, C (dw x l) at each end, taken isotropic
+        # with the lever arm of the linearisation point (fixed while the preintegration is)
+        l_lin = layout.get(preint.x_lin, "lever_arm", np.zeros(3))
+        sw = record.w_b_sigma
+        var += ((2.0 / 3.0) * float(l_lin @ l_lin) * np.sum(sw[:-1] ** 2 + sw[1:] ** 2, axis=1) / (3.0 * T**2))[:, None]
     if sway_sigma:
         var += float(sway_sigma) ** 2
     sigma = np.sqrt(var)
@@ -273,7 +297,10 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
             r[rc] = np.einsum("mij,mj->mi", Ut, r[rc])
             H_R[rc] = Ut @ H_R[rc]
             H_x[rc] = Ut @ H_x[rc]
-    sigma = np.sqrt(frame.var + (noise.gyro**2 * record.reading_tau)[:, None])
+    var_gyro = noise.gyro**2 * record.reading_tau
+    if noise.gyro_quantization:
+        var_gyro = var_gyro + noise.gyro_quantization**2 * record.reading_quantization_gain
+    sigma = np.sqrt(frame.var + var_gyro[:, None])
     return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
 
 

@@ -24,6 +24,9 @@ class ModelOptions:
         Overrides of the grade's prior sigmas, ``{parameter name: sigma}`` (SI).
     gyro_noise, accel_noise, encoder_noise : float or None
         Overrides of the grade's noise (rad/sqrt(s), m/s/sqrt(s), rad).
+    gyro_quantization : float or None
+        White error of the gyros' integrated angle at each sample end, rad (IEEE ``Q``: a ring-laser
+        gyro's quantization; :class:`graph_calib.model.factors.Noise`); None: none.
     initial_attitude_sigma : float or None
         Prior sigma of the first keyframe attitude around the alignment, rad.
         None: what the alignment can know (:attr:`CalibrationModel.initial_attitude_sigma`).
@@ -58,6 +61,7 @@ class ModelOptions:
     gyro_noise: float | None = None
     accel_noise: float | None = None
     encoder_noise: float | None = None
+    gyro_quantization: float | None = None
     initial_attitude_sigma: float | None = None
     moving_sigma: float | str | None = None
     sway_sigma: float | str | None = None

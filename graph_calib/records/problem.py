@@ -12,7 +12,7 @@ import numpy as np
 
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.noise import find_rests, identify_noise, table_noise
-from graph_calib.noise.identify import TERMS
+from graph_calib.noise.identify import ENCODER_NOISE_FLOOR, MIN_DWELL_DOF, TERMS
 from graph_calib.noise.rests import segment_static_parts, segment_thresholds
 from graph_calib.options import CalibrationOptions
 from graph_calib.sensors.params import grade
@@ -137,6 +137,13 @@ def build_problem(experiment, *, options=CalibrationOptions()):
             **model_options.noise_source, "encoder": "identified"},
             noise_identified={**model_options.noise_identified, "encoder": {"sigma_rad": enc, "dof": enc_dof}})
         model = CalibrationModel.from_record(model.record, options=model_options)
+    elif enc is None and enc_dof >= MIN_DWELL_DOF and model_options.encoder_noise is None:
+        # the dwells' readings do not scatter (below ENCODER_NOISE_FLOOR): their noise is not identified, and the
+        # grade's is no measurement of it (the verdict says what that does to the sigmas: solvers/verdict.py)
+        model_options = replace(model_options, noise_identified={
+            **model_options.noise_identified,
+            "encoder": {"sigma_rad": None, "dof": enc_dof, "below_rad": ENCODER_NOISE_FLOOR}})
+        model = CalibrationModel.from_record(model.record, options=model_options)
     q_nb0 = aligned[0].q_nb0 if len(aligned) == 1 else np.array([al.q_nb0 for al in aligned])
     return Problem(model=model, q_nb0=q_nb0, alignment=aligned[0], segment_alignments=tuple(aligned),
                    noise=identified)
@@ -228,8 +235,12 @@ def noise_options(identified, model_options):
     (:func:`graph_calib.noise.identify_noise`, the density that governs a keyframe) is ``identified``;
     a record whose rests are too short to show it, or that shows less than
     :data:`IDENTIFIED_FLOOR_FRACTION` of the grade's (noise-free simulated data), takes the grade's
-    (``grade``).  The table readings' noise is identified later, from the
-    prepared record's dwells (:func:`build_problem`).
+    (``grade``).  An identified gyro density is split (unless ``gyro_quantization`` is declared): the
+    white rate noise ``N`` (the IEEE term, floored at :data:`IDENTIFIED_FLOOR_FRACTION` of the grade's)
+    becomes ``gyro_noise`` and the quantization ``Q`` ``gyro_quantization``, since the keyframe attitudes
+    absorb ``Q`` (:class:`graph_calib.model.factors.Noise`); without quantization ``N`` is the
+    density.  The table readings' noise is identified later, from the prepared record's dwells
+    (:func:`build_problem`).
 
     Parameters
     ----------
@@ -239,10 +250,12 @@ def noise_options(identified, model_options):
     Returns
     -------
     graph_calib.model.ModelOptions
-        With ``gyro_noise``, ``accel_noise``, ``noise_source`` and ``noise_identified`` set.
+        With ``gyro_noise``, ``accel_noise``, ``gyro_quantization``, ``noise_source`` and ``noise_identified``
+        set.
     """
     g = grade(model_options.grade)
     source, figures, values = {}, {}, {}
+    quantization = model_options.gyro_quantization
     for sensor, declared, floor in (("gyro", model_options.gyro_noise, g.gyro_noise),
                                     ("accel", model_options.accel_noise, g.accel_noise)):
         sn = getattr(identified, sensor)
@@ -252,11 +265,17 @@ def noise_options(identified, model_options):
             values[sensor], source[sensor] = float(declared), "declared"
         elif sn is not None and sn.density >= IDENTIFIED_FLOOR_FRACTION * floor:
             values[sensor], source[sensor] = sn.density, "identified"
+            if sensor == "gyro" and quantization is None:
+                # the keyframe attitudes absorb the angle's quantization (graph_calib.model.factors.Noise): the
+                # rotation factors get the white rate noise N, the attitude's readers Q
+                # (q_eff^2 = N^2 + 2 Q^2 / T, graph_calib.noise.identify)
+                quantization = sn.term("quantization")
+                values[sensor] = max(sn.term("white"), IDENTIFIED_FLOOR_FRACTION * floor)
         else:
             values[sensor], source[sensor] = floor, "grade"
     source["encoder"] = "declared" if model_options.encoder_noise is not None else "grade"
     return replace(model_options, gyro_noise=values["gyro"], accel_noise=values["accel"], noise_source=source,
-                   noise_identified=figures)
+                   noise_identified=figures, gyro_quantization=quantization)
 
 
 __all__ = ["Problem", "SWAY_VARIANCE_FACTOR", "IDENTIFIED_FLOOR_FRACTION", "build_problem", "noise_options",

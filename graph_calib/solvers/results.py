@@ -91,6 +91,9 @@ def noise_block(model):
     out = {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
            "encoder_rad": model.encoder_noise, "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0,
            "source": src}
+    if model.gyro_quantization:
+        # the gyros' angle quantization (IEEE Q) the encoder and gravity factors carry (docs/model.md)
+        out["gyro_quantization_rad"] = model.gyro_quantization
     if o.noise_identified:
         out["identified"] = o.noise_identified
         # the rate random walks where the rests support them (the bias's random walk of Kalibr's and OpenVINS's

@@ -18,7 +18,12 @@ brought to 1 by a variance factor; the factor itself is then the test: a kind wh
 outside ``1 / VARIANCE_FACTOR_LIMIT .. VARIANCE_FACTOR_LIMIT`` of the noise identified from the record
 fails, naming the kind and the factor (its residuals are that many times, in variance, what the
 identified noise explains).  A kind whose sensor's noise was the grade's (nothing identified) is not
-judged by its factor: the grade's table value is no measurement.
+judged by its factor: the grade's table value is no measurement.  One case of it fails all the same:
+table readings whose static dwells do not scatter (below the identification floor: noise-free
+readings).  Their residuals are then the gyro's angle random walk from the keyframe to each reading,
+correlated from reading to reading, which the encoder factors take as independent; no variance factor
+makes that right (docs/model.md measures the sigmas 1.4 times optimistic at the factor the residuals
+ask for), and the verdict says so in words.
 
 Without variance factors (``residuals.variance_components`` false: a campaign's tasks) a kind below
 its lower limit is a note, not a failure: the kinds' own approximations keep a right model's rotation
@@ -32,6 +37,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Mapping
 
+from graph_calib.constants import RAD_TO_ARCSEC
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
 
 #: Largest chi-square per measurement component of a result without redundancies (the old statistic).
@@ -66,7 +72,9 @@ def judge_kinds(result):
     """
     kinds = (result.residuals or {}).get("kinds") or {}
     scaled = bool((result.residuals or {}).get("variance_components", True))
-    source = ((result.extra or {}).get("noise") or {}).get("source") or {}
+    noise = (result.extra or {}).get("noise") or {}
+    source = noise.get("source") or {}
+    quiet = ((noise.get("identified") or {}).get("encoder") or {}).get("below_rad")
     figures, problems, notes = {}, [], []
     for kind, sensor in JUDGED_KINDS.items():
         k = kinds.get(kind)
@@ -77,6 +85,9 @@ def judge_kinds(result):
         lo, hi = kind_limits(nu)
         figures[kind] = {"chi2_per_redundancy": v, "redundancy": nu, "low": lo, "high": hi, "variance_factor": vf}
         what = f"{kind} chi2/redundancy {v:.3g} (redundancy {nu:.1f})"
+        if kind == "encoder" and quiet and source.get("encoder") == "grade":
+            problems.append(_quiet_readings_text(what, quiet))
+            continue
         if v > hi:
             problems.append(f"{what} > {hi:.3g}: the {kind} residuals are larger than their noise model; the "
                             f"model lacks an effect or the {sensor} noise is larger than assumed; sigmas "
@@ -98,6 +109,16 @@ def judge_kinds(result):
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} < 1/{VARIANCE_FACTOR_LIMIT:g} on "
                                 f"the {source.get(sensor, 'assumed')} {sensor} noise: that noise is overstated")
     return figures, problems, notes
+
+
+def _quiet_readings_text(what, floor_rad):
+    """The verdict's words for table readings whose static dwells show no noise (docs/model.md)."""
+    return (f"{what}: the table readings do not scatter (their static dwells show less than "
+            f"{floor_rad * RAD_TO_ARCSEC:.2g} arcsec), so their noise is not identified and the grade's is no "
+            f"measurement of it; the encoder factors' residuals are then the gyro's angle random walk from the "
+            f"keyframe to each reading, correlated from reading to reading, which the model takes as independent: "
+            f"no variance factor makes that right, and the sigmas of what the readings inform are not reliable "
+            f"(declare the readings' noise, encoder_noise, if it is known)")
 
 
 def fit_chi2_per_redundancy(block):

@@ -1,6 +1,7 @@
 """The verdict on made-up results: each kind's limits from its redundancy, the variance factors, the words, exit 3."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -102,3 +103,17 @@ def test_without_variance_components_a_kind_below_its_limit_is_a_note():
     v = verdict_of({"factor-graph": res})
     assert v.passed and "encoder chi2/redundancy 0.67" in v.notes[0] and lo > 0.67
     assert not verdict_of({"factor-graph": _result({"encoder": (0.67, 3000.0, 1.0)})}).passed
+
+
+def test_table_readings_that_do_not_scatter_fail_the_encoder_kind_in_words():
+    quiet = {"noise": {"source": {"gyro": "identified", "accel": "identified", "encoder": "grade"},
+                       "identified": {"encoder": {"sigma_rad": None, "dof": 300, "below_rad": 4.85e-7}}}}
+    kinds = {"rotation": (1.0, 60.0, 1.0), "gravity": (1.0, 900.0, 1.0), "encoder": (1.0, 3000.0, 0.01)}
+    res = _result(kinds)
+    v = verdict_of({"factor-graph": replace(res, extra=quiet)})
+    assert not v.passed
+    (problem,) = v.problems
+    assert "the table readings do not scatter" in problem and "0.1 arcsec" in problem and "not reliable" in problem
+    assert "RESIDUALS INCONSISTENT WITH THE NOISE MODEL: encoder" in v.text()
+    # readings whose noise is the grade's because no dwell shows any: a note, as before
+    assert verdict_of({"factor-graph": _result(kinds, source=quiet["noise"]["source"])}).passed
