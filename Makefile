@@ -4,6 +4,9 @@ PYTHON ?= python3
 VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# The tests run in two worker processes (pytest-xdist), a test file to a worker so that its module fixtures are
+# computed once; `make test XDIST=` runs them in one process (docs/performance.md, "The tests").
+XDIST  ?= -n 2 --dist loadfile
 
 .PHONY: demo test test-fast env bench clean clean-cache
 
@@ -19,10 +22,10 @@ demo: $(STAMP)
 	$(VENV)/bin/graph-calib demo --out demo-out
 
 test: $(STAMP)
-	$(PY) -m pytest -q -x --durations=15
+	$(PY) -m pytest -q -x $(XDIST) --durations=15
 
 test-fast: $(STAMP)
-	$(PY) -m pytest -q -x -m "not (montecarlo or measured or slow)" --durations=10
+	$(PY) -m pytest -q -x $(XDIST) -m "not (montecarlo or measured or slow)" --durations=10
 
 bench: $(STAMP)
 	$(PY) benchmarks/run_all.py $(BENCH_ARGS)

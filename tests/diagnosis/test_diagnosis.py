@@ -17,6 +17,9 @@ import pytest
 from scipy import stats
 
 from graph_calib import constants as c
+from graph_calib.calibrate import build_problem, solve_problem
+from graph_calib.model import ModelOptions
+from graph_calib.options import CalibrationOptions
 from graph_calib.sensors import effects
 from graph_calib.diagnosis import (
     DiagnosisOptions,
@@ -173,6 +176,12 @@ def test_the_missing_effect_is_added_first_and_the_error_falls(effect):
     assert ea["rms_z"] < 1.6
     # the whitened residuals shrink
     assert d.rounds[-1].chi2_per_dof <= first.chi2_per_dof
+    # calibrate, on the same record, does not pass what the loop changes: its verdict fails naming the effect
+    # (the structure tests, docs/model.md "The verdict")
+    opts = CalibrationOptions(model=ModelOptions(), t_ref_degC=se.truth.t_ref_degC)
+    verdict = solve_problem(build_problem(se.experiment, options=opts), options=opts,
+                            solvers=("factor-graph",)).verdict
+    assert not verdict.passed and any(effect in p for p in verdict.problems), verdict.problems
 
 
 @pytest.mark.slow
