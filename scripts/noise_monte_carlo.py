@@ -11,9 +11,17 @@ variance factor, the verdict. A file that exists is not run again (the study res
 over the elements the data determine (both solvers), the per-element RMS against the chi-square limits of the
 number of seeds, the kinds' chi2 / redundancy range and the verdicts.
 
+The normalised error is chi-square only when the truth is drawn from the priors; the simulator draws it
+narrower (``simulation/truth.py``), so elements tied to directions a short record does not determine look
+pessimistic whatever the noise model (docs/model.md, "Noise from the record"). ``--priors truth`` calibrates
+with the truth draw's RMS as the priors (:func:`truth_spread_priors`), which judges the noise model alone; each
+file also holds ``z_data`` (:func:`data_part_z`), the error with the prior's pull removed over the data's part
+of the sigma. Use a new ``--out`` for each code version or prior choice (a file records ``priors``).
+
 Usage::
 
     python scripts/noise_monte_carlo.py --out /tmp/noise-mc --cases clean,noise-0.3x --seeds 0:20
+    python scripts/noise_monte_carlo.py --out /tmp/noise-mc-truth --priors truth --cases clean --seeds 0:40
     python scripts/noise_monte_carlo.py --out /tmp/noise-mc --summary
 """
 
