@@ -100,3 +100,32 @@ def test_table_noise_identified_within_a_fifth(arcsec):
         p = build_problem(se.experiment, options=CalibrationOptions(t_ref_degC=se.truth.t_ref_degC))
         assert p.model.options.noise_source["encoder"] == "identified"
         assert abs(p.model.encoder_noise / (arcsec * ARCSEC_TO_RAD) - 1) < 0.2
+
+
+@pytest.mark.slow
+def test_the_pessimistic_elements_of_the_clean_case_are_the_priors_not_the_noise():
+    """Issue #21's clean-case mount and accelerometer scale sigmas, 2-3 times the Monte Carlo's errors, are the
+    prior's share along the directions the 6-min record does not determine: the linear sandwich with the
+    simulator's truth spread (narrower than the grade's priors) predicts that ratio, and with the priors set to
+    that spread the ratio is 1 (docs/model.md, "Noise from the record")."""
+    import importlib
+    import sys
+    from pathlib import Path
+
+    scripts = str(Path(__file__).resolve().parents[2] / "scripts")
+    sys.path.insert(0, scripts)
+    try:
+        sandwich = importlib.import_module("prior_spread_sandwich")
+    finally:
+        sys.path.remove(scripts)
+    se = _simulated(50_000)                   # seed 0 of scripts/noise_monte_carlo.py
+    names, ratio, dominated = sandwich.prior_spread_ratio(se)
+    r = dict(zip(names, ratio))
+    dom = {n for n, d in zip(names, dominated) if d > 0.7}
+    assert {"accel.scale.x", "accel.misalignment.yx", "accel.misalignment.zx"} <= dom
+    # the Monte Carlo's pessimistic elements (60 seeds: mount 0.38-0.50, accel.scale.z 0.36), predicted without noise
+    for name in ("mount.x", "mount.y", "accel.scale.z", "accel.misalignment.zy"):
+        assert name not in dom and r[name] < 0.6, (name, r[name])
+    # elements the priors do not reach keep their sigma
+    for name in ("accel.bias_tc.x", "accel.scale_tc.y"):
+        assert abs(r[name] - 1.0) < 0.02, (name, r[name])
