@@ -206,7 +206,9 @@ def test_between_grid_points_the_difference_is_the_stated_interpolation_error(ca
         d = triad_errors(layout, X, triad, np.ones_like(s)) - triad_errors(layout, X, triad, np.zeros_like(s))
         d = d.max()
         assert 0 < d < 0.01
-        assert np.all(diff <= v + d / (1 - d) * v.max(axis=1, keepdims=True) + 1e-15 * np.abs(s).max())
+        # plus the rounding of the two corrections (a few tens of ulps of the largest signal: the quantization's
+        # merge moved one gyro sample's difference 1.1e-15 rad/s above the bound with 1e-15 |s|max = 5e-16 slack)
+        assert np.all(diff <= v + d / (1 - d) * v.max(axis=1, keepdims=True) + 1e-14 * np.abs(s).max())
     assert np.abs(w_tab - w_st).max() > 0                                # not vacuous: the temperatures are off-grid
 
 
