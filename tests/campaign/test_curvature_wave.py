@@ -1,0 +1,94 @@
+"""The joint curve's curvature carried into the subranges that lack it: the priors (typed by hand), the prior
+mean both solvers honour, the wave's place in a campaign."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from _shared import make_experiment
+
+from graph_calib.calibrate import CalibrationOptions, build_problem, solve_problem
+from graph_calib.campaign.checks import campaign_checks
+from graph_calib.campaign.curvature_wave import joint_priors
+from graph_calib.model import ModelOptions
+from graph_calib.records.experiment import Result
+
+T0 = 20.0
+#: accel.bias.{x,y,z} cubic about T0: c0, c1, c2, c3 per element
+COEF = {"x": [1e-4, 2e-6, 4e-8, 2e-9], "y": [-3e-4, 1e-6, -6e-8, 5e-9], "z": [2e-4, -1e-6, 1e-8, -3e-9]}
+#: their covariance (the same for each element), with a c2-c3 correlation
+COV = np.diag([1e-12, 1e-16, 1e-18, 1e-20])
+COV[2, 3] = COV[3, 2] = 5e-20
+
+
+def _joint(degree=3):
+    curves = {f"accel.bias.{el}": {"degree": degree, "coefficients": c[: degree + 1],
+                                   "covariance": COV[: degree + 1, : degree + 1].tolist()} for el, c in COEF.items()}
+    block = {"t0_degC": T0, "degrees": {"accel.bias": degree}, "degree_choice": [], "curves": curves, "setups": {},
+             "experiments": ["sub1"]}
+    return Result(source="campaign.toml", solver="joint", t_ref_degC=T0, temperature_range_degC=(-10.0, 50.0),
+                  effects=("accel.bias",), values={f"accel.bias.{el}": c[0] for el, c in COEF.items()},
+                  sigmas={f"accel.bias.{el}": 1e-6 for el in COEF}, extra={"joint": block})
+
+
+def _subrange(effects, *, t_ref=45.0):
+    values = {f"{e}.{el}": 0.0 for e in effects for el in "xyz"}
+    return Result(source="sub6.h5", solver="factor-graph", t_ref_degC=t_ref, temperature_range_degC=(40.0, 50.0),
+                  effects=tuple(effects), values=values, sigmas={n: 1e-6 for n in values})
+
+
+def test_the_orders_a_subrange_lacks_get_the_joint_curves_taylor_coefficients_as_their_prior():
+    """At T_ref = 45 (d = 25 from t0): p_tc2 = c2 + 3 c3 d, p_tc3 = c3; their variances by hand from the
+    coefficients' covariance: var(tc2) = C22 + 6 d C23 + 9 d^2 C33, var(tc3) = C33."""
+    d = 25.0
+    pr = joint_priors(_joint(), _subrange(("accel.bias", "accel.bias_tc")))
+    assert list(pr) == ["accel.bias_tc2", "accel.bias_tc3"]
+    m2, s2 = pr["accel.bias_tc2"]
+    m3, s3 = pr["accel.bias_tc3"]
+    for i, el in enumerate("xyz"):
+        c = COEF[el]
+        assert m2[i] == pytest.approx(c[2] + 3 * c[3] * d, rel=1e-12)
+        assert m3[i] == pytest.approx(c[3], rel=1e-12)
+    assert s2 == pytest.approx([np.sqrt(1e-18 + 6 * d * 5e-20 + 9 * d**2 * 1e-20)] * 3, rel=1e-12)
+    assert s3 == pytest.approx([1e-10] * 3, rel=1e-12)
+    # a subrange that holds the quadratic lacks only the cubic; one that holds the cubic lacks nothing
+    assert list(joint_priors(_joint(), _subrange(("accel.bias", "accel.bias_tc", "accel.bias_tc2")))) == \
+        ["accel.bias_tc3"]
+    assert joint_priors(_joint(), _subrange(("accel.bias", "accel.bias_tc", "accel.bias_tc2", "accel.bias_tc3"))) == {}
+    # a linear joint curve has no curvature to carry
+    assert joint_priors(_joint(degree=1), _subrange(("accel.bias", "accel.bias_tc"))) == {}
+
+
+def test_a_subrange_holding_the_joint_orders_is_no_longer_flagged():
+    """Once the wave carried the orders, the campaign's check 'curvature carried' finds nothing lacking."""
+    doc = {"primary_solver": "factor-graph", "stitch_model": "cubic", "validation": [],
+           "experiments": [{"name": "sub6", "verdict": {"passed": True}}], "verdict": {"passed": True, "failed": []}}
+    full = _subrange(("accel.bias", "accel.bias_tc", "accel.bias_tc2", "accel.bias_tc3"))
+    checks = campaign_checks(doc, results={"sub6": {"factor-graph": full}}, joint=_joint())
+    c = next(c for c in checks["checks"] if c["check"] == "curvature carried")
+    assert c["passed"] is True and "every subrange holds it" in c["text"]
+    lacking = _subrange(("accel.bias", "accel.bias_tc"))
+    lacking.values.update({"accel.bias.x": 1.0})
+    checks = campaign_checks(doc, results={"sub6": {"factor-graph": lacking}}, joint=_joint())
+    assert checks["curvature_bias"]["sub6"]["factor-graph"]
+
+
+def test_a_prior_mean_is_honoured_by_both_solvers():
+    """A parameter the record cannot see (a 5 degC ramp and 6 s: accel.bias_tc3), its prior tight at a mean other
+    than zero: both solvers return that mean; the model's prior and the result file say it."""
+    exp = make_experiment(n=600)
+    mean = [3e-9, -2e-9, 1e-9]
+    model = ModelOptions(extra_effects=("accel.bias_tc2", "accel.bias_tc3"), prior_sigma={"accel.bias_tc3": 1e-15},
+                         prior_mean={"accel.bias_tc3": mean})
+    opts = CalibrationOptions(model=model, variance_components=False, structure_tests=False)
+    problem = build_problem(exp, options=opts)
+    m, s = problem.model.prior()
+    sl = problem.model.layout.slice("accel.bias_tc3")
+    np.testing.assert_array_equal(m[sl], mean)
+    np.testing.assert_array_equal(s[sl], 1e-15)
+    assert np.count_nonzero(m) == 3
+    run = solve_problem(problem, options=opts, solvers=("factor-graph", "sqrt-kf"))
+    for solver, r in run.results.items():
+        got = [r.values[f"accel.bias_tc3.{el}"] for el in "xyz"]
+        np.testing.assert_allclose(got, mean, rtol=1e-4, err_msg=solver)
+        assert r.extra["prior_means"] == {"accel.bias_tc3": mean}
