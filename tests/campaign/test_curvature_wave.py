@@ -92,3 +92,65 @@ def test_a_prior_mean_is_honoured_by_both_solvers():
         got = [r.values[f"accel.bias_tc3.{el}"] for el in "xyz"]
         np.testing.assert_allclose(got, mean, rtol=1e-4, err_msg=solver)
         assert r.extra["prior_means"] == {"accel.bias_tc3": mean}
+
+
+@pytest.fixture(scope="module")
+def carried(tmp_path_factory):
+    """Three 12 min subranges (50 Hz) of nav-campaign seed 11 with a strong cubic, both solvers and the joint, in
+    process; then the same campaign again from its cache: ``(run, rerun)``."""
+    from graph_calib import io
+    from graph_calib.campaign import CampaignOptions, run_campaign
+    from graph_calib.simulation import simulate
+
+    d = tmp_path_factory.mktemp("carried")
+    data = d / "data"
+    data.mkdir()
+    s = simulate("nav-campaign", rng=np.random.default_rng(11), hours=0.2, rate_hz=50.0, cubic_scale=9.5)
+    files = []
+    for i in (0, 2, 4):
+        se = s.plans[i].run()
+        io.write_experiment(se.experiment, data / se.file_name)
+        io.write_result(se.truth, data / se.truth_name)
+        files.append(se.file_name)
+    manifest = data / "campaign.toml"
+    manifest.write_text('[imu]\nid = "SIM-NAV 0001"\ngrade = "navigation"\n'
+                        + "".join(f'\n[[experiment]]\nfile = "{f}"\n' for f in files))
+    opts = CampaignOptions(workers=0, progress=False, report=False)
+    return run_campaign(manifest, d / "out", options=opts), run_campaign(manifest, d / "out", options=opts)
+
+
+@pytest.mark.slow
+def test_a_campaign_carries_the_joint_curves_orders_into_every_subrange_lacking_them(carried):
+    """The joint's degree above what a subrange's loop chose: the last wave re-solves it with the missing orders,
+    their priors the joint curve's Taylor coefficients at its T_ref (read independently through
+    joint_element_at); every final result then holds every order of the joint curves (nothing left for the check
+    'curvature carried' to flag), and a cached re-run recomputes nothing."""
+    from graph_calib.solvers.joint.result import joint_element_at
+
+    run, rerun = carried
+    doc = run.document
+    degrees = doc["joint"]["joint"]["degrees"]
+    assert max(degrees.values()) >= 2, degrees
+    wave = [w for w in doc["loop"]["pooled"]["waves"] if w.get("kind") == "joint"]
+    assert len(wave) == 1, doc["loop"]["pooled"]["waves"]
+    priors = wave[0]["priors"]
+    assert priors
+    for name, per in priors.items():
+        e = next(e for e in doc["experiments"] if e["name"] == name)
+        assert {a["effect"] for a in e["loop"]["pooled"] if a["kind"] == "joint"} == set(per)
+        for solver, r in run.results[name].items():
+            assert set(per) <= set(r.effects), (name, solver)
+            for effect, pr in per.items():
+                assert r.extra["prior_means"][effect] == pytest.approx(pr["mean"], rel=1e-12)
+                assert r.extra["priors"][effect] == pytest.approx(pr["sigma"], rel=1e-12)
+                for i, el in enumerate("xyz"):
+                    v, sig = joint_element_at(run.joint, f"{effect}.{el}", r.t_ref_degC)
+                    assert pr["mean"][i] == pytest.approx(v, rel=1e-9, abs=1e-30)
+                    assert pr["sigma"][i] == pytest.approx(sig, rel=1e-9)
+    assert not doc["campaign_checks"]["curvature_bias"], doc["campaign_checks"]["curvature_bias"]
+    c = next(c for c in doc["campaign_checks"]["checks"] if c["check"] == "curvature carried")
+    assert c["passed"] is True, c["text"]
+    assert rerun.document["timing"]["tasks_computed"] == 0
+    assert rerun.document["loop"]["pooled"]["tasks_computed"] == 0
+    assert [w["decision"] for w in rerun.document["loop"]["pooled"]["waves"]] == \
+        [w["decision"] for w in doc["loop"]["pooled"]["waves"]]
