@@ -28,7 +28,9 @@ share.
 After this wave every final per-subrange result holds every order of the joint curve, so the campaign's
 check "curvature carried" (:mod:`graph_calib.campaign.checks`) has nothing left to flag; the truth check and
 the joint-against-subranges check judge the results the wave wrote.  A task of the wave that fails is
-reported like every failed task of a pooled wave (``campaign.json``'s ``failed``, exit 1).
+reported like every failed task of a pooled wave (``campaign.json``'s ``failed``, exit 1).  A joint result whose
+verdict failed (not converged, residuals inconsistent) is no prior: nothing is carried, the wave's entry says
+why, and the check "curvature carried" flags the subranges lacking its orders as before.
 """
 
 from __future__ import annotations
@@ -127,6 +129,16 @@ def run_curvature_wave(planned, pooled, joint, *, options, on_done=None, pool=No
         if pr:
             priors[n] = pr
     if not priors:
+        return pooled
+    verdict = joint.extra.get("verdict") or {}
+    if not verdict.get("passed", True):
+        # a joint curve that did not converge or does not explain its data is no prior: nothing carried, the
+        # check "curvature carried" flags the subranges that lack its orders
+        text = (f"the joint curves' orders not carried into {', '.join(priors)}: the joint's verdict failed "
+                f"({verdict.get('text', '')})")
+        pooled.document["waves"].append({"wave": wave, "kind": KIND, "tests": [], "adopted": None, "decision": text})
+        if options.progress:
+            print(f"joint curvature wave: {text}", file=sys.stderr, flush=True)
         return pooled
     new, adoptions = [], {}
     for n, pr in priors.items():

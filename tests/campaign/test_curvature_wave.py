@@ -154,3 +154,25 @@ def test_a_campaign_carries_the_joint_curves_orders_into_every_subrange_lacking_
     assert rerun.document["loop"]["pooled"]["tasks_computed"] == 0
     assert [w["decision"] for w in rerun.document["loop"]["pooled"]["waves"]] == \
         [w["decision"] for w in doc["loop"]["pooled"]["waves"]]
+
+
+def test_a_joint_whose_verdict_failed_is_no_prior_and_nothing_is_carried():
+    """The joint did not converge: no wave runs, its entry says why, and the lacking subrange stays flagged."""
+    from types import SimpleNamespace
+
+    from graph_calib.campaign import CampaignOptions
+    from graph_calib.campaign.curvature_wave import run_curvature_wave
+    from graph_calib.campaign.waves import PooledRun
+
+    joint = _joint()
+    joint.extra["verdict"] = {"passed": False, "text": "the joint solve did not converge"}
+    sub = _subrange(("accel.bias", "accel.bias_tc"))
+    pooled = PooledRun(folders={}, outcomes={}, document={"waves": []}, adopted={},
+                       states={"sub6": SimpleNamespace(results={"factor-graph": sub})})
+    out = run_curvature_wave(SimpleNamespace(todo=[], done=[]), pooled, joint,
+                             options=CampaignOptions(workers=0, progress=False))
+    assert out is pooled and not out.outcomes and not out.adopted
+    (entry,) = out.document["waves"]
+    assert entry["adopted"] is None and "not carried into sub6: the joint's verdict failed" in entry["decision"]
+    # a joint that passed would carry the cubic's two orders there
+    assert list(joint_priors(_joint(), sub)) == ["accel.bias_tc2", "accel.bias_tc3"]
