@@ -158,7 +158,8 @@ def run_curvature_wave(planned, pooled, joint, *, options, on_done=None, pool=No
                          "adopted": {"effect": ", ".join(sorted({e for pr in priors.values() for e in pr})),
                                      "kind": KIND, "experiments": list(priors)},
                          "priors": {n: {e: {"mean": m, "sigma": s} for e, (m, s) in pr.items()}
-                                    for n, pr in priors.items()}})
+                                    for n, pr in priors.items()},
+                         "seconds": time.perf_counter() - t0, "tasks_computed": counts["computed"]})
     for k in counts:
         doc[f"tasks_{k}"] = doc.get(f"tasks_{k}", 0) + counts[k]
     doc["seconds"] = doc.get("seconds", 0.0) + time.perf_counter() - t0
