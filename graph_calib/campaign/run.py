@@ -146,7 +146,9 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
         pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool)
         collected = _collect_final(planned, outcomes, pooled)
         joint, joint_status = solve_joint(planned, collected, progress=options.progress, force=options.force)
-        carried = run_curvature_wave(planned, pooled, joint, options=options, on_done=on_done, pool=pool)
+        carried = run_curvature_wave(planned, pooled, joint, options=options, on_done=on_done, pool=pool,
+                                     sensor_ranges={n: s.get("sensor_temperature_range_degC")
+                                                    for n, s in collected.summaries.items()})
         if carried is not pooled:       # the joint curves' missing orders carried: the subranges' new results
             pooled = carried
             collected = _collect_final(planned, outcomes, pooled)

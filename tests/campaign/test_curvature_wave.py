@@ -125,6 +125,7 @@ def test_a_campaign_carries_the_joint_curves_orders_into_every_subrange_lacking_
     their priors the joint curve's Taylor coefficients at its T_ref (read independently through
     joint_element_at); every final result then holds every order of the joint curves (nothing left for the check
     'curvature carried' to flag), and a cached re-run recomputes nothing."""
+    from graph_calib.campaign.curvature_wave import CARRY_SIGMA
     from graph_calib.solvers.joint.result import joint_element_at
 
     run, rerun = carried
@@ -147,7 +148,11 @@ def test_a_campaign_carries_the_joint_curves_orders_into_every_subrange_lacking_
                     v, sig = joint_element_at(run.joint, f"{effect}.{el}", r.t_ref_degC)
                     assert pr["mean"][i] == pytest.approx(v, rel=1e-9, abs=1e-30)
                     assert pr["sigma"][i] == pytest.approx(sig, rel=1e-9)
-    assert not doc["campaign_checks"]["curvature_bias"], doc["campaign_checks"]["curvature_bias"]
+    small = doc["loop"]["pooled"].get("joint_not_carried", {})
+    bias = doc["campaign_checks"]["curvature_bias"]
+    assert not set(bias) & set(priors), bias                  # the carried ones lack nothing
+    assert set(bias) <= set(small)                             # the others lack less than CARRY_SIGMA
+    assert all(abs(z) < CARRY_SIGMA for per in bias.values() for rows in per.values() for z in rows.values())
     c = next(c for c in doc["campaign_checks"]["checks"] if c["check"] == "curvature carried")
     assert c["passed"] is True, c["text"]
     assert rerun.document["timing"]["tasks_computed"] == 0
@@ -176,3 +181,25 @@ def test_a_joint_whose_verdict_failed_is_no_prior_and_nothing_is_carried():
     assert entry["adopted"] is None and "not carried into sub6: the joint's verdict failed" in entry["decision"]
     # a joint that passed would carry the cubic's two orders there
     assert list(joint_priors(_joint(), sub)) == ["accel.bias_tc2", "accel.bias_tc3"]
+
+
+def test_a_subrange_whose_lacking_orders_shift_nothing_that_matters_is_not_solved_again():
+    """The joint's cubic scaled down a thousandfold: what the linear subrange lacks shifts its estimates by
+    hundredths of a sigma, below CARRY_SIGMA: no re-solve, the entry says how little it lacks."""
+    from types import SimpleNamespace
+
+    from graph_calib.campaign import CampaignOptions
+    from graph_calib.campaign.curvature_wave import CARRY_SIGMA, run_curvature_wave
+    from graph_calib.campaign.waves import PooledRun
+
+    joint = _joint()
+    for cv in joint.extra["joint"]["curves"].values():
+        cv["coefficients"] = cv["coefficients"][:2] + [c * 1e-3 for c in cv["coefficients"][2:]]
+    joint.extra["verdict"] = {"passed": True}
+    pooled = PooledRun(folders={}, outcomes={}, document={"waves": []}, adopted={},
+                       states={"sub6": SimpleNamespace(results={"factor-graph": _subrange(("accel.bias",
+                                                                                          "accel.bias_tc"))})})
+    out = run_curvature_wave(SimpleNamespace(todo=[], done=[]), pooled, joint,
+                             options=CampaignOptions(workers=0, progress=False))
+    assert not out.outcomes and not out.document["waves"]
+    assert 0 < out.document["joint_not_carried"]["sub6"] < CARRY_SIGMA
