@@ -116,7 +116,11 @@ def carried(tmp_path_factory):
     manifest.write_text('[imu]\nid = "SIM-NAV 0001"\ngrade = "navigation"\n'
                         + "".join(f'\n[[experiment]]\nfile = "{f}"\n' for f in files))
     opts = CampaignOptions(workers=0, progress=False, report=False)
-    return run_campaign(manifest, d / "out", options=opts), run_campaign(manifest, d / "out", options=opts)
+    # 12 min subranges have wide sigmas: what they lack shifts them by less than CARRY_SIGMA, and the wave would
+    # skip them; carried whatever the shift here (the wave runs in this process)
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr("graph_calib.campaign.curvature_wave.CARRY_SIGMA", 0.0)
+        return run_campaign(manifest, d / "out", options=opts), run_campaign(manifest, d / "out", options=opts)
 
 
 @pytest.mark.slow
@@ -125,7 +129,6 @@ def test_a_campaign_carries_the_joint_curves_orders_into_every_subrange_lacking_
     their priors the joint curve's Taylor coefficients at its T_ref (read independently through
     joint_element_at); every final result then holds every order of the joint curves (nothing left for the check
     'curvature carried' to flag), and a cached re-run recomputes nothing."""
-    from graph_calib.campaign.curvature_wave import CARRY_SIGMA
     from graph_calib.solvers.joint.result import joint_element_at
 
     run, rerun = carried
@@ -148,11 +151,8 @@ def test_a_campaign_carries_the_joint_curves_orders_into_every_subrange_lacking_
                     v, sig = joint_element_at(run.joint, f"{effect}.{el}", r.t_ref_degC)
                     assert pr["mean"][i] == pytest.approx(v, rel=1e-9, abs=1e-30)
                     assert pr["sigma"][i] == pytest.approx(sig, rel=1e-9)
-    small = doc["loop"]["pooled"].get("joint_not_carried", {})
-    bias = doc["campaign_checks"]["curvature_bias"]
-    assert not set(bias) & set(priors), bias                  # the carried ones lack nothing
-    assert set(bias) <= set(small)                             # the others lack less than CARRY_SIGMA
-    assert all(abs(z) < CARRY_SIGMA for per in bias.values() for rows in per.values() for z in rows.values())
+    assert not doc["loop"]["pooled"].get("joint_not_carried")
+    assert not doc["campaign_checks"]["curvature_bias"], doc["campaign_checks"]["curvature_bias"]
     c = next(c for c in doc["campaign_checks"]["checks"] if c["check"] == "curvature carried")
     assert c["passed"] is True, c["text"]
     assert rerun.document["timing"]["tasks_computed"] == 0
