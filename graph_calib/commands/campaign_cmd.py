@@ -147,9 +147,11 @@ def _print_loop(loop, out):
                       for a in loop["added"]) or "nothing"
     line = f"    loop: added {added}"
     for a in loop.get("pooled") or []:
-        if a.get("kind") in ("carried", "joint"):
-            line += (f"; carried {a['effect']} (adopted in {', '.join(a.get('adopted_in') or [])}"
-                     + (", its prior the joint curve's)" if a.get("kind") == "joint" else ")"))
+        if a.get("kind") == "joint":
+            line += f"; carried {a['effect']} ({', '.join(a.get('adopted_in') or [])}, its prior the joint curve's)"
+            continue
+        if a.get("kind") == "carried":
+            line += f"; carried {a['effect']} (adopted in {', '.join(a.get('adopted_in') or [])})"
             continue
         line += (f"; pooled test adopted {a['effect']} ({a['kind']} score {a['statistic']:.1f} > {a['threshold']:.1f} over "
                  f"{len(a['experiments'])} experiments, log10 p {a['log10_p']:.1f})")
