@@ -15,9 +15,13 @@ elements within 3 sigma of the truth and the RMS normalised error of the final r
 of points within 2 sigma and largest |z| against the truth curves, each validation check, the campaign's
 checks that failed, the exit code, the campaign's time.
 
-Resumable: a seed whose ``metrics.json`` exists is only read back (``--again`` recomputes its metrics, the
-campaign's own task cache still reusing finished work); a simulation already on disk is reused; an
-interrupted campaign resumes from its cached tasks.  At the end one table over every seed asked for, with
+Beside the final results' figures, those of the results the joint curvature wave started from
+(``before_joint_wave``: what the campaign reported before that wave carried the joint's curvature).
+
+Resumable: a seed whose ``metrics.json`` exists is only read back (``--again`` runs the campaign again, its
+task cache reusing finished work; ``--no-run`` recomputes the metrics from the ``campaign.json`` on disk); a
+simulation already on disk is reused; an interrupted campaign resumes from its cached tasks.  Seeds can run
+in parallel as separate processes (each its own folder).  At the end one table over every seed asked for, with
 each done-means figure (per subrange >= 99 % within 3 sigma and RMS <= 1.2, both solvers; joint >= 90 % within
 2 sigma and none beyond 4; validation of the stitched and the joint calibration met), and ``summary.json``.
 Exit status 1 when a seed misses one of them.
