@@ -158,7 +158,7 @@ def _joint_check(joint, results):
 # ---------------------------------------------------------------------------
 
 
-def _orders_held(result, base):
+def orders_held(result, base):
     """Highest temperature order of ``base`` a result holds (its effects), 0 without the parameter."""
     orders = temperature_family(base)[1]
     held = [k for k, n in orders.items() if n in result.effects or any(v.startswith(n + ".") for v in result.values)]
@@ -199,7 +199,7 @@ def curvature_bias(joint, results, sensor_ranges):
             rows = {}
             for flat, cv in block["curves"].items():
                 base, el = split_element_name(flat)
-                held = _orders_held(r, base)
+                held = orders_held(r, base)
                 if len(cv["coefficients"]) - 1 <= held or flat not in r.values:
                     continue
                 s = sensor_of(flat)

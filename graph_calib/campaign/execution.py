@@ -195,12 +195,12 @@ def _run_wave_tasks(tasks):
         diag = diagnose_from(exp, options=first.options, diagnosis=first.diagnosis, start=primary_start.values,
                              attitudes=_read_attitudes(start) if primary in previous else None,
                              starts={s: r.values for s, r in previous.items() if s != primary}, max_added=left)
-        return diag, wave_record(record, diag, wave=first.wave, effect=first.pooled[-1])
+        return diag, wave_record(record, diag, wave=first.wave, effects=first.added_by_wave)
 
-    return _loop_job(tasks, wave, wave=tasks[0].wave, pooled_effect=tasks[0].pooled[-1])
+    return _loop_job(tasks, wave, wave=tasks[0].wave, pooled_effects=tasks[0].added_by_wave)
 
 
-def _loop_job(tasks, run, *, wave=None, pooled_effect=None):
+def _loop_job(tasks, run, *, wave=None, pooled_effects=()):
     """One experiment's loop job: read it, ``run(first_task, experiment) -> (diagnosis, loop record)``, write
     its diagnosis (:func:`_write_diagnosis`) and its tasks' files (:func:`_write_chosen`); every task failed
     with the error when reading or the loop fails."""
@@ -217,7 +217,7 @@ def _loop_job(tasks, run, *, wave=None, pooled_effect=None):
     except Exception as exc:  # noqa: BLE001 - reported per task
         return [_failure(t, exc) for t in tasks]
     return _write_chosen(tasks, diag, record, seconds=(time.perf_counter() - t0 - clock.seconds) / len(tasks),
-                         compile_seconds=clock.seconds / len(tasks), wave=wave, pooled_effect=pooled_effect)
+                         compile_seconds=clock.seconds / len(tasks), wave=wave, pooled_effects=pooled_effects)
 
 
 def _write_diagnosis(first, exp, diag):
@@ -229,10 +229,10 @@ def _write_diagnosis(first, exp, diag):
     _write_attitudes(first.out_dir, diag.after.solution)
 
 
-def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, pooled_effect=None):
+def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, pooled_effects=()):
     """Each task's residual series and result file of the model ``diag`` chose (the declared model's results
     beside them when the loop added something, first wave only); the tasks' outcomes.  ``wave``: the pooled
-    wave the job belongs to (None: the first wave), ``pooled_effect`` the effect it adopted (first among the
+    wave the job belongs to (None: the first wave), ``pooled_effects`` the effects it adopted (first among the
     outcome's ``added``, before the loop's own)."""
     outcomes = []
     for task in tasks:
@@ -256,7 +256,7 @@ def _write_chosen(tasks, diag, record, *, seconds, compile_seconds, wave=None, p
             io.write_result(replace(result, extra=extra), task.result_path)
             outcomes.append({"name": task.name, "solver": task.solver, "status": "computed", "seconds": seconds,
                              "compile_seconds": compile_seconds,
-                             "added": ([pooled_effect] if pooled_effect else []) + list(diag.added)})
+                             "added": list(pooled_effects) + list(diag.added)})
         except (KeyboardInterrupt, SystemExit):
             raise
         except Exception as exc:  # noqa: BLE001

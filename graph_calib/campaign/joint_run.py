@@ -185,29 +185,42 @@ def _validate(joint, planned):
     return out
 
 
-def run_joint(planned, collected, *, progress=False, force=False):
-    """The campaign's joint phase (module docstring): ``(joint Result or None, campaign.json's joint entry)``."""
+def solve_joint(planned, collected, *, progress=False, force=False):
+    """The joint solve, or its cached result (module docstring, 1-2).
+
+    Returns
+    -------
+    joint : graph_calib.records.experiment.Result or None
+        None when the campaign has no joint solver or the solve failed.
+    status : dict or str or None
+        ``"computed"`` or ``"cached"``; for a failed solve ``campaign.json``'s ``joint`` entry saying so; None
+        without the joint solver.
+    """
     if JOINT not in getattr(planned, "campaign_solvers", ()):
-        return None, {}
+        return None, None
     key = _key(planned)
     path = planned.out / JOINT_FILE
-    status = "computed"
-    joint = None
     if path.is_file() and not force:
         try:
             cached = read_joint_result(path)
             if (cached.extra.get("campaign") or {}).get("key") == key:
-                joint, status = cached, "cached"
+                return cached, "cached"
         except InputError:              # a damaged or older file is recomputed
-            joint = None
+            pass
+    try:
+        return _solve(planned, collected, key, progress=progress), "computed"
+    except InputError:
+        raise
+    except Exception as exc:        # told like a failed task (joint_failures): campaign.json, exit code 1
+        error = f"{type(exc).__name__}: {exc}"
+        return None, {JOINT: {"file": None, "status": "failed", "error": error, "truth_check": {}}}
+
+
+def joint_entry(planned, collected, joint, status):
+    """``campaign.json``'s ``joint`` of a :func:`solve_joint` (module docstring, 3-5), against ``collected``'s
+    per-subrange results (the final ones)."""
     if joint is None:
-        try:
-            joint = _solve(planned, collected, key, progress=progress)
-        except InputError:
-            raise
-        except Exception as exc:        # told like a failed task (joint_failures): campaign.json, exit code 1
-            error = f"{type(exc).__name__}: {exc}"
-            return None, {JOINT: {"file": None, "status": "failed", "error": error, "truth_check": {}}}
+        return status if isinstance(status, dict) else {}
     names = [e.name for e in planned.campaign.experiments]
     block = joint.extra[JOINT]
     entry = {"file": JOINT_FILE, "status": status, "seconds": (joint.extra.get("campaign") or {}).get("seconds"),
@@ -216,7 +229,13 @@ def run_joint(planned, collected, *, progress=False, force=False):
              "cross_check": cross_check(joint, collected, names),
              "truth_check": truth_check(joint, collected.truths, collected.summaries),
              "validation": _validate(joint, planned)}
-    return joint, {JOINT: entry}
+    return {JOINT: entry}
+
+
+def run_joint(planned, collected, *, progress=False, force=False):
+    """The campaign's joint phase (module docstring): ``(joint Result or None, campaign.json's joint entry)``."""
+    joint, status = solve_joint(planned, collected, progress=progress, force=force)
+    return joint, joint_entry(planned, collected, joint, status)
 
 
 def joint_failures(joint_doc):
@@ -225,4 +244,4 @@ def joint_failures(joint_doc):
             if e.get("status") == "failed"]
 
 
-__all__ = ["JOINT_FILE", "run_joint", "joint_failures", "cross_check", "truth_check"]
+__all__ = ["JOINT_FILE", "run_joint", "solve_joint", "joint_entry", "joint_failures", "cross_check", "truth_check"]

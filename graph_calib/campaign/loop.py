@@ -99,7 +99,7 @@ def loop_record(diagnosis):
                                 for t in last.candidates]}}
 
 
-def wave_record(previous, diagnosis, *, wave, effect):
+def wave_record(previous, diagnosis, *, wave, effects):
     """The loop record after a wave of the campaign's pooled test (:mod:`graph_calib.campaign.pooled`).
 
     Parameters
@@ -109,21 +109,21 @@ def wave_record(previous, diagnosis, *, wave, effect):
     diagnosis : graph_calib.diagnosis.Diagnosis
         The wave's :func:`graph_calib.diagnosis.diagnose_from` (its ``before`` the grown model).
     wave : int
-    effect : str
-        The effect the pooled test adopted in this wave.
+    effects : tuple of str
+        The effects this wave adopted (the pooled test's one, or the joint curvature's orders).
 
     Returns
     -------
     dict
         ``previous`` carried on: ``declared`` kept, ``chosen`` the wave's, ``added`` extended by what the wave's
-        own rounds added (each with its ``wave``), ``pooled`` extended by ``{"effect", "wave"}`` (the pooled
+        own rounds added (each with its ``wave``), ``pooled`` extended by ``{"effect", "wave"}`` per effect (the pooled
         statistics are the campaign's, in ``campaign.json``), ``residual_rms.before`` kept and ``after`` the
         wave's, ``seconds`` summed, ``decision``, ``unexplained``, ``signature`` and ``final_round`` the wave's.
     """
     new = loop_record(diagnosis)
     return {**previous, "chosen": new["chosen"],
             "added": list(previous["added"]) + [dict(a, wave=wave) for a in new["added"]],
-            "pooled": list(previous.get("pooled", [])) + [{"effect": effect, "wave": wave}],
+            "pooled": list(previous.get("pooled", [])) + [{"effect": e, "wave": wave} for e in effects],
             "decision": new["decision"], "unexplained": new["unexplained"], "signature": new["signature"],
             "residual_rms": {"before": previous["residual_rms"]["before"], "after": new["residual_rms"]["after"]},
             "seconds": float(previous["seconds"]) + new["seconds"], "final_round": new["final_round"]}

@@ -9,11 +9,14 @@
    ``campaign.json`` and its ``comparison.json``, the truth files read; with the closed loop (default,
    :mod:`graph_calib.campaign.loop`) the results are those of the model the loop chose, and each
    experiment's ``loop`` records the effects added and why, residuals and errors before and after;
+   the joint campaign solver (:func:`graph_calib.campaign.joint_run.solve_joint`) and, where its curves hold
+   orders a subrange's final model lacks, the wave carrying them into those subranges with the joint's
+   curvature as their prior (:mod:`graph_calib.campaign.curvature_wave`), whose results are then final;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
 5. truth check: the stitched curves against the truth files' ``temperature_curves``, or else against each
    subrange's own truth inside its range (:func:`graph_calib.campaign.truth.truth_check`); the joint
-   campaign solver, its cross-check and its truth check
-   (:func:`graph_calib.campaign.joint_run.run_joint`, ``campaign.json``'s ``joint``);
+   campaign solver's cross-check and truth check against the final results
+   (:func:`graph_calib.campaign.joint_run.joint_entry`, ``campaign.json``'s ``joint``);
 6. validate: the stitched calibration on each independent record (:func:`graph_calib.evaluation.validation.validate`);
 7. document and report: ``campaign.json`` (:class:`CampaignRun.document`) and ``report.html``.
 """
@@ -29,7 +32,8 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.campaign.checks import check_inputs, judge_campaign
 from graph_calib.campaign.execution import Pool, execute
-from graph_calib.campaign.joint_run import joint_failures, run_joint
+from graph_calib.campaign.curvature_wave import run_curvature_wave
+from graph_calib.campaign.joint_run import joint_entry, joint_failures, solve_joint
 from graph_calib.campaign.loop import loop_entry
 from graph_calib.campaign.planning import plan_campaign
 from graph_calib.campaign.tasks import CampaignOptions
@@ -136,18 +140,24 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     t_start = time.perf_counter()
     planned = _read_and_plan(manifest, out, options=options)
     check_inputs(planned)           # every input file read and checked before the first experiment starts
-    pool = Pool(options)        # one cluster for the first wave and the pooled test's waves
+    pool = Pool(options)        # one cluster for the first wave, the pooled test's waves and the joint's
     try:
         outcomes, compute_timing = _compute(planned, options=options, on_done=on_done, pool=pool)
         pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool)
+        collected = _collect_final(planned, outcomes, pooled)
+        joint, joint_status = solve_joint(planned, collected, progress=options.progress, force=options.force)
+        carried = run_curvature_wave(planned, pooled, joint, options=options, on_done=on_done, pool=pool,
+                                     sensor_ranges={n: s.get("sensor_temperature_range_degC")
+                                                    for n, s in collected.summaries.items()})
+        if carried is not pooled:       # the joint curves' missing orders carried: the subranges' new results
+            pooled = carried
+            collected = _collect_final(planned, outcomes, pooled)
     finally:
         pool.close()
-    collected = _collect(planned, {**outcomes, **(pooled.outcomes if pooled else {})},
-                         folders=pooled.folders if pooled else {})
     loop_doc = _loop(planned, collected, pooled)
     stitched = _stitch(planned, collected)
     truth_doc = _check_truth(stitched, collected.truths, collected.summaries)
-    joint, joint_doc = run_joint(planned, collected, progress=options.progress, force=options.force)
+    joint_doc = joint_entry(planned, collected, joint, joint_status)
     truth_doc.update({s: {JOINT: e["truth_check"]} for s, e in joint_doc.items() if e["truth_check"]})
     primary = primary_of(tuple(stitched))
     validations, validation_doc = _validate(planned, stitched, outcomes, primary=primary,
@@ -200,6 +210,12 @@ def _compute(planned, *, options, on_done, pool=None):
     if bad:  # bad input found by a worker: one clear message, exit code 2 (finished tasks stay cached)
         raise InputError(bad[0]["input_error"])
     return outcomes, timing
+
+
+def _collect_final(planned, outcomes, pooled):
+    """Phase 3 over the final results: the first wave's, or a later wave's where one re-solved an experiment."""
+    return _collect(planned, {**outcomes, **(pooled.outcomes if pooled else {})},
+                    folders=pooled.folders if pooled else {})
 
 
 def _collect(planned, outcomes, *, folders):

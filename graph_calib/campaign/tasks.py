@@ -118,7 +118,11 @@ class Task:
     start_dir : str or None
         Where the results a wave starts from are (the previous wave's folder, or the experiment's).
     pooled : tuple of str
-        The effects the pooled test adopted in this experiment so far, in order (the last one this wave's).
+        The effects the campaign's waves adopted in this experiment so far, in order (the last ones this wave's).
+    wave_effects : tuple of str
+        The effects this wave adds (empty: the last of ``pooled``, one effect a wave as the pooled test adopts);
+        a wave carrying the joint curve's curvature adds several at once
+        (:mod:`graph_calib.campaign.curvature_wave`).
     """
 
     name: str
@@ -134,6 +138,12 @@ class Task:
     wave: int = 0
     start_dir: str | None = None
     pooled: tuple[str, ...] = ()
+    wave_effects: tuple[str, ...] = ()
+
+    @property
+    def added_by_wave(self):
+        """The effects this wave adds (``wave_effects``, else the last one of ``pooled``)."""
+        return tuple(self.wave_effects) or tuple(self.pooled[-1:])
 
     @property
     def result_path(self):

@@ -62,12 +62,16 @@ class PooledRun:
         ``tasks_cached``, ``tasks_failed``.
     adopted : dict
         ``{experiment: [pooled test dict with its "wave"]}``, what the pooled test adopted in each.
+    states : dict
+        ``{experiment: _State}``: each experiment's current results, folder and loop record, where a later
+        wave starts (:mod:`graph_calib.campaign.curvature_wave`).
     """
 
     folders: dict
     outcomes: dict
     document: dict
     adopted: dict
+    states: dict = field(default_factory=dict)
 
 
 def _start_key(results):
@@ -76,14 +80,22 @@ def _start_key(results):
     return hashlib.sha256(text.encode("utf-8")).hexdigest()
 
 
-def _wave_tasks(state, *, name, effect, wave, dopts):
-    """The tasks of one experiment in a wave: its model grown by ``effect``, started from its current results."""
+def wave_tasks(state, *, name, effects, wave, dopts, prior_sigma=None, prior_mean=None):
+    """The tasks of one experiment in a wave: its model grown by ``effects``, started from its current results.
+
+    ``prior_sigma``, ``prior_mean``: ``{parameter: per-element values}`` the grown model's priors take (the joint
+    curve's curvature, :mod:`graph_calib.campaign.curvature_wave`); None: the grade's.
+    """
     base = state.tasks[0].options
     rec = state.record
     added = tuple(n for n in rec["chosen"] if n not in rec["declared"])
     t_ref = next(iter(state.results.values())).t_ref_degC
-    copts = replace(base, model=replace(base.model, extra_effects=tuple(base.model.extra_effects) + added + (effect,)),
-                    t_ref_degC=float(t_ref))
+    model = replace(base.model, extra_effects=tuple(base.model.extra_effects) + added + tuple(effects))
+    if prior_sigma:
+        model = replace(model, prior_sigma={**(model.prior_sigma or {}), **prior_sigma})
+    if prior_mean:
+        model = replace(model, prior_mean={**(model.prior_mean or {}), **prior_mean})
+    copts = replace(base, model=model, t_ref_degC=float(t_ref))
     osha = hashlib.sha256(f"{options_sha256(copts, dopts)}|wave {wave}|start {_start_key(state.results)}"
                           .encode("utf-8")).hexdigest()
     out_dir = state.tasks[0].out_dir
@@ -91,7 +103,8 @@ def _wave_tasks(state, *, name, effect, wave, dopts):
                  out_dir=str(Path(out_dir) / POOLED_FOLDER / str(wave)),
                  key=task_key(input_sha256=t.input_sha256, options_sha256=osha, solver=t.solver),
                  input_sha256=t.input_sha256, options_sha256=osha, numba_threads=t.numba_threads, diagnosis=dopts,
-                 wave=wave, start_dir=str(state.folder), pooled=tuple(state.pooled) + (effect,))
+                 wave=wave, start_dir=str(state.folder), pooled=tuple(state.pooled) + tuple(effects),
+                 wave_effects=tuple(effects))
             for t in state.tasks]
 
 
@@ -195,32 +208,58 @@ def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
         if pick is None or limit:
             break
         new = [t for n in pick.experiments
-               for t in _wave_tasks(states[n], name=n, effect=pick.effect, wave=wave, dopts=dopts)]
-        todo = [t for t in new if options.force or not cached(t)]
-        outs = execute(todo, options=options, on_done=on_done, pool=pool)
-        for t in new:
-            if t not in todo:
-                outs[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}
-        for n in pick.experiments:
-            mine = [t for t in new if t.name == n]
-            oc = {t.solver: outs[(t.name, t.solver)] for t in mine}
-            for t in mine:
-                wave_outcomes[(n, t.solver)] = oc[t.solver]
-                counts["failed" if oc[t.solver]["status"] == "failed" else oc[t.solver]["status"]] += 1
-            adopted.setdefault(n, []).append(dict(pick.to_json(), wave=wave))
-            folders[n] = Path(n) / POOLED_FOLDER / str(wave)
-            if any(o["status"] == "failed" for o in oc.values()):
-                del states[n]           # its failure is reported; it takes no further part
-                continue
-            st = states[n]
-            st.results = {t.solver: io.read_result(t.result_path) for t in mine}
-            st.record = next(iter(st.results.values())).extra["campaign"]["loop"]
-            st.folder = Path(mine[0].out_dir)
-            st.pooled.append(pick.effect)
+               for t in wave_tasks(states[n], name=n, effects=(pick.effect,), wave=wave, dopts=dopts)]
+        run = PooledRun(folders=folders, outcomes=wave_outcomes, document={}, adopted=adopted, states=states)
+        execute_wave(run, new, {n: [dict(pick.to_json(), wave=wave)] for n in pick.experiments}, wave=wave,
+                     options=options, on_done=on_done, pool=pool, counts=counts)
     document = {"rule": RULE, "alpha": dopts.alpha, "max_waves": MAX_WAVES, "waves": waves,
                 "seconds": time.perf_counter() - t0, "tasks_computed": counts["computed"],
                 "tasks_cached": counts["cached"], "tasks_failed": counts["failed"]}
-    return PooledRun(folders=folders, outcomes=wave_outcomes, document=document, adopted=adopted)
+    return PooledRun(folders=folders, outcomes=wave_outcomes, document=document, adopted=adopted, states=states)
 
 
-__all__ = ["POOLED_FOLDER", "PooledRun", "CarriedCurvature", "carried_curvature", "run_waves"]
+def execute_wave(run, tasks, adoptions, *, wave, options, on_done, pool, counts):
+    """A wave's tasks run (or read from the cache) and ``run``'s maps updated in place.
+
+    Parameters
+    ----------
+    run : PooledRun
+        Its ``folders``, ``outcomes``, ``adopted`` and ``states`` are updated: each experiment of ``adoptions``
+        has its results, record and folder the wave's (an experiment a task of which failed leaves ``states``:
+        its failure is reported, it takes no further part).
+    tasks : list of Task
+        The wave's tasks (:func:`wave_tasks`).
+    adoptions : dict
+        ``{experiment: [adoption dict]}``, what ``campaign.json``'s ``loop.pooled`` lists for it from this wave.
+    wave : int
+    options : CampaignOptions
+    on_done, pool
+        As for :func:`run_waves`.
+    counts : dict
+        ``{"computed", "cached", "failed": int}``, counted on.
+    """
+    todo = [t for t in tasks if options.force or not cached(t)]
+    outs = execute(todo, options=options, on_done=on_done, pool=pool)
+    for t in tasks:
+        if t not in todo:
+            outs[(t.name, t.solver)] = {"name": t.name, "solver": t.solver, "status": "cached"}
+    for n, entries in adoptions.items():
+        mine = [t for t in tasks if t.name == n]
+        oc = {t.solver: outs[(t.name, t.solver)] for t in mine}
+        for t in mine:
+            run.outcomes[(n, t.solver)] = oc[t.solver]
+            counts["failed" if oc[t.solver]["status"] == "failed" else oc[t.solver]["status"]] += 1
+        run.adopted.setdefault(n, []).extend(entries)
+        run.folders[n] = Path(n) / POOLED_FOLDER / str(wave)
+        if any(o["status"] == "failed" for o in oc.values()):
+            del run.states[n]
+            continue
+        st = run.states[n]
+        st.results = {t.solver: io.read_result(t.result_path) for t in mine}
+        st.record = next(iter(st.results.values())).extra["campaign"]["loop"]
+        st.folder = Path(mine[0].out_dir)
+        st.pooled.extend(mine[0].added_by_wave)
+
+
+__all__ = ["POOLED_FOLDER", "PooledRun", "CarriedCurvature", "carried_curvature", "run_waves", "wave_tasks",
+           "execute_wave"]

@@ -147,6 +147,9 @@ def _print_loop(loop, out):
                       for a in loop["added"]) or "nothing"
     line = f"    loop: added {added}"
     for a in loop.get("pooled") or []:
+        if a.get("kind") == "joint":
+            line += f"; carried {a['effect']} ({', '.join(a.get('adopted_in') or [])}, its prior the joint curve's)"
+            continue
         if a.get("kind") == "carried":
             line += f"; carried {a['effect']} (adopted in {', '.join(a.get('adopted_in') or [])})"
             continue

@@ -256,12 +256,20 @@ class CalibrationModel:
     # -- priors -------------------------------------------------------------
 
     def prior(self):
-        """Prior mean and one sigma of the calibration vector, shapes (P,), (P,)."""
+        """Prior mean and one sigma of the calibration vector, shapes (P,), (P,).
+
+        The mean is zero but for the parameters ``ModelOptions.prior_mean`` names; the sigmas the grade's but
+        for those ``ModelOptions.prior_sigma`` names.
+        """
         sig = self.grade.prior_vector(self.layout)
         for name, value in (self.options.prior_sigma or {}).items():
             if name in self.layout:
                 sig[self.layout.slice(name)] = value
-        return self.layout.zeros(), sig
+        mean = self.layout.zeros()
+        for name, value in (self.options.prior_mean or {}).items():
+            if name in self.layout:
+                mean[self.layout.slice(name)] = value
+        return mean, sig
 
     def priors_used(self):
         """``{parameter name: sigma}`` actually used (for the result file)."""

@@ -21,7 +21,12 @@ class ModelOptions:
     exclude : tuple of str
         Declared parameters not estimated (e.g. ``lever_arm`` without a table).
     prior_sigma : dict
-        Overrides of the grade's prior sigmas, ``{parameter name: sigma}`` (SI).
+        Overrides of the grade's prior sigmas, ``{parameter name: sigma}`` (SI; a scalar for every element or
+        one value per element).
+    prior_mean : dict
+        Prior means other than zero, ``{parameter name: value per element}`` (SI): what the campaign already
+        knows of a parameter (the joint curve's curvature at a subrange's ``T_ref``,
+        :mod:`graph_calib.campaign.curvature_wave`).  A parameter not named has mean zero.
     gyro_noise, accel_noise, encoder_noise : float or None
         Overrides of the grade's noise (rad/sqrt(s), m/s/sqrt(s), rad).
     gyro_quantization : float or None
@@ -58,6 +63,7 @@ class ModelOptions:
     extra_effects: tuple = ()
     exclude: tuple = ()
     prior_sigma: dict | None = None
+    prior_mean: dict | None = None
     gyro_noise: float | None = None
     accel_noise: float | None = None
     encoder_noise: float | None = None

@@ -170,7 +170,9 @@ def _loop_table(doc):
         added = "; ".join(f"{a['effect']} (score {a['statistic']:.1f} > {a['threshold']:.1f}, log10 p "
                           f"{a['log10_p']:.1f})" for a in lp["added"]) or "nothing"
         pooled = "; ".join((f"{a['effect']} (wave {a['wave']}: carried, the curvature "
-                            f"{', '.join(a.get('adopted_in') or [])} adopted)") if a.get("kind") == "carried" else
+                            f"{', '.join(a.get('adopted_in') or [])} adopted"
+                            + (", the joint curve's Taylor coefficient as its prior)" if a.get("kind") == "joint"
+                               else ")")) if a.get("kind") in ("carried", "joint") else
                            f"{a['effect']} (wave {a['wave']}: pooled {a['kind']} score {a['statistic']:.1f} > "
                            f"{a['threshold']:.1f}, "
                            f"{a['dof']} dof, log10 p {a['log10_p']:.1f}, over {len(a['experiments'])} experiments)"

@@ -141,6 +141,9 @@ def to_result(model, output, *, extra=None):
     ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
           "prior_dominated": prior_dominated(model, output),
           "noise": noise_block(model)}
+    if model.options.prior_mean:    # only then (a prior mean other than zero: the campaign's joint curvature)
+        ex["prior_means"] = {n: np.atleast_1d(np.asarray(v, dtype=float)).tolist()
+                             for n, v in model.options.prior_mean.items() if n in model.layout}
     unresolved, U = model.unresolved_directions(output.x)
     if unresolved:      # only then, so that every other result file stays as it was
         ex["unresolved"] = {name: {n: float(v) for n, v in zip(names, u) if v != 0.0}
