@@ -79,10 +79,6 @@ def test_the_whole_session_is_calibrated_within_3_sigma_by_both_solvers(whole):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="known since the noise is identified from the record: on this cut hand-held "
-                   "session the rotation kind's variance factor (0.15) makes the gyro sigmas optimistic, gyro.bias_tc.x "
-                   "4.5 sigma off (issue 21 open: the white density over a keyframe does not cover a consumer gyro's "
-                   "bias instability); strict, so that the fix shows")
 def test_the_cut_session_leaves_the_uninformed_to_the_prior_and_predicts_its_hold_out_tilts():
     cut = simulate("consumer-ferraris", rng=np.random.default_rng(SEED), cut=True).run()[0]
     full = simulate("consumer-ferraris", rng=np.random.default_rng(SEED)).run()[0]    # the same session, uncut
