@@ -19,6 +19,9 @@ import numpy as np
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.errors import InputError
 from graph_calib.evaluation.crossval import cross_validate
+from graph_calib.records.problem import build_problem
+from graph_calib.solvers.orchestration import run_solvers
+from graph_calib.solvers.variance import estimate_variance_components
 
 #: The pooled held-out figures the guard compares (the static rate is left out: on a still unit it is the
 #: Earth rate and the noise, which an effect moves by chance).
@@ -78,11 +81,9 @@ def held_out_check(experiment, *, options, grown, solver, folds=2):
     """
     if experiment.table is not None:
         return None
-    from graph_calib.calibrate import calibrate      # the loop is imported by calibrate's package
 
     def fitter(opts):
-        opts = replace(opts, structure_tests=False)
-        return lambda train: Calibration.from_result(calibrate(train, options=opts, solvers=(solver,)).results[solver])
+        return lambda train: _fit(train, options=opts, solver=solver)
 
     try:
         cv_before = cross_validate(experiment, fit=fitter(options), folds=folds, by="pairs")
@@ -92,6 +93,19 @@ def held_out_check(experiment, *, options, grown, solver, folds=2):
     before, after = cv_before.pooled("calibrated"), cv_after.pooled("calibrated")
     worse = tuple(k for k in GUARDED if np.isfinite(before[k]) and np.isfinite(after[k]) and after[k] > before[k])
     return HoldOutCheck(effect=grown.model.extra_effects[-1], before=before, after=after, worse=worse)
+
+
+def _fit(train, *, options, solver):
+    """A fold's calibration as ``calibrate`` makes it with one solver and no structure tests (the layers below
+    ``graph_calib.calibrate``, which imports this package: the variance components, then the solve)."""
+    problem, initial = build_problem(train, options=options), None
+    if options.variance_components:
+        # and the final solve started from the variance components' last solution, as calibrate starts it
+        vc = estimate_variance_components(problem, options=options, solver=solver,
+                                          fixed=tuple(problem.model.options.variance_factors or ()))
+        problem, initial = vc.problem, {solver: vc.initial}
+    run = run_solvers(problem, options=replace(options, structure_tests=False), solvers=(solver,), initial=initial)
+    return Calibration.from_result(run.results[solver])
 
 
 __all__ = ["GUARDED", "HoldOutCheck", "held_out_check"]

@@ -53,3 +53,29 @@ def test_the_loop_does_not_add_an_effect_the_held_out_figures_refuse(monkeypatch
     last = diag.rounds[-1].to_json()
     assert last["added"] is None and last["held_out"]["adopted"] is False
     assert "not adopted" in last["decision"]
+
+
+@pytest.mark.slow
+def test_the_guard_fits_each_fold_as_calibrate_does():
+    """The guard's fold fits (the layers below ``calibrate``, which imports the diagnosis) are ``calibrate``'s
+    with one solver and no structure tests: the same held-out figures."""
+    import numpy as np
+
+    from graph_calib.calibrate import calibrate
+    from graph_calib.compensation.calibration import Calibration
+    from graph_calib.evaluation.crossval import cross_validate
+    from graph_calib.simulation import simulate
+
+    exp = simulate("consumer-ferraris", rng=np.random.default_rng(3)).run()[0].experiment
+    grown = CalibrationOptions(model=ModelOptions(grade="consumer", extra_effects=("gyro.g_sensitivity",)))
+    check = held_out_check(exp, options=CONSUMER, grown=grown, solver="factor-graph")
+    assert check is not None and check.effect == "gyro.g_sensitivity"
+
+    def fit(train):
+        opts = CalibrationOptions(model=ModelOptions(grade="consumer"), structure_tests=False)
+        return Calibration.from_result(calibrate(train, options=opts, solvers=("factor-graph",)).results["factor-graph"])
+
+    direct = cross_validate(exp, fit=fit, folds=2, by="pairs").pooled("calibrated")
+    for k in GUARDED:
+        assert np.isfinite(check.before[k]) and check.before[k] > 0
+        np.testing.assert_allclose(check.before[k], direct[k], rtol=1e-6)
