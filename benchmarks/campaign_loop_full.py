@@ -65,6 +65,14 @@ def _errors(run):
     return {name: {s: truth_errors(r, run.truths[name]) for s, r in res.items()} for name, res in run.results.items()}
 
 
+def _adoption(a):
+    """One campaign-level adoption in words: a pooled test's figures, or a carried joint curve (no statistic)."""
+    if a.get("statistic") is None:
+        return f"; {a.get('kind') or 'carried'}: {a['effect']}"
+    return (f"; pooled: {a['effect']} ({a['kind']} {a['statistic']:.1f} > {a['threshold']:.1f}, "
+            f"{a['dof']} dof, log10 p {a['log10_p']:.1f})")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="/tmp/loop-full")
@@ -84,8 +92,7 @@ def main(argv=None):
     for e in looped.document["experiments"]:
         name = e["name"]
         added = ", ".join(a["effect"] for a in e["loop"]["added"]) or "nothing"
-        added += "".join(f"; pooled: {a['effect']} ({a['kind']} {a['statistic']:.1f} > {a['threshold']:.1f}, "
-                         f"{a['dof']} dof, log10 p {a['log10_p']:.1f})" for a in e["loop"].get("pooled") or [])
+        added += "".join(_adoption(a) for a in e["loop"].get("pooled") or [])
         for s in ("factor-graph", "sqrt-kf"):
             a, b = e_plain[name][s], e_loop[name][s]
             worst_linear = max(worst_linear, a["max_abs_z"])
