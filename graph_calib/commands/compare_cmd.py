@@ -1,6 +1,7 @@
-"""``graph-calib compare PROCEDURE.toml PROCEDURE.toml [...] --out DIR [--soak-h H]... [--simulate N --simulate-at NAME:HOURS]...``.
+"""``graph-calib compare PROCEDURE.toml PROCEDURE.toml [...] --out DIR [--soak-h H]... [--grade G] [--gyro-noise ...] [--simulate N --simulate-at NAME:HOURS]...``.
 
-Campaign procedures compared on predicted accuracy against campaign duration
+Campaign procedures compared on predicted accuracy against campaign duration, for the IMU the grade and
+the noise options describe (default: the navigation grade)
 (:mod:`graph_calib.design.comparison`; the procedures: :mod:`graph_calib.design.procedures`), optionally
 confirmed by simulated calibrations (:mod:`graph_calib.design.comparison_check`).  Writes
 ``comparison.json`` and ``report.html``.
@@ -16,9 +17,11 @@ from graph_calib import io
 from graph_calib.design.comparison import compare
 from graph_calib.design.comparison_check import simulated_check
 from graph_calib.design.procedures import read_procedure
+from graph_calib.commands.model_options import add_noise, noise_of
 from graph_calib.commands.paths import make_output_folder
+from graph_calib.model import ModelOptions
 from graph_calib.errors import InputError
-from graph_calib.reports.comparison_report import comparison_report_html
+from graph_calib.reports.comparison_report import comparison_report_html, noise_text
 from graph_calib.reports.comparison_study import comparison_markdown
 
 
@@ -31,6 +34,7 @@ def add_arguments(p):
                    help="a soak time of the step procedures, h (repeatable; default: each procedure's own)")
     p.add_argument("--range-degc", type=float, nargs=2, default=(-10.0, 50.0), metavar=("LOW", "HIGH"),
                    help="temperature range the stitched curves are judged over, degC (default -10 50)")
+    add_noise(p, grade_default="navigation", noise_default="the grade's")
     p.add_argument("--draws", type=int, default=40, help="truth curves drawn from the family (default 40)")
     p.add_argument("--seed", type=int, default=1, help="seed of the truth draws and of the simulations (default 1)")
     p.add_argument("--simulate", type=int, default=0, metavar="N",
@@ -60,6 +64,10 @@ def _check(args):
         raise InputError(f"must be at least 1, got {args.draws}", dataset="--draws")
     if args.simulate < 0:
         raise InputError(f"must not be negative, got {args.simulate}", dataset="--simulate")
+    noise = noise_of(args)
+    if args.simulate and ((args.grade or "navigation") != "navigation" or any(v is not None for v in noise.values())):
+        raise InputError("the simulated check simulates the navigation grade's noise: drop --simulate, or --grade and "
+                         "the noise options (they set the predicted part only)", dataset="--simulate")
     if args.simulate and not args.simulate_at:
         raise InputError("name the campaigns to simulate (--simulate-at NAME:HOURS, repeatable)", dataset="--simulate-at")
     at = {}
@@ -95,8 +103,9 @@ def run(args):
         print(msg, file=sys.stderr, flush=True)
 
     soaks = None if args.soak_h is None else [w * 3600.0 for w in args.soak_h]
+    model = ModelOptions(grade=args.grade or "navigation", **noise_of(args))
     comparison = compare(procs, soaks_s=soaks, range_degC=tuple(args.range_degc), draws=args.draws, seed=args.seed,
-                         progress=progress)
+                         model=model, progress=progress)
     doc = comparison.to_dict()
     if args.simulate:
         doc["simulated_check"] = simulated_check(comparison, lengths=at, realisations=args.simulate,
@@ -123,6 +132,12 @@ def _command_line(args):
         parts += [a for w in args.soak_h for a in ("--soak-h", f"{w:g}")]
     if tuple(args.range_degc) != (-10.0, 50.0):
         parts += ["--range-degc", *(f"{v:g}" for v in args.range_degc)]
+    if args.grade:
+        parts += ["--grade", args.grade]
+    for flag, v in (("--gyro-noise", args.gyro_noise), ("--accel-noise", args.accel_noise),
+                    ("--encoder-noise", args.encoder_noise)):
+        if v is not None:
+            parts += [flag, f"{v:g}"]
     if args.draws != 40:
         parts += ["--draws", str(args.draws)]
     if args.seed != 1:
@@ -138,7 +153,8 @@ def _command_line(args):
 def comparison_text(doc):
     """The equal-accuracy ratios on the largest 1-sigma, a few lines."""
     ref = doc["procedures"][0]["name"]
-    lines = [f"predicted part: {doc['seconds']:.0f} s wall, {doc['cpu_seconds']:.0f} s CPU; reference {ref}"]
+    lines = [f"predicted part: {doc['seconds']:.0f} s wall, {doc['cpu_seconds']:.0f} s CPU; reference {ref}",
+             f"  noise: {noise_text(doc['noise'])}"]
     several = {p["name"] for p in doc["procedures"] if len(p["lengths_s"]) >= 2}
     for cand, by_soak in doc["equal_accuracy"].items():
         if cand not in several:

@@ -44,4 +44,35 @@ def _estimate_or_mps2(text, option):
     return value
 
 
-__all__ = ["add_sway", "sway_of", "add_moving", "moving_of"]
+GRADE_CHOICES = ("navigation", "tactical", "consumer")
+
+#: The white-noise options: (flag, ``ModelOptions`` field, metavar, what).
+_NOISE = (("--gyro-noise", "gyro_noise", "RAD_PER_SQRT_S", "gyro angle random walk, rad/sqrt(s)"),
+          ("--accel-noise", "accel_noise", "MPS2_PER_SQRT_HZ", "accelerometer velocity random walk, m/s^2/sqrt(Hz)"),
+          ("--encoder-noise", "encoder_noise", "RAD", "encoder reading noise, rad"))
+
+
+def add_noise(parser, *, grade_default, noise_default):
+    """``--grade`` and the white-noise overrides ``--gyro-noise``, ``--accel-noise``, ``--encoder-noise`` (SI).
+
+    ``grade_default`` / ``noise_default``: what the command does without them, for the help text.
+    """
+    parser.add_argument("--grade", choices=GRADE_CHOICES, default=None,
+                        help=f"IMU grade for priors and noise (default: {grade_default})")
+    for flag, _, metavar, what in _NOISE:
+        parser.add_argument(flag, type=float, default=None, metavar=metavar,
+                            help=f"{what} (default: {noise_default})")
+
+
+def noise_of(args):
+    """``{ModelOptions field: value}`` of the noise overrides given; each must be a positive finite number."""
+    out = {}
+    for flag, field, _, _ in _NOISE:
+        v = getattr(args, field, None)
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise InputError(f"must be a positive number, got {v!r}", dataset=flag)
+        out[field] = v
+    return out
+
+
+__all__ = ["add_sway", "sway_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise", "noise_of"]

@@ -22,21 +22,15 @@ from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.design.prediction import expected_variance_factors, predict, prediction_result
 from graph_calib.records.problem import build_problem
+from graph_calib.commands.model_options import add_noise, noise_of
 from graph_calib.simulation.program import nominal_experiment, read_program
 
 
 def add_arguments(p):
     p.add_argument("input", help="experiment file (HDF5, data-format.md) or bench program (TOML, docs/programs.md)")
     p.add_argument("--out", required=True, metavar="FILE.json", help="prediction file to write (JSON, the result layout)")
-    p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
-                   help="IMU grade for priors and noise (default: chosen from the static intervals, as calibrate)")
-    p.add_argument("--gyro-noise", type=float, default=None, metavar="RAD_PER_SQRT_S",
-                   help="gyro angle random walk, rad/sqrt(s) (default: the grade's, raised to what the first "
-                        "static interval shows, as the solvers)")
-    p.add_argument("--accel-noise", type=float, default=None, metavar="MPS2_PER_SQRT_HZ",
-                   help="accelerometer velocity random walk, m/s^2/sqrt(Hz) (default as --gyro-noise)")
-    p.add_argument("--encoder-noise", type=float, default=None, metavar="RAD",
-                   help="encoder reading noise, rad (default: the grade's)")
+    add_noise(p, grade_default="chosen from the static intervals, as calibrate",
+              noise_default="identified from the record's rests, as calibrate; a program: the grade's")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="further effects of model.md to include (repeatable)")
     p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
@@ -53,15 +47,13 @@ def options_from_args(args, *, grade=None):
     for e in args.effect:
         if e not in FURTHER_EFFECTS:
             raise InputError(f"unknown effect {e!r}; known: {', '.join(FURTHER_EFFECTS)}", dataset="--effect")
-    for flag, v in (("--keyframe", args.keyframe), ("--gyro-noise", args.gyro_noise),
-                    ("--accel-noise", args.accel_noise), ("--encoder-noise", args.encoder_noise)):
-        if v is not None and not (np.isfinite(v) and v > 0):
-            raise InputError(f"must be a positive number, got {v!r}", dataset=flag)
+    if not (np.isfinite(args.keyframe) and args.keyframe > 0):
+        raise InputError(f"must be a positive number, got {args.keyframe!r}", dataset="--keyframe")
+    noise = noise_of(args)
     if getattr(args, "seed", 0) < 0:
         raise InputError(f"must be a non-negative integer, got {args.seed}", dataset="--seed")
     model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade or "navigation",
-                         extra_effects=tuple(args.effect), gyro_noise=args.gyro_noise,
-                         accel_noise=args.accel_noise, encoder_noise=args.encoder_noise)
+                         extra_effects=tuple(args.effect), **noise)
     return CalibrationOptions(model=model, t_ref_degC=args.t_ref)
 
 

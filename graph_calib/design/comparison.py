@@ -131,7 +131,9 @@ class CampaignPoint:
     stitched cubics' joint covariance at the four :func:`check_nodes` of the range over the three axes
     (axis-major; a cubic is fixed by its values there: what the simulated check whitens its errors with);
     ``experiment_covariance``: ``(names, matrix)`` one experiment's predicted covariance of the compared
-    families' elements (every experiment of the campaign has it: one program shifted in temperature).
+    families' elements (every experiment of the campaign has it: one program shifted in temperature);
+    ``noise``: the grade and the white-noise densities the prediction used (SI: ``gyro_noise`` rad/sqrt(s),
+    ``accel_noise`` m/s/sqrt(s), ``encoder_noise`` rad).
     """
 
     procedure: str
@@ -144,6 +146,7 @@ class CampaignPoint:
     seconds: float
     node_covariance: dict = field(default_factory=dict)
     experiment_covariance: tuple = ((), None)
+    noise: dict = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -160,10 +163,17 @@ class Comparison:
     ratios: dict
     seconds: float
     cpu_seconds: float = float("nan")
+    model: ModelOptions = ModelOptions()
 
     def durations(self, name, *, soak_s=None):
         proc = next(p for p in self.procedures if p.name == name)
         return np.array([proc.duration_s(pt.length_s, soak_s=soak_s) for pt in self.points[name]])
+
+    def noise(self):
+        """The grade and white-noise densities the predictions used (SI), and which of them were given."""
+        first = next(pt for pts in self.points.values() for pt in pts)
+        given = [k for k in ("gyro_noise", "accel_noise", "encoder_noise") if getattr(self.model, k) is not None]
+        return {**first.noise, "given": given}
 
     def to_dict(self):
         def fam(d):
@@ -172,6 +182,7 @@ class Comparison:
         return {
             "range_degC": list(self.range_degC), "soaks_s": list(self.soaks_s), "truth_family": self.truth.to_dict(),
             "truth_draws": self.draws, "seconds": self.seconds, "cpu_seconds": self.cpu_seconds,
+            "noise": self.noise(),
             "procedures": [p.to_dict() for p in self.procedures],
             "campaigns": {name: [{"length_s": pt.length_s,
                                   "duration_s": {f"{w:g}": p.duration_s(pt.length_s, soak_s=w) for w in self.soaks_s}
@@ -291,12 +302,15 @@ def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC,
 
 
 def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise_draws=20, rng,
-                   rate_hz=PREDICTION_RATE_HZ, progress=None):
-    """The predicted stitched accuracy of one campaign of ``procedure`` (:class:`CampaignPoint`)."""
+                   rate_hz=PREDICTION_RATE_HZ, model=ModelOptions(), progress=None):
+    """The predicted stitched accuracy of one campaign of ``procedure`` (:class:`CampaignPoint`).
+
+    ``model``: the grade and noise of the compared IMU (:class:`ModelOptions`; ``exclude`` is the procedure's).
+    """
     t0 = time.perf_counter()
     program = procedure.base_program(length_s, rate_hz=rate_hz)
     exp = nominal_experiment(program)
-    opts = CalibrationOptions(model=ModelOptions(exclude=procedure.exclude))
+    opts = CalibrationOptions(model=replace(model, exclude=procedure.exclude))
     problem = build_problem(exp, options=opts)
     pred = predict(problem)
     base = _family_result(prediction_result(problem, pred))
@@ -337,10 +351,13 @@ def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise
                       "largest_total": float(tot.max()), "expected_largest": float(np.mean(largest))}
         sig_curve[f] = s.max(axis=0)
         me_curve[f] = me_rms.max(axis=0)
+    noise = problem.model.noise
     pt = CampaignPoint(procedure=procedure.name, length_s=float(length_s), metrics=metrics, sigma_curve=sig_curve,
                        model_error_curve=me_curve, t_ref_degC=tuple(r.t_ref_degC for r in results), sigma_axes=sigma,
                        seconds=time.perf_counter() - t0, node_covariance=node_cov,
-                       experiment_covariance=(tuple(base.covariance_names), np.asarray(base.covariance)))
+                       experiment_covariance=(tuple(base.covariance_names), np.asarray(base.covariance)),
+                       noise={"grade": problem.model.options.grade, "gyro_noise": float(noise.gyro),
+                              "accel_noise": float(noise.accel), "encoder_noise": float(noise.encoder)})
     if progress:
         progress(f"  {procedure.name}, {length_s / 3600:g} h per experiment: gyro bias largest sigma "
                  f"{metrics['gyro.bias']['largest_sigma'] * c.RS_TO_DH:.4f} deg/h, accel bias "
@@ -409,7 +426,7 @@ def equal_accuracy(procedures, points, *, soaks_s, metrics=("largest_sigma", "rm
 
 
 def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, draws=40, seed=1, grid_points=121,
-            rate_hz=PREDICTION_RATE_HZ, progress=None):
+            rate_hz=PREDICTION_RATE_HZ, model=ModelOptions(), progress=None):
     """Compare ``procedures`` (the first is the reference) on predicted accuracy against duration.
 
     Parameters
@@ -429,6 +446,9 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
     grid_points : int
     rate_hz : float
         IMU sample rate of the predicted records (:data:`PREDICTION_RATE_HZ`).
+    model : ModelOptions
+        The compared IMU: its grade (priors and noise) and any noise overrides (``gyro_noise``,
+        ``accel_noise``, ``encoder_noise``); default the navigation grade.  ``exclude`` is each procedure's.
     progress : callable, optional
 
     Returns
@@ -454,14 +474,15 @@ def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, d
         if progress:
             progress(f"{p.name} ({p.kind}, {p.n_experiments} experiments)")
         points[p.name] = tuple(campaign_point(p, L, grid_degC=grid, truths=truths, center_degC=center, rng=rng,
-                                              rate_hz=rate_hz, progress=progress) for L in p.lengths())
+                                              rate_hz=rate_hz, model=model, progress=progress)
+                                for L in p.lengths())
     if soaks_s is None:
         soaks_s = tuple(sorted({p.soak_s for p in procedures if p.kind == "steps"})) or (0.0,)
     soaks_s = tuple(float(w) for w in soaks_s)
     ratios = equal_accuracy(procedures, points, soaks_s=soaks_s)
     return Comparison(procedures=procedures, points=points, range_degC=(lo, hi), grid_degC=grid, soaks_s=soaks_s,
                       truth=truth, draws=int(draws), ratios=ratios, seconds=time.perf_counter() - t0,
-                      cpu_seconds=time.process_time() - c0)
+                      cpu_seconds=time.process_time() - c0, model=model)
 
 
 __all__ = ["PREDICTION_RATE_HZ", "FAMILIES", "METRICS", "DISPLAY", "TruthFamily", "CampaignPoint", "Comparison",

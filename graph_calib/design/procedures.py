@@ -20,6 +20,10 @@ them, and which model each experiment is calibrated with.  Three kinds:
     sensors' temperatures sit in the middle of each subrange; one length, the program's own.  Duration
     ``n`` times the program's length.
 
+``steps`` and ``ramp`` may discard ``discarded_s`` seconds at the start of every experiment (a warm-up or
+settling after the soak, a start the lab does not use): the duration counts the whole recorded length
+``L``, the prediction only the ``L - discarded_s`` that follow.
+
 ``steps`` and ``ramp`` sweep the recorded length per experiment over ``lengths_s``; their turntable
 motion is the navigation rotation design (:func:`graph_calib.simulation.design.rotation_program`) of
 that length, drawn with ``seed``.  Every experiment of one length runs the same table motion and the
@@ -38,6 +42,7 @@ The file (TOML)::
     subranges_degC = [[-10.0, 0.0], [0.0, 10.0]]                    # ramp, program
     span_degC = 8.0                        # ramp: the sensors' drift per subrange
     lengths_s = [900.0, 1800.0, 3600.0]    # steps, ramp: recorded seconds per experiment
+    discarded_s = 0.0                      # steps, ramp: seconds of each that the calibration does not use
     seed = 1                               # steps, ramp: the rotation design's draws
     program = "designed-nav-subrange.toml" # program: a bench program, relative to this file
 """
@@ -64,8 +69,8 @@ KINDS = ("steps", "ramp", "program")
 STEP_EXCLUDED = ("gyro.bias_tc", "gyro.scale_tc", "accel.bias_tc", "accel.scale_tc")
 
 _KEYS = {
-    "steps": ("temperatures_degC", "soak_s", "lengths_s", "seed"),
-    "ramp": ("subranges_degC", "span_degC", "lengths_s", "seed"),
+    "steps": ("temperatures_degC", "soak_s", "lengths_s", "discarded_s", "seed"),
+    "ramp": ("subranges_degC", "span_degC", "lengths_s", "discarded_s", "seed"),
     "program": ("subranges_degC", "program"),
 }
 
@@ -95,6 +100,9 @@ class Procedure:
         ``ramp``: the sensors' drift across each subrange.
     lengths_s : tuple of float
         ``steps`` and ``ramp``: recorded seconds per experiment, one campaign per length.
+    discarded_s : float
+        ``steps`` and ``ramp``: seconds at the start of each experiment that the calibration does not use
+        (counted in the duration, not in the data).
     seed : int
         The rotation design's draws.
     program : BenchProgram or None
@@ -110,6 +118,7 @@ class Procedure:
     soak_s: float = 0.0
     span_degC: float = 8.0
     lengths_s: tuple = ()
+    discarded_s: float = 0.0
     seed: int = 1
     program: BenchProgram | None = None
     source: str = ""
@@ -141,13 +150,15 @@ class Procedure:
         return n * float(length_s)
 
     def base_program(self, length_s, *, rate_hz=None):
-        """The bench program of one experiment of ``length_s`` seconds before its temperature shift.
+        """The bench program of one experiment of ``length_s`` seconds before its temperature shift: the
+        ``length_s - discarded_s`` seconds the calibration uses.
 
         ``rate_hz``: the IMU sample rate (default: 100 Hz, a ``program`` its own).
         """
         if self.kind == "program":
             return self.program if rate_hz is None else replace(self.program, rate_hz=float(rate_hz))
         rate_hz = 100.0 if rate_hz is None else rate_hz
+        length_s = float(length_s) - self.discarded_s
         tp = rotation_program(float(rate_hz), float(length_s), rng=np.random.default_rng(self.seed),
                               design=NAV_DESIGN)
         steps = steps_of(tp)
@@ -183,7 +194,9 @@ class Procedure:
                "experiments": self.n_experiments, "lengths_s": list(self.lengths())}
         if self.kind == "steps":
             out.update(temperatures_degC=list(self.temperatures_degC), soak_s=self.soak_s)
-        else:
+        if self.kind in ("steps", "ramp"):
+            out["discarded_s"] = self.discarded_s
+        if self.kind != "steps":
             out["subranges_degC"] = [list(s) for s in self.subranges_degC]
         if self.kind == "ramp":
             out["span_degC"] = self.span_degC
@@ -258,9 +271,11 @@ def parse_procedure(doc, *, path=""):
         kw["subranges_degC"] = tuple(pairs)
     if kind in ("steps", "ramp"):
         kw["lengths_s"] = _numbers(doc, "lengths_s", path=path, positive=True)
-        if any(L < 300.0 for L in kw["lengths_s"]):
-            raise InputError("every recorded length must be at least 300 s (the alignment and one rotation cycle)",
-                             path=path, dataset="lengths_s")
+        kw["discarded_s"] = _number(doc, "discarded_s", path=path, default=0.0)
+        if any(L - kw["discarded_s"] < 300.0 for L in kw["lengths_s"]):
+            what = "" if not kw["discarded_s"] else f" after the {kw['discarded_s']:g} s discarded (discarded_s)"
+            raise InputError(f"every recorded length must be at least 300 s{what} (the alignment and one rotation "
+                             "cycle)", path=path, dataset="lengths_s")
         seed = doc.get("seed", 1)
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
             raise InputError(f"must be a non-negative integer, got {seed!r}", path=path, dataset="seed")

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from graph_calib import constants as c
 from graph_calib.design.comparison import DISPLAY, FAMILIES
 from graph_calib.reports.campaign_figures import _plt
 from graph_calib.reports.html import figure, page, paragraph, section, table
@@ -108,6 +109,15 @@ def _fmt(v, f):
     return f"{v * DISPLAY[f][0]:.3g}"
 
 
+def noise_text(noise):
+    """The grade and densities of a comparison's ``noise`` block, in the units labs quote."""
+    given = noise.get("given") or []
+    return (f"{noise['grade']} grade; gyro {noise['gyro_noise'] / c.DSH_TO_RSS:.3g} deg/sqrt(h), accelerometer "
+            f"{noise['accel_noise'] / c.UG_TO_MPS2:.3g} micro-g/sqrt(Hz), table readings "
+            f"{noise['encoder_noise'] * c.RAD_TO_ARCSEC:.3g} arcsec"
+            + (f" ({', '.join(given)} given, the rest the grade's)" if given else " (the grade's)"))
+
+
 def comparison_report_html(doc, comparison):
     """The report page: ``doc`` is comparison.json's content, ``comparison`` the :class:`Comparison`."""
     ref = doc["procedures"][0]["name"]
@@ -117,7 +127,7 @@ def comparison_report_html(doc, comparison):
         f"Noise: the shared model's Fisher information of each experiment (graph-calib predict), stitched as the "
         f"campaign stitches (cubic over temperature). Model error: each procedure's temperature model against "
         f"{doc['truth_draws']} truth curves of the stated family (cubic in every bias and scale factor). Reference "
-        f"procedure: {ref}. Predicted part: {doc['seconds']:.0f} s wall, {doc.get('cpu_seconds', float('nan')):.0f} s CPU.")]
+        f"procedure: {ref}. The IMU: {noise_text(doc['noise'])}. Predicted part: {doc['seconds']:.0f} s wall, {doc.get('cpu_seconds', float('nan')):.0f} s CPU.")]
     rows = []
     for p in doc["procedures"]:
         rows.append([p["name"], p["kind"], p["experiments"], ", ".join(f"{L / 3600:.3g}" for L in p["lengths_s"]),
@@ -208,4 +218,4 @@ def comparison_report_html(doc, comparison):
     return page("graph-calib compare", *parts)
 
 
-__all__ = ["accuracy_figure", "ratio_figure", "curves_figure", "comparison_report_html"]
+__all__ = ["accuracy_figure", "ratio_figure", "curves_figure", "noise_text", "comparison_report_html"]

@@ -11,7 +11,7 @@ from pathlib import Path
 
 from graph_calib.design.comparison import DISPLAY, FAMILIES
 from graph_calib.io import atomic_path
-from graph_calib.reports.comparison_report import accuracy_figure, curves_figure, ratio_figure
+from graph_calib.reports.comparison_report import accuracy_figure, curves_figure, noise_text, ratio_figure
 from graph_calib.reports.html import figure_png
 
 HALF = 0.5
@@ -122,7 +122,7 @@ def comparison_markdown(doc, comparison, *, path, command, intro="", closing="")
         out.append(f"| {p['name']} | {p['kind']} | {p['experiments']} | "
                    f"{', '.join(f'{L / 3600:.3g}' for L in p['lengths_s'])} | {soak} | {p['description']} |")
     tf = doc["truth_family"]
-    out += ["", f"Range judged: {doc['range_degC'][0]:g}..{doc['range_degC'][1]:g} degC of sensor temperature. "
+    out += ["", f"The IMU: {noise_text(doc['noise'])}.", "", f"Range judged: {doc['range_degC'][0]:g}..{doc['range_degC'][1]:g} degC of sensor temperature. "
             f"Truth family ({doc['truth_draws']} draws): {tf['form']}; sizes in "
             "`graph_calib/design/comparison.py` (`TruthFamily`): accelerometer bias 10-40 micro-g for each of the "
             "quadratic and cubic terms at the ends of the range, scale factors 1-8 ppm, gyro bias 0.005-0.03 deg/h, "

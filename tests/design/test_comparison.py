@@ -11,6 +11,8 @@ from graph_calib.cli import main
 from graph_calib.design.comparison import TruthFamily, compare, equal_accuracy_duration
 from graph_calib.design.procedures import parse_procedure, read_procedure
 from graph_calib.errors import InputError
+from graph_calib.model import ModelOptions
+from graph_calib.reports.comparison_report import noise_text
 
 STEPS = """format = "graph-calib-procedure"
 version = 1
@@ -58,6 +60,8 @@ def test_shipped_procedures_read():
     (("lengths_s = [600.0, 1200.0]", "lengths_s = [600.0, -1.0]"), "lengths_s[1]", "positive"),
     (("temperatures_degC = [0.0, 13.333333333333334, 26.666666666666668, 40.0]", "temperatures_degC = [0.0]"),
      "temperatures_degC", "at least two"),
+    (("soak_s = 3600.0", "soak_s = 3600.0\ndiscarded_s = -5.0"), "discarded_s", "non-negative"),
+    (("soak_s = 3600.0", "soak_s = 3600.0\ndiscarded_s = 400.0"), "lengths_s", "after the 400 s discarded"),
 ])
 def test_bad_step_procedure_refused(tmp_path, edit, key, words):
     path = _write(tmp_path, "p.toml", STEPS.replace(*edit))
@@ -152,6 +156,12 @@ def test_ratios_follow_the_durations(small):
     (["P1", "P2", "--simulate", "3", "--simulate-at", "xx:0.25"], "--simulate-at", "no procedure named 'xx'"),
     (["P1", "P2", "--simulate", "3", "--simulate-at", "st:0.3"], "--simulate-at", "not one of its lengths"),
     (["P1", "P1"], "PROCEDURE.toml", "names must be unique"),
+    (["P1", "P2", "--accel-noise", "0"], "--accel-noise", "positive number"),
+    (["P1", "P2", "--gyro-noise", "nan"], "--gyro-noise", "positive number"),
+    (["P1", "P2", "--accel-noise", "2e-4", "--simulate", "3", "--simulate-at", "st:600"], "--simulate",
+     "simulates the navigation grade's noise"),
+    (["P1", "P2", "--grade", "tactical", "--simulate", "3", "--simulate-at", "st:600"], "--simulate",
+     "simulates the navigation grade's noise"),
 ])
 def test_compare_command_refuses_bad_input(tmp_path, capsys, argv, key, words):
     p1, p2 = _write(tmp_path, "st.toml", STEPS), _write(tmp_path, "rp.toml", RAMP)
@@ -160,6 +170,43 @@ def test_compare_command_refuses_bad_input(tmp_path, capsys, argv, key, words):
     assert main(["compare", *args, "--out", str(out)]) == 2
     err = capsys.readouterr().err
     assert key in err and words in err and not out.exists()
+
+
+def test_noise_options_set_the_compared_imu(tmp_path, small):
+    """The accelerometer density given scales the accelerometer-bias sigmas (white noise: less than
+    proportionally, the attitude shares the information) and barely moves the gyro's; the comparison states
+    the densities it used."""
+    procs = [read_procedure(_write(tmp_path, "st.toml", STEPS)), read_procedure(_write(tmp_path, "rp.toml", RAMP))]
+    base = small.to_dict()["noise"]
+    assert base["grade"] == "navigation" and base["given"] == []
+    noisy = compare(procs, range_degC=(0.0, 40.0), draws=6, seed=3,
+                    model=ModelOptions(accel_noise=4.0 * base["accel_noise"]))
+    doc = noisy.to_dict()
+    assert doc["noise"]["accel_noise"] == pytest.approx(4.0 * base["accel_noise"]) and doc["noise"]["given"] == [
+        "accel_noise"]
+    assert doc["noise"]["gyro_noise"] == pytest.approx(base["gyro_noise"])
+    for name in ("st", "rp"):
+        for a, b in zip(small.points[name], noisy.points[name]):
+            k = b.metrics["accel.bias"]["largest_sigma"] / a.metrics["accel.bias"]["largest_sigma"]
+            assert 2.0 < k <= 4.0 + 1e-9, (name, k)
+            g = b.metrics["gyro.bias"]["largest_sigma"] / a.metrics["gyro.bias"]["largest_sigma"]
+            assert abs(g - 1.0) < 0.1, (name, g)
+    assert "accelerometer 8.16 micro-g/sqrt(Hz)" in noise_text(doc["noise"])
+
+
+def test_discarded_start_counts_in_the_duration_not_the_data(tmp_path, small):
+    """A step procedure that discards 300 s of its 1200 s steps predicts what 900 s steps predict, and its
+    durations are the 1200 s steps'."""
+    disc = read_procedure(_write(tmp_path, "d.toml", STEPS.replace("lengths_s = [600.0, 1200.0]",
+                                                                   "lengths_s = [1200.0]\ndiscarded_s = 300.0")))
+    short = read_procedure(_write(tmp_path, "s.toml", STEPS.replace("lengths_s = [600.0, 1200.0]",
+                                                                    "lengths_s = [900.0]")))
+    assert disc.duration_s(1200.0) == 4 * 1200.0 + 3 * 3600.0 and disc.to_dict()["discarded_s"] == 300.0
+    rp = read_procedure(_write(tmp_path, "rp.toml", RAMP))
+    a = compare([disc, rp], range_degC=(0.0, 40.0), draws=2, seed=3).points["st"][0].metrics
+    b = compare([short, rp], range_degC=(0.0, 40.0), draws=2, seed=3).points["st"][0].metrics
+    for f in ("gyro.bias", "accel.bias", "gyro.scale", "accel.scale"):
+        assert a[f]["largest_sigma"] == pytest.approx(b[f]["largest_sigma"], rel=1e-12)
 
 
 def test_report_and_study_page(small, tmp_path):
