@@ -21,7 +21,7 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.solvers.orchestration import CalibrationRun, judge, run_solvers
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER, primary_of
-from graph_calib.solvers.variance import estimate_variance_components
+from graph_calib.solvers.variance import weighted_problem
 
 
 def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None,
@@ -50,16 +50,9 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     # thread (as inside each solve) also for the fit statistics and the structure tests between the solves:
     # their products are small, and OpenBLAS's threads spin against each other (docs/performance.md)
     with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):
-        initial = None
-        if options.variance_components:
-            # one variance factor per measurement kind, estimated with the primary solver (solvers/variance.py);
-            # the primary solver's final solve starts from its last solution (the factors' last rescale moves
-            # the solution to second order only), every other solver from its own start
-            primary = primary_of(solvers)
-            vc = estimate_variance_components(problem, options=options, solver=primary,
-                                              fixed=tuple(problem.model.options.variance_factors or ()),
-                                              progress=progress)
-            problem, initial = vc.problem, {primary: vc.initial}
+        # one variance factor per measurement kind when asked, estimated with the primary solver; the primary
+        # solver's final solve starts from its last solution, every other solver from its own start
+        problem, initial = weighted_problem(problem, options=options, solver=primary_of(solvers), progress=progress)
         tests = {}
 
         def structure_of(name, output):

@@ -21,7 +21,7 @@ from graph_calib.errors import InputError
 from graph_calib.evaluation.crossval import cross_validate
 from graph_calib.records.problem import build_problem
 from graph_calib.solvers.orchestration import run_solvers
-from graph_calib.solvers.variance import estimate_variance_components
+from graph_calib.solvers.variance import weighted_problem
 
 #: The pooled held-out figures the guard compares (the static rate is left out: on a still unit it is the
 #: Earth rate and the noise, which an effect moves by chance).
@@ -98,12 +98,7 @@ def held_out_check(experiment, *, options, grown, solver, folds=2):
 def _fit(train, *, options, solver):
     """A fold's calibration as ``calibrate`` makes it with one solver and no structure tests (the layers below
     ``graph_calib.calibrate``, which imports this package: the variance components, then the solve)."""
-    problem, initial = build_problem(train, options=options), None
-    if options.variance_components:
-        # and the final solve started from the variance components' last solution, as calibrate starts it
-        vc = estimate_variance_components(problem, options=options, solver=solver,
-                                          fixed=tuple(problem.model.options.variance_factors or ()))
-        problem, initial = vc.problem, {solver: vc.initial}
+    problem, initial = weighted_problem(build_problem(train, options=options), options=options, solver=solver)
     run = run_solvers(problem, options=replace(options, structure_tests=False), solvers=(solver,), initial=initial)
     return Calibration.from_result(run.results[solver])
 

@@ -5,6 +5,8 @@ Modules, from the data up:
 - :mod:`graph_calib.model.options`: :class:`ModelOptions`;
 - :mod:`graph_calib.model.record`: :class:`PreparedRecord`, the data of one experiment prepared once
   (rates, temperatures and their slopes, keyframes, table readings), whatever the layout;
+- :mod:`graph_calib.model.local_rates`: the rate and angular acceleration at an instant (a keyframe boundary,
+  a table reading) from local fits of the integrated angle, and the boundary rate's four-sample correction;
 - :mod:`graph_calib.model.encoder_noise`: the table readings' noise covariance (each static dwell's
   scatter, or the declared noise about a program's axes, floored) and the principal axes that whiten it;
 - :mod:`graph_calib.model.kernel`: the compiled per-sample preintegration kernel;
@@ -26,7 +28,8 @@ from graph_calib.model.calibration_model import TABLE_ALIGNMENT_SIGMA, Calibrati
 from graph_calib.model.factors import Noise, PriorResidual, Residuals
 from graph_calib.model.options import ModelOptions
 from graph_calib.model.preintegration import REPREINTEGRATE_TOL, Preintegrated, SensorTerms
-from graph_calib.model.record import PreparedRecord, boundary_rate_correction
+from graph_calib.model.local_rates import boundary_rate_correction
+from graph_calib.model.record import PreparedRecord
 
 __all__ = ["CalibrationModel", "ModelOptions", "PreparedRecord", "Preintegrated", "SensorTerms", "Residuals",
            "PriorResidual", "Noise", "REPREINTEGRATE_TOL", "TABLE_ALIGNMENT_SIGMA", "gyrocompass_attitude_sigma",

@@ -34,7 +34,7 @@ Gravity measurement
     are preintegrated once per calibration.  Covariance
     ``q_a^2 / T_k`` per axis plus ``g^2 q_g^2 T_k / 3`` on the horizontal axes
     (attitude noise inside the interval), plus ``2/3 |l|^2 (s_k^2 + s_{k+1}^2) / T_k^2`` on every axis,
-    ``s`` the boundary rates' scatter (:func:`graph_calib.model.record.local_rates`) and ``l`` the lever
+    ``s`` the boundary rates' scatter (:func:`graph_calib.model.local_rates.local_rates`) and ``l`` the lever
     arm at the preintegration's linearisation point.
 
 Encoder measurement
@@ -243,7 +243,7 @@ def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None, s
         # angle errors Q tilts the keyframe's (the attitude at its start holds its own)
         var[:, :2] += ((record.gravity * noise.gyro_quantization) ** 2 / np.diff(record.k0))[:, None]
     if "lever_arm" in layout:
-        # the boundary rates' scatter (record.local_rates: a ring-laser gyro's quantization leaves some at a
+        # the boundary rates' scatter (model.local_rates: a ring-laser gyro's quantization leaves some at a
         # ramp, where a short fit is kept) through the lever-arm term, C (dw x l) at each end, taken isotropic
         # with the lever arm of the linearisation point (fixed while the preintegration is)
         l_lin = layout.get(preint.x_lin, "lever_arm", np.zeros(3))

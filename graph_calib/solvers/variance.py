@@ -189,6 +189,38 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
                               solves=n, converged=converged, history=tuple(history), initial=initial)
 
 
+def weighted_problem(problem, *, options, solver, progress=None):
+    """The problem a final solve takes, and where that solve starts: the variance components first when asked.
+
+    With ``options.variance_components`` each kind's factor is estimated with ``solver``
+    (:func:`estimate_variance_components`; the kinds whose factor the problem's options already set are kept),
+    and the final solve of ``solver`` starts from the last solution of that iteration: the factors' last rescale
+    moves the solution to second order only.  What ``calibrate`` and the diagnosis' held-out fold fits both do.
+
+    Parameters
+    ----------
+    problem : graph_calib.records.problem.Problem
+    options : graph_calib.options.CalibrationOptions
+    solver : str
+        The registered solver that iterates (the run's primary solver).
+    progress : callable, optional
+        Called with each solve's :class:`graph_calib.solvers.interface.ProgressEvent`.
+
+    Returns
+    -------
+    problem : graph_calib.records.problem.Problem
+        ``problem`` itself without the variance components, else the problem that carries the factors.
+    initial : dict or None
+        None without the variance components, else ``{solver: (R, x)}``, the iteration's last solution, as the
+        ``initial`` of :func:`graph_calib.solvers.orchestration.run_solvers`.
+    """
+    if not options.variance_components:
+        return problem, None
+    vc = estimate_variance_components(problem, options=options, solver=solver,
+                                      fixed=tuple(problem.model.options.variance_factors or ()), progress=progress)
+    return vc.problem, {solver: vc.initial}
+
+
 def _static_gravity(st):
     """``st`` whose ``"gravity"`` counts the static keyframes only when the moving ones are apart (MOVING)."""
     g, m = st.kinds.get("gravity"), st.kinds.get(MOVING)
@@ -203,5 +235,5 @@ def factors_estimated(factors):
     return KINDS + ((MOVING,) if MOVING in factors else ())
 
 
-__all__ = ["VarianceComponents", "estimate_variance_components", "with_variance_factors", "KINDS", "MOVING_SIGMA_BOUNDS",
-           "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]
+__all__ = ["VarianceComponents", "estimate_variance_components", "weighted_problem", "with_variance_factors", "KINDS",
+           "MOVING_SIGMA_BOUNDS", "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]

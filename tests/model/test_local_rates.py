@@ -1,11 +1,11 @@
-"""The rate and angular acceleration at an instant (record.local_rates): exact on smooth motion, quiet at rest
-under a ring-laser gyro's quantization, axis by axis during a turn; what the model takes from it."""
+"""The rate and angular acceleration at an instant (graph_calib.model.local_rates): exact on smooth motion, quiet
+at rest under a ring-laser gyro's quantization, axis by axis during a turn; what the model takes from it."""
 
 import numpy as np
 import pytest
 
 from graph_calib.constants import ARCSEC_TO_RAD
-from graph_calib.model.record import boundary_rate_correction, local_rates
+from graph_calib.model.local_rates import boundary_rate_correction, local_rates
 
 H = 0.01
 EARTH = np.array([0.0, 4.6e-5, 5.7e-5])          # a rest's rate, rad/s
