@@ -21,7 +21,7 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.solvers.orchestration import CalibrationRun, judge, run_solvers
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER, primary_of
-from graph_calib.solvers.variance import weighted_problem
+from graph_calib.solvers.variance import tested_problem, weighted_problem
 
 
 def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None,
@@ -52,18 +52,20 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
     with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):
         # one variance factor per measurement kind when asked, estimated with the primary solver; the primary
         # solver's final solve starts from its last solution, every other solver from its own start
+        identified = problem
         problem, initial = weighted_problem(problem, options=options, solver=primary_of(solvers), progress=progress)
         tests = {}
 
         def structure_of(name, output):
             """The structure tests at the primary solver's solution, as soon as it is solved (with two solvers
-            run concurrently, while the other still runs)."""
+            run concurrently, while the other still runs), against the noise the loop tests with (the identified
+            one: variance factors estimated from these residuals would absorb the misfit the tests look for)."""
             if options.structure_tests and name == primary_of(solvers):
                 # the diagnosis package only when it is used: `calibrate --help` and a run without the tests
                 # import none of it
                 from graph_calib.diagnosis.structure import structure_tests
 
-                tests[name] = structure_tests(problem, output)
+                tests[name] = structure_tests(tested_problem(identified, problem), output)
 
         run = run_solvers(problem, options=options, solvers=solvers, progress=progress, concurrent=concurrent,
                           initial=initial, on_output=structure_of, stamp=not options.structure_tests)

@@ -6,7 +6,13 @@ carry.  What they carry is judged here: the loop's score test (:func:`graph_cali
 of every further effect of model.md that the model lacks, linearised once at the solution (the model
 extended by the candidates, every candidate zero: :func:`graph_calib.diagnosis.linearise`), with the
 loop's thresholds (chi-square quantile at ``alpha`` over the number of candidates tested, Bonferroni;
-:class:`graph_calib.diagnosis.DiagnosisOptions`).  A significant candidate fails the residual part of the
+:class:`graph_calib.diagnosis.DiagnosisOptions`) and the loop's noise: ``calibrate`` passes the problem with the
+noise identified from the record (:func:`graph_calib.solvers.variance.tested_problem`), not the one its variance
+factors rescale, since a factor estimated from these residuals absorbs the misfit the tests look for (and a
+factor below one would make them stricter than the loop's: on the Xsens session ``accel.nonlinearity`` was named
+at a gravity factor 0.25 that the loop, testing at the identified noise, does not find).  Each candidate is tested
+alone against the declared model; the loop adds the most significant and tests the others again, so a
+candidate named here beside a stronger one may be explained by it.  A significant candidate fails the residual part of the
 verdict, named with its statistic: a record that ``diagnose`` would change does not get "pass" from
 ``calibrate``.  Nothing is adopted; ``diagnose`` is the command that does.
 """

@@ -35,7 +35,7 @@ def _quadratic_slope(y, win, delta):
 
     Savitzky-Golay's first derivative of order 2 with scipy's ``mode='interp'``
     (``scipy.signal.savgol_filter(y, win, 2, deriv=1, delta=delta, axis=0,
-    mode='interp')``, checked in tests/model/test_model.py): inside, the slope of the
+    mode='interp')``, checked in tests/records/test_record_slope.py): inside, the slope of the
     quadratic through the window, ``sum(k y_{i+k}) / (delta sum k^2)``; in the
     first and last ``win // 2`` rows, the slope at each row of the quadratic fitted
     to the first (last) ``win`` rows.  Written here so that the solvers do not

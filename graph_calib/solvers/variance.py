@@ -221,6 +221,33 @@ def weighted_problem(problem, *, options, solver, progress=None):
     return vc.problem, {solver: vc.initial}
 
 
+def tested_problem(identified, weighted):
+    """The problem the closed loop's score tests judge with: the identified noise, not the kinds' factors.
+
+    The loop (:func:`graph_calib.diagnosis.diagnose`) tests its candidates against the noise identified from the
+    record (the kinds' factors the caller set, none estimated: a factor estimated from the residuals would absorb
+    the misfit the tests look for), with the moving keyframes' gravity sigma as the variance components estimated
+    it when they did.  ``calibrate``'s structure tests use the same problem at its solution, so that an effect
+    they name is one the loop tests the same way.
+
+    Parameters
+    ----------
+    identified : graph_calib.records.problem.Problem
+        The problem as built (:func:`graph_calib.records.problem.build_problem`).
+    weighted : graph_calib.records.problem.Problem
+        ``identified`` with the variance components (:func:`weighted_problem`), or ``identified`` itself.
+
+    Returns
+    -------
+    graph_calib.records.problem.Problem
+    """
+    options = identified.model.options
+    if weighted is identified or options.noise_source.get("moving") != MOVING_ESTIMATED:
+        return identified
+    return with_variance_factors(identified, dict(options.variance_factors or {}),
+                                 moving_sigma=weighted.model.options.moving_sigma)
+
+
 def _static_gravity(st):
     """``st`` whose ``"gravity"`` counts the static keyframes only when the moving ones are apart (MOVING)."""
     g, m = st.kinds.get("gravity"), st.kinds.get(MOVING)
@@ -235,5 +262,5 @@ def factors_estimated(factors):
     return KINDS + ((MOVING,) if MOVING in factors else ())
 
 
-__all__ = ["VarianceComponents", "estimate_variance_components", "weighted_problem", "with_variance_factors", "KINDS",
+__all__ = ["VarianceComponents", "estimate_variance_components", "weighted_problem", "with_variance_factors", "tested_problem", "KINDS",
            "MOVING_SIGMA_BOUNDS", "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]

@@ -239,8 +239,9 @@ def verdict_of(results, comparison=None, *, structure=()):
         sm = comparison["summary"]
         agree, maxdiff = bool(sm["agree"]), float(sm["max_abs_difference_in_sigma"])
         if not agree:
-            problems.append(f"the solvers disagree: max |difference| {maxdiff:.3g} sigma, sigma ratio range "
-                            f"{sm['sigma_ratio_range']}")
+            rr = sm.get("sigma_ratio_range")
+            rr = f"{float(rr[0]):.3f}..{float(rr[1]):.3f}" if rr is not None and len(rr) == 2 else f"{rr}"
+            problems.append(f"the solvers disagree: max |difference| {maxdiff:.3g} sigma, sigma ratio range {rr}")
     for s, r in results.items():
         figures, kp, kn = judge_kinds(r)
         if figures:
@@ -262,7 +263,8 @@ def verdict_of(results, comparison=None, *, structure=()):
     for t in structure:
         if t["significant"]:
             problems.append(f"the residuals carry {t['effect']}: score statistic {t['statistic']:.3g} > threshold "
-                            f"{t['threshold']:.3g} ({t['dof']} dof): the model lacks it (graph-calib diagnose adds it)")
+                            f"{t['threshold']:.3g} ({t['dof']} dof): the model lacks it or an effect that shares its "
+                            "signature (graph-calib diagnose adds the most significant and tests the others again)")
     return Verdict(converged=converged, agree=agree, max_difference_sigma=maxdiff, fit_chi2=fit,
                    passed=not problems, problems=tuple(problems), notes=tuple(notes), kinds=kinds,
                    structure=structure)
