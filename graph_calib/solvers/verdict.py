@@ -34,6 +34,7 @@ not give them) is judged as before, by its chi-square per measurement component 
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -220,6 +221,20 @@ class Verdict:
                 "problems": list(self.problems), "notes": list(self.notes), "text": self.text()}
 
 
+def _cost_words(results, comparison):
+    """Which of the two compared solvers stopped at the lower batch cost (``residuals.final_cost``), in words; ""
+    when either cost is missing or they are equal to 1e-9 relative."""
+    names = list(comparison.get("solvers") or [])[:2] or list(results)[:2]
+    costs = {n: results[n].residuals.get("final_cost") for n in names if n in results}
+    if len(costs) != 2 or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in costs.values()):
+        return ""
+    (lo, c_lo), (hi, c_hi) = sorted(costs.items(), key=lambda kv: kv[1])
+    if c_hi - c_lo <= 1e-9 * max(abs(c_lo), 1.0):
+        return ""
+    return (f"; {lo} stopped at the lower batch cost ({c_lo:.6g} against {c_hi:.6g} for {hi}): the two stopped "
+            "in different places of a flat valley or in two minima, and the lower is the better fit")
+
+
 def verdict_of(results, comparison=None, *, structure=()):
     """The :class:`Verdict` of solver results (``{solver: Result}``) and their comparison (``comparison.json``).
 
@@ -241,7 +256,8 @@ def verdict_of(results, comparison=None, *, structure=()):
         if not agree:
             rr = sm.get("sigma_ratio_range")
             rr = f"{float(rr[0]):.3f}..{float(rr[1]):.3f}" if rr is not None and len(rr) == 2 else f"{rr}"
-            problems.append(f"the solvers disagree: max |difference| {maxdiff:.3g} sigma, sigma ratio range {rr}")
+            problems.append(f"the solvers disagree: max |difference| {maxdiff:.3g} sigma, sigma ratio range {rr}"
+                            + _cost_words(results, comparison))
     for s, r in results.items():
         figures, kp, kn = judge_kinds(r)
         if figures:

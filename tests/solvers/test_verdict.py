@@ -117,3 +117,24 @@ def test_table_readings_that_do_not_scatter_fail_the_encoder_kind_in_words():
     assert "RESIDUALS INCONSISTENT WITH THE NOISE MODEL: encoder" in v.text()
     # readings whose noise is the grade's because no dwell shows any: a note, as before
     assert verdict_of({"factor-graph": _result(kinds, source=quiet["noise"]["source"])}).passed
+
+
+def test_disagreeing_solvers_are_told_which_stopped_at_the_lower_cost():
+    """Two solvers that disagree: the words name the one at the lower batch cost (the better fit), the sigma ratio
+    range to three decimals; equal costs add nothing."""
+    def with_cost(solver, cost):
+        res = _result({"gravity": (1.0, 900.0, 1.0)}, solver=solver)
+        return replace(res, residuals={**res.residuals, "final_cost": cost})
+
+    comparison = {"solvers": ["factor-graph", "sqrt-kf"],
+                  "summary": {"agree": False, "max_abs_difference_in_sigma": 1.03,
+                              "sigma_ratio_range": [0.994131756458089, 1.004885804236632]}}
+    v = verdict_of({"factor-graph": with_cost("factor-graph", 760.945), "sqrt-kf": with_cost("sqrt-kf", 761.637)},
+                   comparison)
+    assert not v.passed
+    words = v.problems[0]
+    assert "sigma ratio range 0.994..1.005" in words
+    assert "factor-graph stopped at the lower batch cost (760.945 against 761.637 for sqrt-kf)" in words
+    v = verdict_of({"factor-graph": with_cost("factor-graph", 761.0), "sqrt-kf": with_cost("sqrt-kf", 761.0)},
+                   comparison)
+    assert "lower batch cost" not in v.problems[0]
