@@ -62,6 +62,8 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.simulation import simulate
 
+from _seed_study import cases_of, run_resumable, seed_range  # scripts/: run as a script, its folder on sys.path
+
 #: The cases: name -> the simulator's noise options (``noise_monte_carlo.py``'s names).
 CASES = {
     "noise-0.3x": {"noise_factor": 0.3},
@@ -86,15 +88,6 @@ def _verdict(v):
     return {"passed": bool(v.passed), "problems": list(v.problems), "notes": list(v.notes),
             "agree": None if v.agree is None else bool(v.agree),
             "max_difference_sigma": None if v.max_difference_sigma is None else float(v.max_difference_sigma)}
-
-
-def _plain(o):
-    """``json.dumps``' default: numpy scalars and arrays as Python ones."""
-    if isinstance(o, np.generic):
-        return o.item()
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 def run_one(case, seed, *, hours, solvers=None):
@@ -230,16 +223,11 @@ def summarise(root):
               f"95 % Clopper-Pearson {100 * lo:.2f}..{100 * hi:.2f} %")
 
 
-def _seeds(text):
-    a, b = (int(x) for x in text.split(":"))
-    return range(a, b)
-
-
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--cases", default=",".join(CASES), help=f"comma-separated, of {', '.join(CASES)}")
-    p.add_argument("--seeds", type=_seeds, default=range(0, 200), help="A:B, the seeds A..B-1")
+    p.add_argument("--seeds", type=seed_range, default=range(0, 200), help="A:B, the seeds A..B-1")
     p.add_argument("--hours", type=float, default=0.3, help="record length, h (the scenario's default 0.3)")
     p.add_argument("--solvers", default=None,
                    help="comma-separated, the primary first (default DiagnosisOptions': both default solvers)")
@@ -250,30 +238,19 @@ def main(argv=None):
     if args.summary:
         summarise(args.out)
         return 0
-    cases = args.cases.split(",")
-    unknown = [c for c in cases if c not in CASES]
-    if unknown:
-        p.error(f"unknown cases {unknown}; known: {', '.join(CASES)}")
+    cases = cases_of(p, args.cases, CASES)
     solvers = args.solvers.split(",") if args.solvers else None
-    for case in cases:
-        (args.out / case).mkdir(parents=True, exist_ok=True)
     order = ([(c, s) for s in args.seeds for c in cases] if args.interleave
              else [(c, s) for c in cases for s in args.seeds])
-    for case, seed in order:
-        path = args.out / case / f"seed-{seed:04d}.json"
-        if path.exists():
-            continue
-        record = run_one(case, seed, hours=args.hours, solvers=solvers)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(record, default=_plain))
-        tmp.replace(path)
-        b = record["rounds"][0]["best"]
-        print(f"{case} seed {seed}: added {', '.join(record['added']) or 'nothing'}"
-              + (f" (round 1 best {b['name']} {b['statistic']:.1f} vs {b['threshold']:.1f})" if b else "")
-              + f", verdict {'pass' if record['verdict']['passed'] else 'FAIL'}, {record['seconds']:.1f} s",
-              flush=True)
-    return 0
 
+    def line(case, seed, record):
+        b = record["rounds"][0]["best"]
+        return (f"{case} seed {seed}: added {', '.join(record['added']) or 'nothing'}"
+                + (f" (round 1 best {b['name']} {b['statistic']:.1f} vs {b['threshold']:.1f})" if b else "")
+                + f", verdict {'pass' if record['verdict']['passed'] else 'FAIL'}, {record['seconds']:.1f} s")
+
+    run_resumable(args.out, order, lambda case, seed: run_one(case, seed, hours=args.hours, solvers=solvers), line)
+    return 0
 
 if __name__ == "__main__":
     sys.exit(main())

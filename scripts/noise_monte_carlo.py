@@ -42,6 +42,8 @@ from graph_calib.simulation import simulate
 from graph_calib.simulation.truth import TRUTH_RANGES
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
 
+from _seed_study import cases_of, run_resumable, seed_range  # scripts/: run as a script, its folder on sys.path
+
 #: The cases: name -> the simulator's noise options.
 CASES = {
     "clean": {},
@@ -186,16 +188,11 @@ def summarise(root):
         print(f"   seconds per run: median {np.median([r['seconds'] for r in runs]):.1f}")
 
 
-def _seeds(text):
-    a, b = (int(x) for x in text.split(":"))
-    return range(a, b)
-
-
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", type=Path, required=True)
     p.add_argument("--cases", default="clean", help=f"comma-separated, of {', '.join(CASES)}")
-    p.add_argument("--seeds", type=_seeds, default=range(0, 20), help="A:B, the seeds A..B-1")
+    p.add_argument("--seeds", type=seed_range, default=range(0, 20), help="A:B, the seeds A..B-1")
     p.add_argument("--hours", type=float, default=0.1)
     p.add_argument("--priors", choices=("grade", "truth"), default="grade",
                    help="grade: the product's priors (as calibrate); truth: the RMS of the simulator's truth draw")
@@ -204,24 +201,13 @@ def main(argv=None):
     if args.summary:
         summarise(args.out)
         return 0
-    cases = args.cases.split(",")
-    unknown = [c for c in cases if c not in CASES]
-    if unknown:
-        p.error(f"unknown cases {unknown}; known: {', '.join(CASES)}")
-    for case in cases:
-        (args.out / case).mkdir(parents=True, exist_ok=True)
-        for seed in args.seeds:
-            path = args.out / case / f"seed-{seed:04d}.json"
-            if path.exists():
-                continue
-            record = run_one(case, seed, hours=args.hours, priors=args.priors)
-            tmp = path.with_suffix(".tmp")
-            tmp.write_text(json.dumps(record))
-            tmp.replace(path)
-            print(f"{case} seed {seed}: verdict {'pass' if record['verdict']['passed'] else 'FAIL'}, "
-                  f"{record['seconds']:.1f} s", flush=True)
+    cases = cases_of(p, args.cases, CASES)
+    run_resumable(args.out, [(c, s) for c in cases for s in args.seeds],
+                  lambda case, seed: run_one(case, seed, hours=args.hours, priors=args.priors),
+                  lambda case, seed, record: (f"{case} seed {seed}: verdict "
+                                              f"{'pass' if record['verdict']['passed'] else 'FAIL'}, "
+                                              f"{record['seconds']:.1f} s"))
     return 0
-
 
 if __name__ == "__main__":
     sys.exit(main())
