@@ -49,6 +49,8 @@ def add_arguments(p):
 
 
 def _check(args):
+    """Bad arguments refused (InputError naming the option); the simulated campaigns asked ``{name: [seconds]}`` and
+    the noise options given ``{ModelOptions field: value or None}``."""
     if len(args.procedures) < 2:
         raise InputError("a comparison needs at least two procedures", dataset="PROCEDURE.toml")
     if args.soak_h is not None and not all(math.isfinite(w) and w >= 0 for w in args.soak_h):
@@ -80,11 +82,11 @@ def _check(args):
         if not name or not (math.isfinite(h) and h > 0):
             raise InputError(f"must be NAME:HOURS, got {item!r}", dataset="--simulate-at")
         at.setdefault(name, []).append(h * 3600.0)
-    return at
+    return at, noise
 
 
 def run(args):
-    at = _check(args)
+    at, noise = _check(args)
     procs = [read_procedure(p) for p in args.procedures]
     names = [p.name for p in procs]
     if len(set(names)) != len(names):
@@ -103,7 +105,7 @@ def run(args):
         print(msg, file=sys.stderr, flush=True)
 
     soaks = None if args.soak_h is None else [w * 3600.0 for w in args.soak_h]
-    model = ModelOptions(grade=args.grade or "navigation", **noise_of(args))
+    model = ModelOptions(grade=args.grade or "navigation", **noise)
     comparison = compare(procs, soaks_s=soaks, range_degC=tuple(args.range_degc), draws=args.draws, seed=args.seed,
                          model=model, progress=progress)
     doc = comparison.to_dict()
