@@ -3,9 +3,12 @@
 Each seed simulates ``consumer-ferraris`` as a hand makes it (:data:`graph_calib.simulation.scenarios.SHORT_REST_FERRARIS`:
 rests of 0.5-1.5 s, a swaying hand, the record starting in motion), cuts it into two folds
 (:func:`graph_calib.evaluation.crossval.make_folds`, by pairs), calibrates without each fold (``calibrate``, the
-factor graph, the consumer grade) and judges on it; imucal's closed-form Ferraris calibration (fitted on the whole
-record's six faces and three turns, as a lab would) is judged on the same held-out parts.  Prints per seed and pooled
-the held-out transition rms and |f| spread of raw, imucal and the product (``--diagnose``: the loop's calibration).
+factor graph, the consumer grade, the moving keyframes' gravity sigma and the hand's sway at rest estimated: the
+README's options for a swaying hand) and judges on it; imucal's closed-form Ferraris calibration (fitted on the whole
+record's six faces and three turns, as a lab would) is judged on the same held-out parts, and so is the simulator's
+true calibration (the floor of any calibration fitted without those parts: imucal, fitted on them too, may go below
+it).  Prints per seed and pooled the held-out transition rms and |f| spread of raw, truth, imucal and the product
+(``--diagnose``: the loop's calibration).
 
     PYTHONPATH=$PWD python scripts/handheld_vs_imucal.py --seeds 1 2 3 [--diagnose] [--guess] [--sway-sigma none]
 """

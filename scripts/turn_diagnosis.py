@@ -1,12 +1,13 @@
 """Which calibration elements cause the product's held-out transition error on hand-held Ferraris sessions.
 
-For each seed's :data:`graph_calib.simulation.scenarios.SHORT_REST_FERRARIS` session and each of two folds (by
-pairs), the product is fitted on the training record (``calibrate``, factor graph, consumer grade, the moving sigma
-estimated, and the hand's sway unless ``--sway-sigma none``, as ``scripts/handheld_vs_imucal.py``); then groups of its elements are replaced by the truth's and the
-held-out transition rms and |f| spread recomputed.  Besides fixed groups: the gyro scale (and the whole gyro-matrix
-column: the scale and the two cross-axis terms a turn about that axis drives) of the axes whose full turn the training
-record holds (the most any use of a known full turn in the training record could give) and of the axes whose full turn
-is held out.  Also prints, per gyro element, the product's error against its sigma.
+For each seed's :data:`graph_calib.simulation.scenarios.SHORT_REST_FERRARIS` session and each of two folds (by pairs),
+the product is fitted on the training record (``calibrate``, factor graph, consumer grade, the moving sigma estimated,
+and the hand's sway unless ``--sway-sigma none``, as ``scripts/handheld_vs_imucal.py``); then groups of its elements
+are replaced by the truth's and the held-out transition rms and |f| spread recomputed. Besides fixed groups: the gyro
+scale (and the whole gyro-matrix column: the scale and the two cross-axis terms a turn about that axis drives) of the
+axes whose full turn the training record holds (the most any use of a known full turn in the training record could
+give) and of the axes whose full turn is held out. Also prints, per gyro element, the product's error against its
+sigma.
 
     PYTHONPATH=$PWD python scripts/turn_diagnosis.py --seeds 1 2 3 [--sway-sigma none]
 """
@@ -118,7 +119,8 @@ def main(argv=None):
             z = {k: (res.values[k] - truth.values.get(k, 0.0)) / res.sigmas[k] for k in res.values
                  if k.startswith("gyro.") and res.sigmas.get(k)}
             print("   gyro error/sigma: " + " ".join(
-                f"{k[5:]}={res.values[k] - truth.values.get(k, 0.0):+.1e}({v:+.1f}s)" for k, v in z.items()), flush=True)
+                f"{k[5:]}={res.values[k] - truth.values.get(k, 0.0):+.1e}({v:+.1f}s)" for k, v in z.items()),
+                flush=True)
     print(f"{'pooled over seeds ' + ' '.join(map(str, args.seeds)):<40} {'transitions rms deg':>20} {'|f| spread':>12}")
     for name, r in rows.items():
         a = np.sqrt(np.nanmean(np.asarray(r, dtype=float) ** 2, axis=0))
