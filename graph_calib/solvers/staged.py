@@ -11,7 +11,9 @@ rotation kind deweights the misfit's noise, not its pull (docs/crossval.md measu
    :data:`graph_calib.solvers.verdict.VARIANCE_FACTOR_LIMIT`, the verdict's own limit: the gyro model does not fit.
    A record whose rotation factor is within the limit is solved as before (no extra solve, the same result).
 2. The gravity-only stage: the same problem with the rotation kind's factor :data:`GRAVITY_ONLY_FACTOR` (the gyro
-   integrals hardly weigh), solved by the primary solver.
+   integrals hardly weigh), solved by the primary solver; its gravity factor is the joint solve's when that is within
+   the limit (one solve more), and estimated anew when it is not (the joint solve's then carries the gyro's misfit)
+   or when the test stages the solve (the accelerometer's covariance is then that stage's own).
 3. The test: the accelerometer elements that stage informs (posterior sigma below
    :data:`graph_calib.solvers.results.PRIOR_DOMINATED_RATIO` of the prior) are compared between the joint solution
    and the gravity-only one, ``d^T C_g^{-1} d`` with ``C_g`` the gravity-only covariance, against the chi-square
@@ -66,11 +68,14 @@ class Staging:
     rotation_factor, gravity_factor : float
         The joint solve's variance factors of the rotation and the gravity kind (one of them opened the gate).
     elements : tuple of str
-        The accelerometer elements compared (and pinned when staged).
+        The accelerometer elements pinned when staged (those the gravity-only stage with its own gravity factor
+        informs), else those compared.
     statistic : float
         ``d^T C_g^-1 d`` over ``elements``.
     threshold : float
-        Its chi-square quantile (:data:`STAGE_ALPHA`, ``len(elements)`` degrees of freedom).
+        Its chi-square quantile (:data:`STAGE_ALPHA`, ``dof`` degrees of freedom).
+    dof : int
+        The number of accelerometer elements the test compared (those the gravity-only stage informs).
     staged : bool
         Whether the statistic exceeds the threshold: the solvers then solve :attr:`problem`.
     problem : graph_calib.records.problem.Problem
@@ -91,6 +96,7 @@ class Staging:
     elements: tuple
     statistic: float
     threshold: float
+    dof: int
     staged: bool
     problem: object
     result_problem: object
@@ -119,7 +125,7 @@ class Staging:
         return {"rotation_variance_factor": float(self.rotation_factor),
                 "gravity_variance_factor": float(self.gravity_factor), "staged": bool(self.staged),
                 "statistic": float(self.statistic), "threshold": float(self.threshold),
-                "dof": len(self.elements), "gravity_only_rotation_factor": float(GRAVITY_ONLY_FACTOR),
+                "dof": int(self.dof), "gravity_only_rotation_factor": float(GRAVITY_ONLY_FACTOR),
                 "pinned": list(self.elements) if self.staged else []}
 
 
@@ -163,17 +169,31 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
     if initial is None:
         joint = solve(solver, problem, options=options, progress=progress)
         initial = (joint.attitudes, joint.x)
-    # the gravity-only stage, its gravity factor estimated anew (the joint solve's may carry the gyro's misfit)
-    vc = estimate_variance_components(with_variance_factors(problem, {**factors, "rotation": GRAVITY_ONLY_FACTOR}),
-                                      options=options, solver=solver, fixed=fixed + ("rotation",), progress=progress,
-                                      initial=initial)
-    gravity = solve(solver, vc.problem, options=options, progress=progress, initial=vc.initial)
+    gravity_only = with_variance_factors(problem, {**factors, "rotation": GRAVITY_ONLY_FACTOR})
+
+    def gravity_stage(estimate):
+        """The gravity-only solution, its gravity factor estimated anew when ``estimate`` (else the joint one's)."""
+        if not estimate:
+            return solve(solver, gravity_only, options=options, progress=progress, initial=initial), None
+        vc = estimate_variance_components(gravity_only, options=options, solver=solver,
+                                          fixed=fixed + ("rotation",), progress=progress, initial=initial)
+        return solve(solver, vc.problem, options=options, progress=progress, initial=vc.initial), vc
+
+    # the joint solve's gravity factor is kept for the test when within the limit (one solve more; the rotation kind
+    # opened the gate) and estimated anew when not (it then carries the gyro's misfit): the accelerometer of a
+    # staged solve always takes a gravity-only stage with its own factor
+    reestimate = float(factors.get("gravity", 1.0)) > VARIANCE_FACTOR_LIMIT
+    gravity, vc = gravity_stage(reestimate)
     model = problem.model
-    names = gravity.layout.element_names()
     _, prior = model.prior()
-    sig = gravity.sigma
-    index = np.array([i for i, n in enumerate(names)
-                      if n.startswith(PINNED_PREFIX) and sig[i] < PRIOR_DOMINATED_RATIO * prior[i]], dtype=int)
+    names = gravity.layout.element_names()
+
+    def informed(output):
+        sig = output.sigma
+        return np.array([i for i, n in enumerate(names)
+                         if n.startswith(PINNED_PREFIX) and sig[i] < PRIOR_DOMINATED_RATIO * prior[i]], dtype=int)
+
+    index = informed(gravity)
     if index.size == 0:
         return None
     d = np.asarray(initial[1], dtype=float)[index] - gravity.x[index]
@@ -181,7 +201,13 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
     statistic = float(d @ np.linalg.solve(cg, d))
     threshold = float(2.0 * gammaincinv(0.5 * index.size, 1.0 - STAGE_ALPHA))     # chi2.ppf(1 - alpha, dof)
     staged = statistic > threshold
+    dof = int(index.size)
+    if staged and vc is None:
+        gravity, vc = gravity_stage(True)
+        index = informed(gravity)
+        staged = index.size > 0
     result_problem, start = problem, (gravity.attitudes, gravity.x)
+    sig = gravity.sigma
     if staged:
         # the staged solve's own variance factors, the accelerometer held at the gravity-only stage's
         start_factors = {**factors, "gravity": vc.factors.get("gravity", factors.get("gravity", 1.0))}
@@ -197,7 +223,8 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
     else:
         problem_solved = problem
     return Staging(rotation_factor=factors.get("rotation", 1.0), gravity_factor=factors.get("gravity", 1.0),
-                   elements=tuple(names[i] for i in index), statistic=statistic, threshold=threshold, staged=staged,
+                   elements=tuple(names[i] for i in index), statistic=statistic, threshold=threshold, dof=dof,
+                   staged=staged,
                    problem=problem_solved, result_problem=result_problem, initial=start,
                    x=np.asarray(gravity.x, dtype=float), covariance=np.asarray(gravity.covariance, dtype=float),
                    index=index)

@@ -51,7 +51,7 @@ def test_finish_propagates_the_gravity_only_covariance_exactly():
     B = rng.normal(size=(3, 3))
     cg = B @ B.T + 0.5 * np.eye(3)                      # the gravity-only stage's covariance of the pinned elements
     staging = Staging(rotation_factor=10.0, gravity_factor=1.0, elements=("a", "b", "c"), statistic=50.0,
-                      threshold=16.3, staged=True, problem=None, result_problem=None, initial=None,
+                      threshold=16.3, dof=3, staged=True, problem=None, result_problem=None, initial=None,
                       x=np.zeros(P), covariance=np.zeros((P, P)), index=a)
     staging.covariance[np.ix_(a, a)] = cg
     out = staging.finish(_Output(x=np.zeros(P), covariance=sigma))
