@@ -50,7 +50,7 @@ from graph_calib.solvers.verdict import VARIANCE_FACTOR_LIMIT
 GRAVITY_ONLY_FACTOR = FACTOR_MAX
 #: Probability of the test firing on a record whose models both fit (at most, were the noise model exact; module doc).
 #: Smaller than the verdict's 1e-3: the noise model's approximations (a sway taken for white noise, short rests)
-#: stretch the statistic on right models (35.4 on a simulated Ferraris fold, 10 elements: 1e-3's quantile 29.6, this
+#: stretch the statistic on right models (32.9 on a simulated Ferraris fold, 10 elements: 1e-3's quantile 29.6, this
 #: level's 46.9), while a pull that spoils the accelerometer held out gives thousands (docs/crossval.md).
 STAGE_ALPHA = 1e-6
 #: A pinned element's prior sigma, as a fraction of its gravity-only sigma.
