@@ -7,9 +7,10 @@ the best estimate of everything.  When it does not (an unmodelled g-sensitivity,
 rotation kind deweights the misfit's noise, not its pull (docs/crossval.md measures the accelerometer's held-out
 |f| spread ten times that of a gravity-only fit).  So, on a table-less record:
 
-1. The gate: the rotation kind's variance factor (:mod:`graph_calib.solvers.variance`) above
-   :data:`graph_calib.solvers.verdict.VARIANCE_FACTOR_LIMIT`, the verdict's own limit: the gyro model does not fit.
-   A record whose rotation factor is within the limit is solved as before (no extra solve, the same result).
+1. The gate: the rotation or the gravity kind's variance factor (:mod:`graph_calib.solvers.variance`) above
+   :data:`graph_calib.solvers.verdict.VARIANCE_FACTOR_LIMIT`, the verdict's own limit (the variance components may
+   put a gyro misfit on either kind: it tilts the attitudes, and the gravity residuals grow with it).  A record whose
+   factors are within the limit is solved as before (no extra solve, the same result).
 2. The gravity-only stage: the same problem with the rotation kind's factor :data:`GRAVITY_ONLY_FACTOR` (the gyro
    integrals hardly weigh), solved by the primary solver; its gravity factor is the joint solve's when that is within
    the limit (one solve more), and estimated anew when it is not (the joint solve's then carries the gyro's misfit)
@@ -19,7 +20,8 @@ rotation kind deweights the misfit's noise, not its pull (docs/crossval.md measu
    and the gravity-only one, ``d^T C_g^{-1} d`` with ``C_g`` the gravity-only covariance, against the chi-square
    quantile ``1 -`` :data:`STAGE_ALPHA` of as many degrees of freedom.  Were both models right, ``d``'s
    covariance would be ``C_g - C_joint``, smaller than ``C_g``: the statistic is then below a chi-square, and the
-   test rarely fires wrongly.  Not significant: the joint solve is kept (the gyro's misfit does not reach the accelerometer).
+   test rarely fires wrongly.  Not significant: the joint solve is kept (the gyro's misfit does not reach the
+   accelerometer).
 4. The staged solve: every solver solves the problem whose prior pins those accelerometer elements at the
    gravity-only values (a sigma :data:`PIN_RATIO` times theirs): the gyro, the attitudes and whatever else is
    calibrated given the accelerometer of stage 2.  Each solver's output is then made honest
