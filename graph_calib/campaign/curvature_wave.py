@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -102,6 +102,48 @@ def _adoption(effect, *, wave, experiments, degree):
     return {"effect": effect, "kind": KIND, "wave": wave, "experiments": list(experiments),
             "adopted_in": [f"the joint's degree {degree}"], "statistic": None, "dof": None, "threshold": None,
             "log10_p": None}
+
+
+@dataclass(frozen=True)
+class JointCarry:
+    """The joint curves' orders, carried into every re-solve of a pooled wave (:func:`joint_carry`).
+
+    A pooled wave (:func:`graph_calib.campaign.waves.run_waves`) solves an experiment again anyway; with this
+    it also adds the joint curves' orders the experiment's model lacks, each with its prior from the joint
+    (:func:`joint_priors`), so that the experiment is not solved once more by this module's wave.
+
+    Attributes
+    ----------
+    joint : graph_calib.records.experiment.Result
+        The joint result; its verdict passed.
+    """
+
+    joint: object
+
+    def priors(self, result):
+        """:func:`joint_priors` of ``result``."""
+        return joint_priors(self.joint, result)
+
+    def covers(self, effect):
+        """Whether ``effect`` is an order of a family the joint fits, at most its degree (this wave carries it)."""
+        e = EFFECTS.get(effect)
+        if e is None or e.temperature_of is None:
+            return False
+        degree = self.joint.extra[JOINT]["degrees"].get(e.temperature_of)
+        return degree is not None and e.temperature_order <= int(degree)
+
+    def adoption(self, effect, *, wave, experiments):
+        """``campaign.json``'s entry of ``effect`` carried in ``wave`` into ``experiments``."""
+        degree = self.joint.extra[JOINT]["degrees"][EFFECTS[effect].temperature_of]
+        return _adoption(effect, wave=wave, experiments=experiments, degree=degree)
+
+
+def joint_carry(joint):
+    """A :class:`JointCarry` of ``joint``, or None when there is no joint result or its verdict failed (a
+    joint curve that did not converge or does not explain its data is no prior)."""
+    if joint is None or not (joint.extra.get("verdict") or {}).get("passed", True):
+        return None
+    return JointCarry(joint=joint)
 
 
 def run_curvature_wave(planned, pooled, joint, *, options, on_done=None, pool=None, sensor_ranges=None):
@@ -188,4 +230,4 @@ def run_curvature_wave(planned, pooled, joint, *, options, on_done=None, pool=No
     return replace(pooled, document=doc)
 
 
-__all__ = ["KIND", "CARRY_SIGMA", "joint_priors", "run_curvature_wave"]
+__all__ = ["KIND", "CARRY_SIGMA", "JointCarry", "joint_carry", "joint_priors", "run_curvature_wave"]

@@ -32,7 +32,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.campaign.checks import check_inputs, judge_campaign
 from graph_calib.campaign.execution import Pool, execute
-from graph_calib.campaign.curvature_wave import run_curvature_wave
+from graph_calib.campaign.curvature_wave import joint_carry, run_curvature_wave
 from graph_calib.campaign.joint_run import joint_entry, joint_failures, solve_joint
 from graph_calib.campaign.loop import loop_entry
 from graph_calib.campaign.planning import plan_campaign
@@ -143,9 +143,11 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     pool = Pool(options)        # one cluster for the first wave, the pooled test's waves and the joint's
     try:
         outcomes, compute_timing = _compute(planned, options=options, on_done=on_done, pool=pool)
-        pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool)
+        # the joint curves before the pooled waves: a wave that solves an experiment again carries them too
+        joint, joint_status = solve_joint(planned, _collect_final(planned, outcomes, None),
+                                          progress=options.progress, force=options.force)
+        pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool, carry=joint_carry(joint))
         collected = _collect_final(planned, outcomes, pooled)
-        joint, joint_status = solve_joint(planned, collected, progress=options.progress, force=options.force)
         carried = run_curvature_wave(planned, pooled, joint, options=options, on_done=on_done, pool=pool,
                                      sensor_ranges={n: s.get("sensor_temperature_range_degC")
                                                     for n, s in collected.summaries.items()})
