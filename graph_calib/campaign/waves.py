@@ -218,12 +218,14 @@ def run_waves(planned, outcomes, *, options, on_done=None, pool=None, carry=None
             break
         new, adoptions, priors = [], {}, {}
         for n in pick.experiments:
+            # the adopted effect with the grade's prior, as the test adopted it; the joint's other orders with theirs
             joint = carry.priors(next(iter(states[n].results.values()))) if carry else {}
-            new += wave_tasks(states[n], name=n, effects=(pick.effect,) + tuple(e for e in joint if e != pick.effect),
-                              wave=wave, dopts=dopts, prior_sigma={e: s for e, (_, s) in joint.items()} or None,
+            joint.pop(pick.effect, None)
+            new += wave_tasks(states[n], name=n, effects=(pick.effect,) + tuple(joint), wave=wave, dopts=dopts,
+                              prior_sigma={e: s for e, (_, s) in joint.items()} or None,
                               prior_mean={e: m for e, (m, _) in joint.items()} or None)
             adoptions[n] = [dict(pick.to_json(), wave=wave)] + [
-                carry.adoption(e, wave=wave, experiments=(n,)) for e in joint if e != pick.effect]
+                carry.adoption(e, wave=wave, experiments=(n,)) for e in joint]
             if joint:
                 priors[n] = {e: {"mean": m, "sigma": s} for e, (m, s) in joint.items()}
         if priors:
