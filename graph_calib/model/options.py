@@ -4,6 +4,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+#: ``ModelOptions.noise_identified`` key of the sway (m/s^2) a table-less record's rests show when no sway term models
+#: it (:func:`graph_calib.records.problem.sway_from_static`); the verdict notes it.
+SWAY_SEEN_KEY = "sway_seen_mps2"
 
 
 @dataclass(frozen=True)
@@ -51,7 +54,8 @@ class ModelOptions:
         Where each white-noise level came from, ``{"gyro" | "accel" | "encoder": "identified" | "declared" |
         "grade"}`` (:func:`graph_calib.records.problem.noise_options`); empty: not said.
     noise_identified : dict
-        What the record showed of its noise (JSON-ready figures for the result's ``noise`` block).
+        What the record showed of its noise (JSON-ready figures for the result's ``noise`` block); under
+        :data:`SWAY_SEEN_KEY` the sway its rests show when ``sway_sigma`` is None (m/s^2; absent when none is seen).
     variance_factors : dict
         ``{kind: factor}``: each measurement kind's (``rotation``, ``gravity``, ``encoder``) covariance
         multiplied by its factor (variance components, :mod:`graph_calib.solvers.variance`); a kind not

@@ -11,6 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
+from graph_calib.model.options import SWAY_SEEN_KEY
 from graph_calib.noise import find_rests, identify_noise, table_noise
 from graph_calib.noise.identify import ENCODER_NOISE_FLOOR, MIN_DWELL_DOF, TERMS
 from graph_calib.noise.rests import segment_static_parts, segment_thresholds
@@ -107,14 +108,21 @@ def build_problem(experiment, *, options=CalibrationOptions()):
         # noise_options, which writes noise_source afresh); a table's record has every keyframe static
         model_options = replace(model_options, moving_sigma=None) if static_mask is None else replace(
             model_options, moving_sigma=1.0, noise_source={**model_options.noise_source, "moving": MOVING_ESTIMATED})
+    accel_noise = model_options.accel_noise if model_options.accel_noise is not None \
+        else grade(model_options.grade).accel_noise
     if isinstance(model_options.sway_sigma, str):
         if model_options.sway_sigma != "estimate":
             raise InputError(f"sway_sigma must be a number of m/s^2, 'estimate' or None, not "
                              f"{model_options.sway_sigma!r}", dataset="sway_sigma")
         model_options = replace(model_options, sway_sigma=sway_from_static(
-            experiment, static, keyframe_s=model_options.keyframe_s,
-            accel_noise=model_options.accel_noise if model_options.accel_noise is not None
-            else grade(model_options.grade).accel_noise))
+            experiment, static, keyframe_s=model_options.keyframe_s, accel_noise=accel_noise))
+    elif model_options.sway_sigma is None and static_mask is not None:
+        # a sway the rests show although no sway term is asked for: the result records it (noise.identified) and the
+        # verdict notes it (solvers/verdict.py), since a short record's residual test does not see it
+        seen = sway_from_static(experiment, static, keyframe_s=model_options.keyframe_s, accel_noise=accel_noise)
+        if seen > 0.0:
+            model_options = replace(model_options, noise_identified={**model_options.noise_identified,
+                                                                     SWAY_SEEN_KEY: seen})
     method = "table" if (experiment.table is not None and np.any(experiment.table.valid)) else "gyrocompass"
     aligned = []
     for i, (piece, st, (a, b)) in enumerate(zip(pieces, static_per, bounds)):

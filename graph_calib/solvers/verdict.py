@@ -25,6 +25,10 @@ correlated from reading to reading, which the encoder factors take as independen
 makes that right (docs/model.md measures the sigmas 1.4 times optimistic at the factor the residuals
 ask for), and the verdict says so in words.
 
+A record without a table whose rests scatter beyond white noise while no sway term models it (the result's
+``noise.identified.sway_seen_mps2``) gets a note naming the sway and ``--sway-sigma estimate``: a short record's
+residual test does not see it (docs/model.md, "A hand").
+
 Without variance factors (``residuals.variance_components`` false: a campaign's tasks) a kind below
 its lower limit is a note, not a failure: the kinds' own approximations keep a right model's rotation
 and encoder kinds below 1 (docs/model.md).  A result without per-kind redundancies (a solver that does
@@ -39,6 +43,7 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from graph_calib.constants import RAD_TO_ARCSEC
+from graph_calib.model.options import SWAY_SEEN_KEY
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
 
 #: Largest chi-square per measurement component of a result without redundancies (the old statistic).
@@ -109,7 +114,17 @@ def judge_kinds(result):
             elif vf < 1.0 / VARIANCE_FACTOR_LIMIT:
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} < 1/{VARIANCE_FACTOR_LIMIT:g} on "
                                 f"the {source.get(sensor, 'assumed')} {sensor} noise: that noise is overstated")
+    seen = (noise.get("identified") or {}).get(SWAY_SEEN_KEY)
+    if seen and not noise.get("sway_mps2"):
+        notes.append(_sway_text(seen))
     return figures, problems, notes
+
+
+def _sway_text(seen_mps2):
+    """The verdict's note on a sway the rests show and no sway term models (docs/model.md, "A hand")."""
+    return (f"gravity: the rests' keyframe means scatter {seen_mps2:.2g} m/s^2 beyond the accelerometer's white noise "
+            f"(a hand's sway, or a bias instability), which the gravity factors take for white noise: the sigmas of "
+            f"what the rests inform may be optimistic (--sway-sigma estimate models it)")
 
 
 def _quiet_readings_text(what, floor_rad):

@@ -17,6 +17,8 @@ from imucal_peer import imucal_ferraris
 pytestmark = pytest.mark.slow
 
 CONSUMER = CalibrationOptions(model=ModelOptions(grade="consumer"))
+#: A hand-held session with short rests (README): the moving keyframes' gravity sigma estimated.
+HAND_HELD = CalibrationOptions(model=ModelOptions(grade="consumer", moving_sigma="estimate"))
 
 
 def _session(tmp_path, seed):
@@ -61,16 +63,15 @@ def _short_rest_session(seed):
     return exp, Calibration.from_result(se.truth), record_rests(exp)
 
 
-@pytest.mark.parametrize("seed", [1, 2, pytest.param(3, marks=pytest.mark.xfail(strict=True, reason=(
-    "one of its rests is detect_static's (a 1-2 s core) and holds no whole keyframe of the grid: it gets no static "
-    "keyframe (keyframes are cut only at the short pass's rests, so that the measured sessions keep theirs), and "
-    "in sample the transitions are 0.154 deg against imucal's 0.073 (0.030 when every rest without a keyframe is cut)")))])
+@pytest.mark.parametrize("seed", [1, 2, 3])
 def test_imucal_and_the_product_on_a_whole_hand_held_ferraris_session(seed):
-    """Rests of 0.5-1.5 s, a swaying hand, a start in motion: every rest found, the gyro scales resolved."""
+    """Rests of 0.5-1.5 s, a swaying hand, a start in motion: every rest found, the gyro scales resolved (the moving
+    keyframes' gravity sigma estimated, as the README says for such a session; in sample, so without the sway term,
+    which deweights the rests these figures are taken on)."""
     exp, truth, rests = _short_rest_session(seed)
     assert rests.shape[0] == 12                     # six faces and the two rests of each full turn
     every = Fold(index=0, spans=((0, exp.n_samples),), rests=(rests,))
-    run = calibrate(exp, options=CONSUMER, solvers=("factor-graph",))
+    run = calibrate(exp, options=HAND_HELD, solvers=("factor-graph",))
     result = run.results["factor-graph"]
     fig = {name: held_out_figures(exp, every, cal) for name, cal in (
         ("raw", None), ("truth", truth), ("imucal", imucal_ferraris(exp, rests)),
@@ -81,16 +82,51 @@ def test_imucal_and_the_product_on_a_whole_hand_held_ferraris_session(seed):
     assert fig["product"].static_norm_std_mps2 <= 1.2 * fig["imucal"].static_norm_std_mps2
 
 
-@pytest.mark.xfail(strict=True, reason="issue 22, open: fitted on one of two folds of a six-face session (half the "
-                   "faces and turns), the product's held-out transitions are 1-4 deg against imucal's 0.1-0.2 deg fitted "
-                   "on the whole record; imucal's model takes each full turn to be exactly about a body axis, which "
-                   "the simulator's hand does, and the product's rotation factors cannot see a turn's cross-axis terms")
+#: The product's options for a swaying hand (README): the moving keyframes' gravity sigma and the sway at rest estimated.
+SWAYING_HAND = CalibrationOptions(model=ModelOptions(grade="consumer", moving_sigma="estimate", sway_sigma="estimate"))
+
+
+def _fold_fit(exp, fold, rests, options):
+    return calibrate(training_record(exp, fold, rests=rests), options=options,
+                     solvers=("factor-graph",)).results["factor-graph"]
+
+
+@pytest.mark.xfail(strict=True, reason=(
+    "the bar lies below the true calibration's own held-out figures: imucal is fitted on the whole record, the held-out "
+    "parts included, and each full turn's gyro column comes from that turn alone; over seeds 1-10 (two folds each) the "
+    "truth's held-out transitions are 0.141 deg rms against imucal's 0.131. The product (sway estimated) gives 0.416 deg "
+    "and 1.14e-2 m/s^2 (imucal 9.4e-3); on seed 1 fold 1 0.152 deg against 0.108, 1.44e-2 m/s^2 against 4.8e-3. Most "
+    "of the rest is the gyro scale about the held-out full turn's axis, which the fold's training record barely informs "
+    "(scripts/turn_diagnosis.py)"))
 def test_held_out_hand_held_ferraris_no_worse_than_imucal():
     exp, _, rests = _short_rest_session(1)
     peer = imucal_ferraris(exp, rests)
     for fold in make_folds(exp, folds=2, by="pairs", rests=rests):
-        cal = Calibration.from_result(calibrate(training_record(exp, fold, rests=rests), options=CONSUMER,
-                                                solvers=("factor-graph",)).results["factor-graph"])
+        cal = Calibration.from_result(_fold_fit(exp, fold, rests, SWAYING_HAND))
         mine, theirs = held_out_figures(exp, fold, cal), held_out_figures(exp, fold, peer)
         assert mine.transitions_rms_deg <= theirs.transitions_rms_deg
         assert mine.static_norm_std_mps2 <= 1.2 * theirs.static_norm_std_mps2
+
+
+def test_imucal_fitted_on_the_held_out_turn_beats_the_true_calibration():
+    """Why the bar above is out of reach: imucal, fitted on the held-out parts too, goes below the truth there."""
+    exp, truth, rests = _short_rest_session(3)
+    peer = imucal_ferraris(exp, rests)
+    fold = make_folds(exp, folds=2, by="pairs", rests=rests)[0]
+    theirs, true = held_out_figures(exp, fold, peer), held_out_figures(exp, fold, truth)
+    assert theirs.transitions_rms_deg < 0.6 * true.transitions_rms_deg          # 0.026 against 0.056 deg
+
+
+def test_the_sway_term_makes_a_hand_held_fold_s_gyro_scales_honest():
+    """A swaying hand unmodelled makes the rests' gravity factors overconfident: seed 4, fold 1 puts the trained full
+    turn's gyro.scale.x 7.9 sigma off (held-out transitions 0.62 deg); with the sway estimated every gyro scale is within
+    2 sigma and the held-out transitions are 0.31 deg."""
+    exp, truth, rests = _short_rest_session(4)
+    fold = make_folds(exp, folds=2, by="pairs", rests=rests)[0]
+    swayed = _fold_fit(exp, fold, rests, SWAYING_HAND)
+    still = _fold_fit(exp, fold, rests, HAND_HELD)
+    true = truth.values()
+    z = [(swayed.values[f"gyro.scale.{a}"] - true[f"gyro.scale.{a}"]) / swayed.sigmas[f"gyro.scale.{a}"] for a in "xyz"]
+    assert np.max(np.abs(z)) < 3.0
+    mine, before = (held_out_figures(exp, fold, Calibration.from_result(r)) for r in (swayed, still))
+    assert mine.transitions_rms_deg < 0.7 * before.transitions_rms_deg

@@ -98,6 +98,24 @@ def test_sway_from_static_sees_a_slow_oscillation_and_not_white_noise():
     assert est == pytest.approx(A / np.sqrt(6.0), rel=0.1)        # variance A^2/2 on one axis of three
 
 
+def test_the_sway_the_rests_show_is_recorded_when_no_term_models_it():
+    """A hand-held Ferraris session whose hand sways at rest (0.05 m/s^2): without a sway term the problem records the
+    sway its rests show (the verdict notes it); with the term it is the term's; a session without sway records none."""
+    from graph_calib.model.options import SWAY_SEEN_KEY
+    from graph_calib.simulation.scenarios import SHORT_REST_FERRARIS
+
+    def problem(sway, **kw):
+        exp = simulate("consumer-ferraris", rng=np.random.default_rng(4), **kw).plans[0].make().experiment
+        return build_problem(exp, options=CalibrationOptions(model=ModelOptions(grade="consumer", sway_sigma=sway)))
+
+    unmodelled = problem(None, **SHORT_REST_FERRARIS).model.options
+    seen = unmodelled.noise_identified[SWAY_SEEN_KEY]
+    assert 0.005 < seen < 0.05, seen
+    modelled = problem("estimate", **SHORT_REST_FERRARIS).model.options
+    assert SWAY_SEEN_KEY not in modelled.noise_identified and modelled.sway_sigma == pytest.approx(seen)
+    assert SWAY_SEEN_KEY not in problem(None).model.options.noise_identified     # still hand, rests of 5-10 s
+
+
 def test_an_unknown_sway_option_is_refused():
     e = make_experiment(with_table=False)
     with pytest.raises(InputError, match="sway_sigma must be a number of m/s\\^2, 'estimate' or None, not 'auto'"):

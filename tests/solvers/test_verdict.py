@@ -119,6 +119,21 @@ def test_table_readings_that_do_not_scatter_fail_the_encoder_kind_in_words():
     assert verdict_of({"factor-graph": _result(kinds, source=quiet["noise"]["source"])}).passed
 
 
+def test_a_sway_the_rests_show_and_no_term_models_is_a_note_naming_the_option():
+    """A short hand-held record's residual test cannot see a hand's sway at rest (docs/model.md, "A hand"): the
+    sway its rests show is noted in words, the verdict still passing; a modelled sway is not noted."""
+    kinds = {"rotation": (1.0, 20.0, 1.0), "gravity": (1.13, 21.0, 1.0)}
+    src = {"gyro": "identified", "accel": "identified", "encoder": "grade"}
+    seen = {"noise": {"source": src, "sway_mps2": 0.0, "identified": {"sway_seen_mps2": 0.0208}}}
+    v = verdict_of({"factor-graph": replace(_result(kinds), extra=seen)})
+    assert v.passed
+    (note,) = v.notes
+    assert "scatter 0.021 m/s^2 beyond the accelerometer's white noise" in note and "--sway-sigma estimate" in note
+    modelled = {"noise": {**seen["noise"], "sway_mps2": 0.0208}}
+    assert verdict_of({"factor-graph": replace(_result(kinds), extra=modelled)}).notes == ()
+    assert verdict_of({"factor-graph": _result(kinds)}).notes == ()
+
+
 def test_disagreeing_solvers_are_told_which_stopped_at_the_lower_cost():
     """Two solvers that disagree: the words name the one at the lower batch cost (the better fit), the sigma ratio
     range to three decimals; equal costs add nothing."""
