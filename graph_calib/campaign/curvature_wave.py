@@ -8,7 +8,9 @@ its linear estimates absorb the orders it lacks: under a cubic truth the 20..30 
 (:mod:`graph_calib.campaign.pooled`) carry curvature a loop adopted somewhere; what only the joint's degree
 shows (the scale factors' curvature, typically) stays missing.
 
-Here, after the joint solve, every experiment whose final model holds fewer orders of a family than the
+The joint is solved before the pooled waves, and a pooled wave that solves an experiment again adds the
+orders it lacks at once (:class:`JointCarry`, :func:`graph_calib.campaign.waves.run_waves`).  Here, after the
+pooled waves, every experiment whose final model still holds fewer orders of a family than the
 joint's degree is solved again (both solvers, warm-started from its current results, the loop's rounds on
 the grown model: a wave like the pooled test's, :func:`graph_calib.campaign.waves.execute_wave`) with the
 missing orders ``*_tc2`` .. ``*_tc<d>`` added as parameters whose prior is what the campaign knows of them:

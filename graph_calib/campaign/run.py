@@ -9,9 +9,10 @@
    ``campaign.json`` and its ``comparison.json``, the truth files read; with the closed loop (default,
    :mod:`graph_calib.campaign.loop`) the results are those of the model the loop chose, and each
    experiment's ``loop`` records the effects added and why, residuals and errors before and after;
-   the joint campaign solver (:func:`graph_calib.campaign.joint_run.solve_joint`) and, where its curves hold
-   orders a subrange's final model lacks, the wave carrying them into those subranges with the joint's
-   curvature as their prior (:mod:`graph_calib.campaign.curvature_wave`), whose results are then final;
+   the joint campaign solver (:func:`graph_calib.campaign.joint_run.solve_joint`) right after the first wave,
+   so that every re-solve of the pooled waves carries the joint curves' orders its model lacks, and, where
+   a final model still lacks some, the wave carrying them into those subranges with the joint's curvature as
+   their prior (:mod:`graph_calib.campaign.curvature_wave`), whose results are then final;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
 5. truth check: the stitched curves against the truth files' ``temperature_curves``, or else against each
    subrange's own truth inside its range (:func:`graph_calib.campaign.truth.truth_check`); the joint
