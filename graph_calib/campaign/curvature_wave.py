@@ -8,7 +8,9 @@ its linear estimates absorb the orders it lacks: under a cubic truth the 20..30 
 (:mod:`graph_calib.campaign.pooled`) carry curvature a loop adopted somewhere; what only the joint's degree
 shows (the scale factors' curvature, typically) stays missing.
 
-Here, after the joint solve, every experiment whose final model holds fewer orders of a family than the
+The joint is solved before the pooled waves, and a pooled wave that solves an experiment again adds the
+orders it lacks at once (:class:`JointCarry`, :func:`graph_calib.campaign.waves.run_waves`).  Here, after the
+pooled waves, every experiment whose final model still holds fewer orders of a family than the
 joint's degree is solved again (both solvers, warm-started from its current results, the loop's rounds on
 the grown model: a wave like the pooled test's, :func:`graph_calib.campaign.waves.execute_wave`) with the
 missing orders ``*_tc2`` .. ``*_tc<d>`` added as parameters whose prior is what the campaign knows of them:
@@ -41,7 +43,7 @@ from __future__ import annotations
 
 import sys
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -102,6 +104,48 @@ def _adoption(effect, *, wave, experiments, degree):
     return {"effect": effect, "kind": KIND, "wave": wave, "experiments": list(experiments),
             "adopted_in": [f"the joint's degree {degree}"], "statistic": None, "dof": None, "threshold": None,
             "log10_p": None}
+
+
+@dataclass(frozen=True)
+class JointCarry:
+    """The joint curves' orders, carried into every re-solve of a pooled wave (:func:`joint_carry`).
+
+    A pooled wave (:func:`graph_calib.campaign.waves.run_waves`) solves an experiment again anyway; with this
+    it also adds the joint curves' orders the experiment's model lacks, each with its prior from the joint
+    (:func:`joint_priors`), so that the experiment is not solved once more by this module's wave.
+
+    Attributes
+    ----------
+    joint : graph_calib.records.experiment.Result
+        The joint result; its verdict passed.
+    """
+
+    joint: object
+
+    def priors(self, result):
+        """:func:`joint_priors` of ``result``."""
+        return joint_priors(self.joint, result)
+
+    def covers(self, effect):
+        """Whether ``effect`` is an order of a family the joint fits, at most its degree (this wave carries it)."""
+        e = EFFECTS.get(effect)
+        if e is None or e.temperature_of is None:
+            return False
+        degree = self.joint.extra[JOINT]["degrees"].get(e.temperature_of)
+        return degree is not None and e.temperature_order <= int(degree)
+
+    def adoption(self, effect, *, wave, experiments):
+        """``campaign.json``'s entry of ``effect`` carried in ``wave`` into ``experiments``."""
+        degree = self.joint.extra[JOINT]["degrees"][EFFECTS[effect].temperature_of]
+        return _adoption(effect, wave=wave, experiments=experiments, degree=degree)
+
+
+def joint_carry(joint):
+    """A :class:`JointCarry` of ``joint``, or None when there is no joint result or its verdict failed (a
+    joint curve that did not converge or does not explain its data is no prior)."""
+    if joint is None or not (joint.extra.get("verdict") or {}).get("passed", True):
+        return None
+    return JointCarry(joint=joint)
 
 
 def run_curvature_wave(planned, pooled, joint, *, options, on_done=None, pool=None, sensor_ranges=None):
@@ -188,4 +232,4 @@ def run_curvature_wave(planned, pooled, joint, *, options, on_done=None, pool=No
     return replace(pooled, document=doc)
 
 
-__all__ = ["KIND", "CARRY_SIGMA", "joint_priors", "run_curvature_wave"]
+__all__ = ["KIND", "CARRY_SIGMA", "JointCarry", "joint_carry", "joint_priors", "run_curvature_wave"]

@@ -9,9 +9,10 @@
    ``campaign.json`` and its ``comparison.json``, the truth files read; with the closed loop (default,
    :mod:`graph_calib.campaign.loop`) the results are those of the model the loop chose, and each
    experiment's ``loop`` records the effects added and why, residuals and errors before and after;
-   the joint campaign solver (:func:`graph_calib.campaign.joint_run.solve_joint`) and, where its curves hold
-   orders a subrange's final model lacks, the wave carrying them into those subranges with the joint's
-   curvature as their prior (:mod:`graph_calib.campaign.curvature_wave`), whose results are then final;
+   the joint campaign solver (:func:`graph_calib.campaign.joint_run.solve_joint`) right after the first wave,
+   so that every re-solve of the pooled waves carries the joint curves' orders its model lacks, and, where
+   a final model still lacks some, the wave carrying them into those subranges with the joint's curvature as
+   their prior (:mod:`graph_calib.campaign.curvature_wave`), whose results are then final;
 4. stitch: every solver's results over temperature (:func:`graph_calib.stitching.stitch`);
 5. truth check: the stitched curves against the truth files' ``temperature_curves``, or else against each
    subrange's own truth inside its range (:func:`graph_calib.campaign.truth.truth_check`); the joint
@@ -32,7 +33,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.campaign.checks import check_inputs, judge_campaign
 from graph_calib.campaign.execution import Pool, execute
-from graph_calib.campaign.curvature_wave import run_curvature_wave
+from graph_calib.campaign.curvature_wave import joint_carry, run_curvature_wave
 from graph_calib.campaign.joint_run import joint_entry, joint_failures, solve_joint
 from graph_calib.campaign.loop import loop_entry
 from graph_calib.campaign.planning import plan_campaign
@@ -143,9 +144,11 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
     pool = Pool(options)        # one cluster for the first wave, the pooled test's waves and the joint's
     try:
         outcomes, compute_timing = _compute(planned, options=options, on_done=on_done, pool=pool)
-        pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool)
+        # the joint curves before the pooled waves: a wave that solves an experiment again carries them too
+        joint, joint_status = solve_joint(planned, _collect_final(planned, outcomes, None),
+                                          progress=options.progress, force=options.force)
+        pooled = run_waves(planned, outcomes, options=options, on_done=on_done, pool=pool, carry=joint_carry(joint))
         collected = _collect_final(planned, outcomes, pooled)
-        joint, joint_status = solve_joint(planned, collected, progress=options.progress, force=options.force)
         carried = run_curvature_wave(planned, pooled, joint, options=options, on_done=on_done, pool=pool,
                                      sensor_ranges={n: s.get("sensor_temperature_range_degC")
                                                     for n, s in collected.summaries.items()})

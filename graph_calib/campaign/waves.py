@@ -134,11 +134,16 @@ class CarriedCurvature:
                 f"{', '.join(self.sources)} adopted is the same IMU's curve there")
 
 
-def carried_curvature(states):
-    """The curvature term to carry next (:class:`CarriedCurvature`), or None when every experiment has it."""
+def carried_curvature(states, *, covered=None):
+    """The curvature term to carry next (:class:`CarriedCurvature`), or None when every experiment has it.
+
+    ``covered``: ``effect -> bool``, the orders the joint curves carry (:meth:`JointCarry.covers
+    <graph_calib.campaign.curvature_wave.JointCarry.covers>`), which are left to them.
+    """
     chosen = {n: set(st.record.get("chosen") or ()) for n, st in states.items()}
     candidates = sorted({c for names in chosen.values() for c in names
-                         if EFFECTS.get(c) is not None and EFFECTS[c].temperature_order >= 2},
+                         if EFFECTS.get(c) is not None and EFFECTS[c].temperature_order >= 2
+                         and not (covered is not None and covered(c))},
                         key=lambda c: (EFFECTS[c].temperature_order, c))
     for c in candidates:
         lacking = tuple(n for n in states if c not in chosen[n])
@@ -167,7 +172,7 @@ def _states(planned, outcomes):
     return states
 
 
-def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
+def run_waves(planned, outcomes, *, options, on_done=None, pool=None, carry=None):
     """The pooled score test and its waves after the first wave of jobs (module docstring).
 
     Parameters
@@ -180,6 +185,10 @@ def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
         Called with each finished wave task's outcome, as in the first wave.
     pool : graph_calib.campaign.execution.Pool, optional
         The first wave's cluster, kept (default: each wave starts its own).
+    carry : graph_calib.campaign.curvature_wave.JointCarry, optional
+        The joint curves, when the joint was solved and its verdict passed: each experiment a wave solves
+        again also gets the orders of the joint curves its model lacks, with the joint's priors, and a
+        curvature term the joint carries is not carried here (:func:`carried_curvature`).
 
     Returns
     -------
@@ -197,7 +206,7 @@ def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
     for wave in range(1, MAX_WAVES + 2):
         tests = pooled_tests({n: final_statistics(st.record) for n, st in states.items()}, alpha=dopts.alpha,
                              identifiable=dopts.identifiable)
-        pick = adoption(tests) or carried_curvature(states)
+        pick = adoption(tests) or carried_curvature(states, covered=carry.covers if carry else None)
         limit = pick is not None and wave > MAX_WAVES
         text = (f"{pick.effect} passes but the limit of {MAX_WAVES} pooled waves is reached" if limit
                 else pick.text() if isinstance(pick, CarriedCurvature) else decision_text(tests, pick))
@@ -207,11 +216,22 @@ def run_waves(planned, outcomes, *, options, on_done=None, pool=None):
             print(f"pooled score test {wave}: {text}", file=sys.stderr, flush=True)
         if pick is None or limit:
             break
-        new = [t for n in pick.experiments
-               for t in wave_tasks(states[n], name=n, effects=(pick.effect,), wave=wave, dopts=dopts)]
+        new, adoptions, priors = [], {}, {}
+        for n in pick.experiments:
+            # the adopted effect with the grade's prior, as the test adopted it; the joint's other orders with theirs
+            joint = carry.priors(next(iter(states[n].results.values()))) if carry else {}
+            joint.pop(pick.effect, None)
+            new += wave_tasks(states[n], name=n, effects=(pick.effect,) + tuple(joint), wave=wave, dopts=dopts,
+                              prior_sigma={e: s for e, (_, s) in joint.items()} or None,
+                              prior_mean={e: m for e, (m, _) in joint.items()} or None)
+            adoptions[n] = [dict(pick.to_json(), wave=wave)] + [
+                carry.adoption(e, wave=wave, experiments=(n,)) for e in joint]
+            if joint:
+                priors[n] = {e: {"mean": m, "sigma": s} for e, (m, s) in joint.items()}
+        if priors:
+            waves[-1]["priors"] = priors       # the joint curves' orders carried along, as the joint wave's
         run = PooledRun(folders=folders, outcomes=wave_outcomes, document={}, adopted=adopted, states=states)
-        execute_wave(run, new, {n: [dict(pick.to_json(), wave=wave)] for n in pick.experiments}, wave=wave,
-                     options=options, on_done=on_done, pool=pool, counts=counts)
+        execute_wave(run, new, adoptions, wave=wave, options=options, on_done=on_done, pool=pool, counts=counts)
     document = {"rule": RULE, "alpha": dopts.alpha, "max_waves": MAX_WAVES, "waves": waves,
                 "seconds": time.perf_counter() - t0, "tasks_computed": counts["computed"],
                 "tasks_cached": counts["cached"], "tasks_failed": counts["failed"]}
