@@ -14,7 +14,10 @@ rotation kind deweights the misfit's noise, not its pull (docs/crossval.md measu
 2. The gravity-only stage: the same problem with the rotation kind's factor :data:`GRAVITY_ONLY_FACTOR` (the gyro
    integrals hardly weigh), solved by the primary solver; its gravity factor is the joint solve's when that is within
    the limit (one solve more), and estimated anew when it is not (the joint solve's then carries the gyro's misfit)
-   or when the test stages the solve (the accelerometer's covariance is then that stage's own).
+   or when the test stages the solve (the accelerometer's covariance is then that stage's own).  Where it keeps the
+   joint's factor, one linearisation of it at the joint solution comes first (:func:`screen_statistic`, the
+   test's statistic to first order): far below the threshold (:data:`SCREEN_FRACTION`), the stage is not solved
+   and the record is solved as before.
 3. The test: the accelerometer elements that stage informs (posterior sigma below
    :data:`graph_calib.solvers.results.PRIOR_DOMINATED_RATIO` of the prior) are compared between the joint solution
    and the gravity-only one, ``d^T C_g^{-1} d`` with ``C_g`` the gravity-only covariance, against the chi-square
@@ -43,6 +46,7 @@ import numpy as np
 from scipy.special import gammaincinv    # not scipy.stats: 0.3 s of every command's start (docs/performance.md)
 
 from graph_calib.model import CalibrationModel
+from graph_calib.model.normal_equations import linearise
 from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import PRIOR_DOMINATED_RATIO
 from graph_calib.solvers.variance import FACTOR_MAX, estimate_variance_components, with_variance_factors
@@ -55,6 +59,10 @@ GRAVITY_ONLY_FACTOR = FACTOR_MAX
 #: stretch the statistic on right models (32.9 on a simulated Ferraris fold, 10 elements: 1e-3's quantile 29.6, this
 #: level's 46.9), while a pull that spoils the accelerometer held out gives thousands (docs/crossval.md).
 STAGE_ALPHA = 1e-6
+#: The screen (:func:`screen_statistic`) skips the gravity-only stage when its one-step statistic is below this
+#: fraction of the test's threshold.  Where the stage keeps the joint's gravity factor the screen's statistic was
+#: within 0.9-1.1 of the solved one on 40 simulated hand-held folds and the Xsens session (docs/crossval.md).
+SCREEN_FRACTION = 0.1
 #: A pinned element's prior sigma, as a fraction of its gravity-only sigma.
 PIN_RATIO = 1e-3
 #: The sensor whose calibration the gravity-only stage gives.
@@ -185,6 +193,11 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
     # opened the gate) and estimated anew when not (it then carries the gyro's misfit): the accelerometer of a
     # staged solve always takes a gravity-only stage with its own factor
     reestimate = float(factors.get("gravity", 1.0)) > VARIANCE_FACTOR_LIMIT
+    if not reestimate:
+        # the stage would keep the joint's weights: its statistic to first order decides whether to solve it
+        screen, screen_dof = screen_statistic(gravity_only, initial=initial, options=options)
+        if screen_dof == 0 or screen < SCREEN_FRACTION * chi2_quantile(screen_dof):
+            return None
     gravity, vc = gravity_stage(reestimate)
     model = problem.model
     _, prior = model.prior()
@@ -201,7 +214,7 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
     d = np.asarray(initial[1], dtype=float)[index] - gravity.x[index]
     cg = gravity.covariance[np.ix_(index, index)]
     statistic = float(d @ np.linalg.solve(cg, d))
-    threshold = float(2.0 * gammaincinv(0.5 * index.size, 1.0 - STAGE_ALPHA))     # chi2.ppf(1 - alpha, dof)
+    threshold = chi2_quantile(index.size)
     staged = statistic > threshold
     dof = int(index.size)
     if staged and vc is None:
@@ -232,6 +245,47 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
                    index=index)
 
 
+def chi2_quantile(dof):
+    """The chi-square quantile ``1 -`` :data:`STAGE_ALPHA` of ``dof`` degrees of freedom (``chi2.ppf``)."""
+    return float(2.0 * gammaincinv(0.5 * dof, 1.0 - STAGE_ALPHA))
+
+
+def screen_statistic(gravity_only, *, initial, options):
+    """The test's statistic to first order: one Gauss-Newton step of the gravity-only problem from the joint solution.
+
+    At the joint solution ``(R, x)`` the gravity-only problem (``gravity_only``, its rotation kind deweighted) is
+    linearised once, the attitudes eliminated; its step ``dx`` and the inverse ``C`` of its reduced information
+    (the calibration prior included) stand for ``x_g - x`` and ``C_g``, and the statistic is
+    ``dx_a^T C_aa^-1 dx_a`` over the accelerometer elements ``C`` informs (as :func:`stage` selects them).  One
+    linearisation instead of a solve: where it is far below the threshold (:data:`SCREEN_FRACTION`) the stage
+    cannot change the answer; near it, or above, :func:`stage` solves the stage and judges by the solved statistic.
+
+    Returns
+    -------
+    statistic : float
+    dof : int
+        The number of accelerometer elements compared.
+    """
+    model = gravity_only.model
+    R, x = initial
+    R, x = np.asarray(R, dtype=float), np.asarray(x, dtype=float)
+    system = linearise(model, model.preintegrate(x), R, x, R_prior=model.segment_priors(gravity_only.q_nb0),
+                       robust=options.graph.robust, robust_k=options.graph.robust_k)
+    A, b, _ = system.reduce(0.0, definite=False)
+    prior = model.calibration_prior(x)
+    A = A + prior.H.T @ prior.H
+    b = b + prior.H.T @ prior.r
+    C = np.linalg.inv(0.5 * (A + A.T))
+    dx = -C @ b
+    _, prior_sigma = model.prior()
+    names = model.layout.element_names()
+    a = np.array([i for i, n in enumerate(names) if n.startswith(PINNED_PREFIX)
+                  and np.sqrt(C[i, i]) < PRIOR_DOMINATED_RATIO * prior_sigma[i]], dtype=int)
+    if a.size == 0:
+        return 0.0, 0
+    return float(dx[a] @ np.linalg.solve(C[np.ix_(a, a)], dx[a])), int(a.size)
+
+
 def pinned_problem(problem, x, sigma, index):
     """``problem`` whose calibration prior holds the elements ``index`` at ``x`` with :data:`PIN_RATIO` ``* sigma``."""
     model = problem.model
@@ -247,5 +301,6 @@ def pinned_problem(problem, x, sigma, index):
     return replace(problem, model=CalibrationModel.from_record(model.record, options=options))
 
 
-__all__ = ["Staging", "stage", "gyro_misfit_gate", "pinned_problem", "GRAVITY_ONLY_FACTOR",
+__all__ = ["Staging", "stage", "gyro_misfit_gate", "pinned_problem", "screen_statistic", "chi2_quantile",
+           "SCREEN_FRACTION", "GRAVITY_ONLY_FACTOR",
            "STAGE_ALPHA", "PIN_RATIO"]

@@ -107,3 +107,33 @@ def test_gyro_misfit_no_longer_spoils_the_accelerometer_held_out():
     for name in staged["pinned"]:
         assert abs(r.values[name] - go.values[name]) < 0.1 * go.sigmas[name], name
         assert r.sigmas[name] == pytest.approx(go.sigmas[name], rel=0.1), name
+
+
+def test_screen_gives_the_solved_statistic_to_first_order(monkeypatch):
+    """A clean hand-held fold whose rotation kind opens the gate (its gravity factor within the limit): the one
+    linearisation's statistic is the solved gravity-only stage's within 10 %, and far below the threshold the
+    stage is not solved."""
+    from graph_calib.calibrate import build_problem
+    from graph_calib.model.calibration_model import reusing_preintegrations
+    from graph_calib.solvers import staged
+    from graph_calib.solvers.variance import weighted_problem, with_variance_factors
+
+    exp = simulate("consumer-handheld", rng=np.random.default_rng(3), n_poses=30).plans[0].make().experiment
+    rests = record_rests(exp)
+    train = training_record(exp, make_folds(exp, folds=2, by="pairs", rests=rests)[1], rests=rests)
+    options = CalibrationOptions(model=ModelOptions(grade="consumer"))
+    with reusing_preintegrations():
+        problem, initial = weighted_problem(build_problem(train, options=options), options=options,
+                                            solver="factor-graph")
+        factors = problem.model.options.variance_factors
+        assert gyro_misfit_gate(problem) and factors["gravity"] <= VARIANCE_FACTOR_LIMIT
+        start = initial["factor-graph"]
+        gravity_only = with_variance_factors(problem, {**factors, "rotation": GRAVITY_ONLY_FACTOR})
+        screen, dof = staged.screen_statistic(gravity_only, initial=start, options=options)
+        assert staged.stage(problem, options=options, solver="factor-graph", initial=start) is None
+        fraction = staged.SCREEN_FRACTION
+        monkeypatch.setattr(staged, "SCREEN_FRACTION", 0.0)
+        solved = staged.stage(problem, options=options, solver="factor-graph", initial=start)
+    assert solved is not None and not solved.staged and solved.dof == dof
+    assert screen == pytest.approx(solved.statistic, rel=0.1)
+    assert 0.1 < solved.statistic < fraction * solved.threshold
