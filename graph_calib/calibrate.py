@@ -21,6 +21,8 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.solvers.orchestration import CalibrationRun, judge, run_solvers
 from graph_calib.solvers.registry import DEFAULT_SOLVERS, PRIMARY_SOLVER, primary_of
+from graph_calib.solvers.results import to_result
+from graph_calib.solvers.staged import stage
 from graph_calib.solvers.variance import tested_problem, weighted_problem
 
 
@@ -54,6 +56,12 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
         # solver's final solve starts from its last solution, every other solver from its own start
         identified = problem
         problem, initial = weighted_problem(problem, options=options, solver=primary_of(solvers), progress=progress)
+        # a table-less record whose gyro model does not fit: the accelerometer from gravity alone when the gyro's
+        # misfit pulls it, every solver then solving the same pinned problem (graph_calib.solvers.staged)
+        staging = stage(problem, options=options, solver=primary_of(solvers),
+                        initial=(initial or {}).get(primary_of(solvers)),
+                        fixed=tuple(identified.model.options.variance_factors or ()), progress=progress)
+        staged = staging is not None and staging.staged
         tests = {}
 
         def structure_of(name, output):
@@ -67,11 +75,19 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
 
                 tests[name] = structure_tests(tested_problem(identified, problem), output)
 
-        run = run_solvers(problem, options=options, solvers=solvers, progress=progress, concurrent=concurrent,
-                          initial=initial, on_output=structure_of, stamp=not options.structure_tests)
-    if not options.structure_tests:
+        run = run_solvers(staging.problem if staged else problem, options=options, solvers=solvers,
+                          progress=progress, concurrent=concurrent,
+                          initial={primary_of(solvers): staging.initial} if staged else initial,
+                          on_output=structure_of, stamp=not (options.structure_tests or staged))
+        if staged:
+            # each output with the honest covariance, its result with the record's own priors and the staging said
+            outputs = {n: staging.finish(o) for n, o in run.outputs.items()}
+            problem = staging.result_problem
+            results = {n: to_result(problem.model, o, extra={"staged": staging.to_json()}) for n, o in outputs.items()}
+            run = replace(run, problem=problem, outputs=outputs, results=results)
+    if not (options.structure_tests or staged):
         return run
-    structure = tests[primary_of(solvers)]
+    structure = tests[primary_of(solvers)] if options.structure_tests else ()
     results, comparison, verdict = judge(run.results, order=solvers, structure=structure)
     return replace(run, results=results, comparison=comparison, verdict=verdict)
 

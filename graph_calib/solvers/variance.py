@@ -107,7 +107,7 @@ def with_variance_factors(problem, factors, *, moving_sigma=None):
 
 
 def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fixed=(), progress=None,
-                                 max_solves=MAX_SOLVES, tolerance=TOLERANCE):
+                                 max_solves=MAX_SOLVES, tolerance=TOLERANCE, initial=None):
     """Estimate each kind's variance factor by solving, rescaling and solving again (module doc).
 
     Parameters
@@ -121,6 +121,8 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
     progress : callable, optional
     max_solves : int
     tolerance : float
+    initial : tuple (R, x), optional
+        Where the first solve starts (default: the solver's own start).
 
     Returns
     -------
@@ -138,7 +140,6 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         moving0 = float(moving)
         factors[MOVING] = factors.get("gravity", 1.0)
     history = []
-    initial = None
     converged = False
     previous = {}                      # kind -> (log factor, log ratio) of the previous solve
     bracket = [None, None]             # log factors of MOVING known too small (ratio > 1) and too large

@@ -54,6 +54,8 @@ RESIDUAL_CHI2_LOW = 0.25
 RESIDUAL_ALPHA = 1e-3
 #: A kind's variance factor beyond this (or below its inverse) fails the verdict.
 VARIANCE_FACTOR_LIMIT = 4.0
+#: The words of a staged solve's problem (:mod:`graph_calib.solvers.staged`), which the verdict line repeats.
+STAGED_WORDS = "the gyro model does not fit"
 #: The measurement kinds the verdict judges, and the sensor whose noise each is weighted by.
 JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder"}
 
@@ -117,7 +119,21 @@ def judge_kinds(result):
     seen = (noise.get("identified") or {}).get(SWAY_SEEN_KEY)
     if seen and not noise.get("sway_mps2"):
         notes.append(_sway_text(seen))
+    staged = _staged_text((result.extra or {}).get("staged"))
+    if staged:
+        problems.append(staged)
     return figures, problems, notes
+
+
+def _staged_text(block):
+    """The verdict's words on a result's ``staged`` block (:mod:`graph_calib.solvers.staged`; None: not staged)."""
+    if not block or not block.get("staged"):
+        return None
+    return (f"{STAGED_WORDS}: its misfit (the joint solve's variance factors rotation "
+            f"{block['rotation_variance_factor']:.3g}, gravity {block.get('gravity_variance_factor', 1.0):.3g}) pulls "
+            f"the accelerometer calibration away from what gravity alone gives (statistic "
+            f"{block['statistic']:.3g} > {block['threshold']:.3g} over {block['dof']} elements): the accelerometer is "
+            f"calibrated from gravity alone and the gyro given it (a staged solve); the gyro model lacks an effect")
 
 
 def _sway_text(seen_mps2):
@@ -204,6 +220,9 @@ class Verdict:
         else:
             agree = f"SOLVERS DISAGREE (max {self.max_difference_sigma:.3g} sigma)"
         resid = self._residual_text()
+        if any(STAGED_WORDS in p for p in self.problems):
+            resid += ("; THE GYRO MODEL DOES NOT FIT: its misfit pulled the accelerometer calibration, which is "
+                      "calibrated from gravity alone, the gyro given it (staged solve)")
         head = "verdict: pass" if self.passed else "verdict: FAIL"
         return f"{head}: {conv}; {agree}; {resid}" + "".join(f"; note: {n}" for n in self.notes)
 
