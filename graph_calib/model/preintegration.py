@@ -92,13 +92,15 @@ class Preintegrated:
     S1, J_S1 : (K, 3), (K, 3, P)   the same weighted by time since the keyframe start, m s
     w_b, J_w_b : (K+1, 3), (K+1, 3, P)  corrected angular rate omega_ib_b at each boundary, rad/s
     reading_dR, reading_J : (M, 3, 3), (M, 3, P)  partial preintegration up to each encoder reading
-    reading_w : (M, 3)  calibrated mean rate of the sample interval holding each reading; its Jacobian
-        in the columns ``gyro_cols`` is formed when asked (:meth:`reading_rate_jacobian`), not stored
-        (0.1 GB for a 3-h record's readings)
+    reading_w : (M, 3)  calibrated mean rate of the sample interval holding each reading, rad/s
+    reading_J_w : (M, 3, G)  its Jacobian in the columns ``gyro_cols`` (G of them), at ``x_lin``, read-only:
+        formed once with ``reading_w`` (the sensor model's inversion gives both), read by every evaluation of
+        the encoder factors (:meth:`reading_rate_jacobian`); 37 MB for a 3-h record's 85,800 readings and
+        the declared model's 18 gyro columns
     gyro_cols : slice
         The columns of ``x`` the calibrated rate depends on.
     record, layout, n_newton
-        What the preintegration was formed from (references; for :meth:`reading_rate_jacobian`).
+        What the preintegration was formed from (references: which record, layout and Newton steps it is of).
     """
 
     x_lin: np.ndarray
@@ -113,6 +115,7 @@ class Preintegrated:
     reading_dR: np.ndarray
     reading_J: np.ndarray
     reading_w: np.ndarray
+    reading_J_w: np.ndarray
     gyro_cols: slice
     record: object
     layout: object
@@ -140,9 +143,8 @@ class Preintegrated:
 
     def reading_rate_jacobian(self, readings=slice(None)):
         """``d reading_w / d x`` in the columns ``gyro_cols``, (m, 3, G), at ``x_lin``, of the readings
-        ``readings`` (a slice): the sensor model's inversion of their sample intervals again, the same call
-        as :func:`preintegrate`'s (bit for bit the same values)."""
-        return _reading_rates(self.record, self.layout, self.x_lin, self.n_newton, self.gyro_cols, readings)[1]
+        ``readings`` (a slice): a read-only view of :attr:`reading_J_w`."""
+        return self.reading_J_w[readings]
 
     def readings_corrected(self, x, readings=slice(None)):
         """The encoder readings' part at ``x`` (of the readings ``readings``, a slice):
@@ -160,25 +162,24 @@ class Preintegrated:
 READING_BLOCK = 8192
 
 
-def _reading_rates(record, layout, x, n_newton, gyro_cols, readings=slice(None), *, jacobian=True):
-    """Calibrated mean rate of each reading's sample interval (m, 3) and its Jacobian in ``gyro_cols``
-    (m, 3, G; None without ``jacobian``), of the readings ``readings`` (a slice).
+def _reading_rates(record, layout, x, n_newton, gyro_cols):
+    """Calibrated mean rate of each reading's sample interval (M, 3), rad/s, and its Jacobian in ``gyro_cols``
+    (M, 3, G).
 
     Sample by sample (the sensor model's inversion is per sample), in blocks of :data:`READING_BLOCK`.
     """
     r = record
-    n_all = r.reading_interval[readings]
+    n_all = r.reading_interval
     M = n_all.size
     w = np.empty((M, 3))
-    J = np.empty((M, 3, gyro_cols.stop - gyro_cols.start)) if jacobian else None
+    J = np.empty((M, 3, gyro_cols.stop - gyro_cols.start))
     for lo in range(0, M, READING_BLOCK):
         n = n_all[lo:lo + READING_BLOCK]
         wb, _, Jb, _ = correct_pair_with_jacobian(layout, x, r.w_raw[n], r.f_raw[n], dTg=r.dTg[n], dTdtg=r.dTdtg[n],
                                                   dTa=r.dTa[n], dTdta=r.dTdta[n], domega=r.dw_raw[n],
                                                   df=r.df_raw[n], n_iter=n_newton)
         w[lo:lo + n.size] = wb
-        if jacobian:
-            J[lo:lo + n.size] = Jb[:, :, gyro_cols]
+        J[lo:lo + n.size] = Jb[:, :, gyro_cols]
     return w, J
 
 
@@ -228,9 +229,13 @@ def preintegrate(record, terms, x, *, layout, n_newton):
     w_b[1:K] = 0.5 * (wl[:-1] + wf[1:])
     Jw_b[1:K] = 0.5 * (Jwl[:-1] + Jwf[1:])
     w_b += r.w_b_fix
-    read_w, _ = _reading_rates(r, layout, x, n_newton, terms.gyro_cols, jacobian=False)
+    # the readings' rates and their Jacobian in the gyro columns at once (the inversion forms both), kept:
+    # every evaluation of the encoder factors at any x reads that Jacobian at x_lin
+    read_w, read_Jw = _reading_rates(r, layout, x, n_newton, terms.gyro_cols)
+    read_Jw.setflags(write=False)
     return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=JR, S=S, J_S=JS, S1=S1, J_S1=JS1, w_b=w_b, J_w_b=Jw_b,
-                         reading_dR=readR, reading_J=readJ, reading_w=read_w, gyro_cols=terms.gyro_cols,
+                         reading_dR=readR, reading_J=readJ, reading_w=read_w, reading_J_w=read_Jw,
+                         gyro_cols=terms.gyro_cols,
                          record=record, layout=layout, n_newton=int(n_newton))
 
 
