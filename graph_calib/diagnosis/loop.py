@@ -20,7 +20,10 @@ The loop solves one record several times (the primary solver, the fit statistics
 further solvers, the grown model), so :func:`diagnose` and :func:`diagnose_from` run inside
 :func:`graph_calib.model.calibration_model.reusing_preintegrations`: the fit statistics at the primary's
 solution, or a solve from a point just preintegrated, take the preintegration already formed there (a
-preintegration depends on the record, the layout, the Newton steps and ``x`` alone: the same values).
+preintegration depends on the record, the layout, the Newton steps and ``x`` alone: the same values).  They
+run BLAS on one thread, as ``calibrate`` does and as a campaign's Dask worker does anyway (its nanny sets
+``OPENBLAS_NUM_THREADS=1``): the rounds' linearisations and the fit statistics multiply matrices of a few tens
+to a hundred columns, where OpenBLAS's threads spin against each other (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
+from threadpoolctl import threadpool_limits
 
 from graph_calib.sensors import effects
 from graph_calib.diagnosis.rounds import (
@@ -488,7 +492,7 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     t_start = time.perf_counter()
     say = progress or (lambda msg: None)
     options = CalibrationOptions() if options is None else options
-    with reusing_preintegrations():      # one record solved several times (module docstring)
+    with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):    # module docstring
         problem = build_problem(experiment, options=options)
         options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
         if options.variance_components and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED:
@@ -543,7 +547,7 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), a
     """
     t_start = time.perf_counter()
     say = progress or (lambda msg: None)
-    with reusing_preintegrations():      # one record solved several times (module docstring)
+    with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):    # module docstring
         problem = build_problem(experiment, options=options)
         model = problem.model
         x0 = model.layout.from_dict(start)
