@@ -35,10 +35,10 @@ class SensorTerms:
         The columns of ``x`` any term touches.
     gyro_rows_compact, accel_rows_compact : ndarray of int64
         The same rows with columns renumbered into ``columns``.
-    gyro_cols : slice
-        The columns the calibrated rate depends on, as one slice (columns in between are zero): the
-        gyro terms', and with ``gyro.g_sensitivity`` the accelerometer terms' too (the gyros see the
-        calibrated specific force).
+    gyro_cols : ndarray of int64
+        The columns the calibrated rate depends on, ascending: the gyro terms', and with
+        ``gyro.g_sensitivity`` the accelerometer terms' too (the gyros see the calibrated specific force).
+        The rate's and the rotation's Jacobians are zero in every other column.
     """
 
     gyro_rows: np.ndarray
@@ -46,7 +46,7 @@ class SensorTerms:
     columns: np.ndarray
     gyro_rows_compact: np.ndarray
     accel_rows_compact: np.ndarray
-    gyro_cols: slice
+    gyro_cols: np.ndarray
 
     @classmethod
     def of(cls, layout):
@@ -57,7 +57,7 @@ class SensorTerms:
         g = gyro[:, 0]
         if np.any(gyro[:, 2] == GSENS):
             g = np.concatenate([g, accel[:, 0]])
-        gyro_cols = slice(int(g.min()), int(g.max()) + 1) if g.size else slice(0, 0)
+        gyro_cols = np.unique(g).astype(np.int64)
         remap = -np.ones(layout.size, dtype=np.int64)
         remap[cols] = np.arange(cols.size)
         gyro_c, accel_c = gyro.copy(), accel.copy()
@@ -91,14 +91,16 @@ class Preintegrated:
     S, J_S : (K, 3), (K, 3, P)     velocity increment in the keyframe-start body frame, m/s
     S1, J_S1 : (K, 3), (K, 3, P)   the same weighted by time since the keyframe start, m s
     w_b, J_w_b : (K+1, 3), (K+1, 3, P)  corrected angular rate omega_ib_b at each boundary, rad/s
-    reading_dR, reading_J : (M, 3, 3), (M, 3, P)  partial preintegration up to each encoder reading
+    reading_dR : (M, 3, 3)  partial preintegration up to each encoder reading
+    reading_J : (M, 3, G)  its right-perturbation Jacobian in the columns ``gyro_cols`` (G of them; the rotation
+        depends on no other column of ``x``)
     reading_w : (M, 3)  calibrated mean rate of the sample interval holding each reading, rad/s
-    reading_J_w : (M, 3, G)  its Jacobian in the columns ``gyro_cols`` (G of them), at ``x_lin``, read-only:
-        formed once with ``reading_w`` (the sensor model's inversion gives both), read by every evaluation of
-        the encoder factors (:meth:`reading_rate_jacobian`); 37 MB for a 3-h record's 85,800 readings and
-        the declared model's 18 gyro columns
-    gyro_cols : slice
-        The columns of ``x`` the calibrated rate depends on.
+    reading_J_w : (M, 3, G)  its Jacobian in the columns ``gyro_cols``, at ``x_lin``, read-only: formed once
+        with ``reading_w`` (the sensor model's inversion gives both), read by every evaluation of the encoder
+        factors (:meth:`reading_rate_jacobian`); 37 MB for a 3-h record's 85,800 readings and the declared
+        model's 18 gyro columns
+    gyro_cols : ndarray of int64
+        The columns of ``x`` the calibrated rate and the rotations depend on (:class:`SensorTerms`), G of them.
     record, layout, n_newton
         What the preintegration was formed from (references: which record, layout and Newton steps it is of).
     """
@@ -116,7 +118,7 @@ class Preintegrated:
     reading_J: np.ndarray
     reading_w: np.ndarray
     reading_J_w: np.ndarray
-    gyro_cols: slice
+    gyro_cols: np.ndarray
     record: object
     layout: object
     n_newton: int
@@ -153,7 +155,7 @@ class Preintegrated:
         J_w = self.reading_rate_jacobian(readings)
         if not np.any(dx):
             return self.reading_dR[readings], self.reading_w[readings], J_w
-        return (self.reading_dR[readings] @ exp_so3(self.reading_J[readings] @ dx),
+        return (self.reading_dR[readings] @ exp_so3(self.reading_J[readings] @ dx[self.gyro_cols]),
                 self.reading_w[readings] + J_w @ dx[self.gyro_cols], J_w)
 
 
@@ -172,7 +174,7 @@ def _reading_rates(record, layout, x, n_newton, gyro_cols):
     n_all = r.reading_interval
     M = n_all.size
     w = np.empty((M, 3))
-    J = np.empty((M, 3, gyro_cols.stop - gyro_cols.start))
+    J = np.empty((M, 3, gyro_cols.size))
     for lo in range(0, M, READING_BLOCK):
         n = n_all[lo:lo + READING_BLOCK]
         wb, _, Jb, _ = correct_pair_with_jacobian(layout, x, r.w_raw[n], r.f_raw[n], dTg=r.dTg[n], dTdtg=r.dTdtg[n],
@@ -233,6 +235,9 @@ def preintegrate(record, terms, x, *, layout, n_newton):
     # every evaluation of the encoder factors at any x reads that Jacobian at x_lin
     read_w, read_Jw = _reading_rates(r, layout, x, n_newton, terms.gyro_cols)
     read_Jw.setflags(write=False)
+    # the readings' rotation Jacobian kept in the gyro columns alone (the others are zero; the kernel's (M, 3, P)
+    # array freed): with the rate Jacobian, less than the (M, 3, P) one alone wherever G < P / 2
+    readJ = readJ[:, :, terms.gyro_cols]
     return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=JR, S=S, J_S=JS, S1=S1, J_S1=JS1, w_b=w_b, J_w_b=Jw_b,
                          reading_dR=readR, reading_J=readJ, reading_w=read_w, reading_J_w=read_Jw,
                          gyro_cols=terms.gyro_cols,
