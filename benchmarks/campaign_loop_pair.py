@@ -3,7 +3,7 @@
 Run by hand (minutes per run; not part of ``make bench``)::
 
     PYTHONPATH=. .venv/bin/python benchmarks/campaign_loop_pair.py [--data /tmp/loop-full/data]
-        [--experiment sub5_30_40] [--pairs 2] [--out /tmp/loop-pair]
+        [--experiment sub5_30_40] [--pairs 2] [--out /tmp/loop-pair] [--loop-only] [--job-only]
 
 ``--data`` is the simulation of ``benchmarks/campaign_loop_full.py`` (6 x 3 h ``nav-campaign``, seed 11,
 ``cubic_scale = 2``; that script writes it).  A one-experiment manifest of ``--experiment`` (its truth file
@@ -15,7 +15,11 @@ solve, report), CPU time of this process, the tasks' wall time (``campaign.json`
 the tasks' CPU time, the loop's own seconds and rounds (``diagnosis.json``), what it added, and the load averages before and
 after (2 cores shared with other work: the CPU time is the steadier figure).  Issue 11's target: the campaign
 with the loop within twice the time of the campaign without it.  docs/performance.md records the figures.
-The same script measures another checkout with ``PYTHONPATH=OTHER``.
+The same script measures another checkout with ``PYTHONPATH=OTHER``.  ``--job-only``: the per-experiment solvers
+alone and no report (no joint solve, no ``report.html``), so that the process's time is mostly the experiment's
+own job (with ``--loop-only --pairs 1``: the one-job benchmark of docs/performance.md).  A campaign's Dask worker
+runs BLAS on one thread (Dask's nanny sets ``OPENBLAS_NUM_THREADS=1``); this process does so only when its
+environment says so: set ``OPENBLAS_NUM_THREADS=1`` to time what a worker does.
 """
 
 from __future__ import annotations
@@ -65,11 +69,13 @@ def _manifest(data, experiment, out):
     return toml
 
 
-def _run(toml, out, *, diagnose):
+def _run(toml, out, *, diagnose, job_only=False):
     load0 = os.getloadavg()
     _TASK_CPU[0] = 0.0
     w0, c0 = time.perf_counter(), time.process_time()
-    run = run_campaign(toml, out, options=CampaignOptions(workers=0, diagnose=diagnose, force=True, progress=False))
+    extra = dict(solvers="per-subrange", report=False) if job_only else {}
+    run = run_campaign(toml, out, options=CampaignOptions(workers=0, diagnose=diagnose, force=True, progress=False,
+                                                          **extra))
     wall, cpu = time.perf_counter() - w0, time.process_time() - c0
     row = {"loop": diagnose, "wall_s": wall, "cpu_s": cpu, "tasks_s": run.document["timing"]["tasks_seconds"],
            "tasks_cpu_s": _TASK_CPU[0],
@@ -89,6 +95,7 @@ def main(argv=None):
     ap.add_argument("--pairs", type=int, default=2)
     ap.add_argument("--out", default="/tmp/loop-pair")
     ap.add_argument("--loop-only", action="store_true", help="only the runs with the loop (another checkout's)")
+    ap.add_argument("--job-only", action="store_true", help="per-experiment solvers only, no report")
     args = ap.parse_args(argv)
     data, out = Path(args.data), Path(args.out)
     if not (data / f"{args.experiment}.h5").is_file():
@@ -101,7 +108,8 @@ def main(argv=None):
     for i in range(args.pairs):
         order = (False, True) if i % 2 == 0 else (True, False)
         for diagnose in ((True,) if args.loop_only else order):
-            row = _run(toml, out / f"run{i}-{'loop' if diagnose else 'plain'}", diagnose=diagnose)
+            row = _run(toml, out / f"run{i}-{'loop' if diagnose else 'plain'}", diagnose=diagnose,
+                       job_only=args.job_only)
             rows.append(row)
             extra = (f", loop {row['loop_s']:.1f} s (rounds {', '.join(f'{s:.1f}' for s in row['rounds_s'])}), "
                      f"added {row['added']}") if diagnose and "loop_s" in row else ""

@@ -15,6 +15,15 @@ candidate is significant (or the limit of added effects is reached).  A round
 After an effect is added the primary solver (the first of ``DiagnosisOptions.solvers``) re-solves the
 same record from the previous solution (:func:`_add_effect`).  Driver signatures significant at the final
 model are reported as ``unexplained``.
+
+The loop solves one record several times (the primary solver, the fit statistics at each solution, the
+further solvers, the grown model), so :func:`diagnose` and :func:`diagnose_from` run inside
+:func:`graph_calib.model.calibration_model.reusing_preintegrations`: the fit statistics at the primary's
+solution, or a solve from a point just preintegrated, take the preintegration already formed there (a
+preintegration depends on the record, the layout, the Newton steps and ``x`` alone: the same values).  They
+run BLAS on one thread, as ``calibrate`` does and as a campaign's Dask worker does anyway (its nanny sets
+``OPENBLAS_NUM_THREADS=1``): the rounds' linearisations and the fit statistics multiply matrices of a few tens
+to a hundred columns, where OpenBLAS's threads spin against each other (docs/performance.md).
 """
 
 from __future__ import annotations
@@ -24,6 +33,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
+from threadpoolctl import threadpool_limits
 
 from graph_calib.sensors import effects
 from graph_calib.diagnosis.rounds import (
@@ -44,6 +54,7 @@ from graph_calib.diagnosis.residuals import (
     residual_statistics,
 )
 from graph_calib.diagnosis.score import score_test, with_priors
+from graph_calib.model.calibration_model import reusing_preintegrations
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.navigation.rotations import exp_so3
@@ -481,20 +492,21 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     t_start = time.perf_counter()
     say = progress or (lambda msg: None)
     options = CalibrationOptions() if options is None else options
-    problem = build_problem(experiment, options=options)
-    options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
-    if options.variance_components and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED:
-        # the moving keyframes' gravity sigma as calibrate estimates it (moving_sigma="estimate"); the kinds'
-        # factors stay the identified noise's: the rounds' tests measure a misfit against it, which factors
-        # estimated from the same residuals would absorb (on the MPU-6050 session the rotation kind's is 72)
-        say("the moving keyframes' gravity sigma ...")
-        problem = estimate_variance_components(problem, options=options, solver=_primary(diagnosis),
-                                               fixed=KINDS).problem
-    say(f"declared model: {problem.model.layout.size} parameters, {problem.model.n_keyframes} keyframes; "
-        f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
-    graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis)
-    return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=truth,
-                      max_added=diagnosis.max_added, starts_x=None, t_start=t_start, say=say)
+    with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):    # module docstring
+        problem = build_problem(experiment, options=options)
+        options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
+        if options.variance_components and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED:
+            # the moving keyframes' gravity sigma as calibrate estimates it (moving_sigma="estimate"); the kinds'
+            # factors stay the identified noise's: the rounds' tests measure a misfit against it, which factors
+            # estimated from the same residuals would absorb (on the MPU-6050 session the rotation kind's is 72)
+            say("the moving keyframes' gravity sigma ...")
+            problem = estimate_variance_components(problem, options=options, solver=_primary(diagnosis),
+                                                   fixed=KINDS).problem
+        say(f"declared model: {problem.model.layout.size} parameters, {problem.model.n_keyframes} keyframes; "
+            f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
+        graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis)
+        return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=truth,
+                          max_added=diagnosis.max_added, starts_x=None, t_start=t_start, say=say)
 
 
 def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), attitudes=None, starts=None,
@@ -535,20 +547,21 @@ def diagnose_from(experiment, *, options, start, diagnosis=DiagnosisOptions(), a
     """
     t_start = time.perf_counter()
     say = progress or (lambda msg: None)
-    problem = build_problem(experiment, options=options)
-    model = problem.model
-    x0 = model.layout.from_dict(start)
-    if attitudes is not None and np.shape(attitudes) == (model.n_keyframes + 1, 3, 3):
-        R0 = np.asarray(attitudes, dtype=float)
-    else:
-        R0 = model.propagate(model.segment_priors(problem.q_nb0), model.preintegrate(x0), x0)
-    say(f"grown model: {model.layout.size} parameters, warm start; "
-        f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
-    graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis, initial=(R0, x0))
-    starts_x = {s: model.layout.from_dict(v) for s, v in (starts or {}).items() if s in diagnosis.solvers[1:]}
-    return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=None,
-                      max_added=diagnosis.max_added if max_added is None else max_added, starts_x=starts_x,
-                      t_start=t_start, say=say)
+    with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):    # module docstring
+        problem = build_problem(experiment, options=options)
+        model = problem.model
+        x0 = model.layout.from_dict(start)
+        if attitudes is not None and np.shape(attitudes) == (model.n_keyframes + 1, 3, 3):
+            R0 = np.asarray(attitudes, dtype=float)
+        else:
+            R0 = model.propagate(model.segment_priors(problem.q_nb0), model.preintegrate(x0), x0)
+        say(f"grown model: {model.layout.size} parameters, warm start; "
+            f"{SOLVER_LABELS.get(_primary(diagnosis), _primary(diagnosis))} ...")
+        graph = _solve_graph(problem, options=options, diagnosis_options=diagnosis, initial=(R0, x0))
+        starts_x = {s: model.layout.from_dict(v) for s, v in (starts or {}).items() if s in diagnosis.solvers[1:]}
+        return _loop_from(experiment, problem, graph, options=options, diagnosis=diagnosis, truth=None,
+                          max_added=diagnosis.max_added if max_added is None else max_added, starts_x=starts_x,
+                          t_start=t_start, say=say)
 
 
 def _loop_from(experiment, problem, graph, *, options, diagnosis, truth, max_added, starts_x, t_start, say):

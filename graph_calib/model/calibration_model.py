@@ -59,10 +59,11 @@ def reusing_preintegrations():
     A preintegration depends on the prepared record, the layout, ``n_newton`` and the calibration ``x`` only
     (not on the noise or the variance factors), so the solves of one record one after the other (the
     variance components' solves, each warm-started from the last solution, and the fit statistics at each
-    solution: :mod:`graph_calib.solvers.variance`) need not form the same one again.  The last
-    :data:`REUSED_PREINTEGRATIONS` formed are held (strongly: for a 3 h record 0.2 GB each) until the block
-    ends, so it is meant for a single record's calibration, not for a campaign's workers.  Blocks nest; the
-    outermost one frees them.
+    solution: :mod:`graph_calib.solvers.variance`; the closed loop's solves and fit statistics:
+    :mod:`graph_calib.diagnosis.loop`) need not form the same one again.  The last
+    :data:`REUSED_PREINTEGRATIONS` formed are held (strongly: for a 3 h record 0.15-0.4 GB each, with the
+    layout) until the block ends, so it is meant for one record's calibration or diagnosis (a campaign
+    worker's job), not held across a worker's jobs.  Blocks nest; the outermost one frees them.
     """
     outer = bool(_REUSE)
     if not outer:

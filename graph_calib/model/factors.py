@@ -341,7 +341,7 @@ def _encoder_block(record, R, preint, x, sl, layout, H_x):
     H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
     # the preintegration and the corrected rate depend on the gyro columns only
     # (summed in place: one (M, 3, G) temporary fewer, 0.1 GB for a 3-h record's readings)
-    G_w = np.swapaxes(Ew, 1, 2) @ preint.reading_J[sl, :, gc]
+    G_w = np.swapaxes(Ew, 1, 2) @ preint.reading_J[sl]
     G_w += (right_jacobian(phi) * rec_reading_dt[:, None, None]) @ J_w
     H_x[:, :, gc] = Jr_inv @ G_w
     del G_w

@@ -35,10 +35,10 @@ class SensorTerms:
         The columns of ``x`` any term touches.
     gyro_rows_compact, accel_rows_compact : ndarray of int64
         The same rows with columns renumbered into ``columns``.
-    gyro_cols : slice
-        The columns the calibrated rate depends on, as one slice (columns in between are zero): the
-        gyro terms', and with ``gyro.g_sensitivity`` the accelerometer terms' too (the gyros see the
-        calibrated specific force).
+    gyro_cols : ndarray of int64
+        The columns the calibrated rate depends on, ascending: the gyro terms', and with
+        ``gyro.g_sensitivity`` the accelerometer terms' too (the gyros see the calibrated specific force).
+        The rate's and the rotation's Jacobians are zero in every other column.
     """
 
     gyro_rows: np.ndarray
@@ -46,7 +46,7 @@ class SensorTerms:
     columns: np.ndarray
     gyro_rows_compact: np.ndarray
     accel_rows_compact: np.ndarray
-    gyro_cols: slice
+    gyro_cols: np.ndarray
 
     @classmethod
     def of(cls, layout):
@@ -57,7 +57,7 @@ class SensorTerms:
         g = gyro[:, 0]
         if np.any(gyro[:, 2] == GSENS):
             g = np.concatenate([g, accel[:, 0]])
-        gyro_cols = slice(int(g.min()), int(g.max()) + 1) if g.size else slice(0, 0)
+        gyro_cols = np.unique(g).astype(np.int64)
         remap = -np.ones(layout.size, dtype=np.int64)
         remap[cols] = np.arange(cols.size)
         gyro_c, accel_c = gyro.copy(), accel.copy()
@@ -91,14 +91,18 @@ class Preintegrated:
     S, J_S : (K, 3), (K, 3, P)     velocity increment in the keyframe-start body frame, m/s
     S1, J_S1 : (K, 3), (K, 3, P)   the same weighted by time since the keyframe start, m s
     w_b, J_w_b : (K+1, 3), (K+1, 3, P)  corrected angular rate omega_ib_b at each boundary, rad/s
-    reading_dR, reading_J : (M, 3, 3), (M, 3, P)  partial preintegration up to each encoder reading
-    reading_w : (M, 3)  calibrated mean rate of the sample interval holding each reading; its Jacobian
-        in the columns ``gyro_cols`` is formed when asked (:meth:`reading_rate_jacobian`), not stored
-        (0.1 GB for a 3-h record's readings)
-    gyro_cols : slice
-        The columns of ``x`` the calibrated rate depends on.
+    reading_dR : (M, 3, 3)  partial preintegration up to each encoder reading
+    reading_J : (M, 3, G)  its right-perturbation Jacobian in the columns ``gyro_cols`` (G of them; the rotation
+        depends on no other column of ``x``)
+    reading_w : (M, 3)  calibrated mean rate of the sample interval holding each reading, rad/s
+    reading_J_w : (M, 3, G)  its Jacobian in the columns ``gyro_cols``, at ``x_lin``, read-only: formed once
+        with ``reading_w`` (the sensor model's inversion gives both), read by every evaluation of the encoder
+        factors (:meth:`reading_rate_jacobian`); 37 MB for a 3-h record's 85,800 readings and the declared
+        model's 18 gyro columns
+    gyro_cols : ndarray of int64
+        The columns of ``x`` the calibrated rate and the rotations depend on (:class:`SensorTerms`), G of them.
     record, layout, n_newton
-        What the preintegration was formed from (references; for :meth:`reading_rate_jacobian`).
+        What the preintegration was formed from (references: which record, layout and Newton steps it is of).
     """
 
     x_lin: np.ndarray
@@ -113,7 +117,8 @@ class Preintegrated:
     reading_dR: np.ndarray
     reading_J: np.ndarray
     reading_w: np.ndarray
-    gyro_cols: slice
+    reading_J_w: np.ndarray
+    gyro_cols: np.ndarray
     record: object
     layout: object
     n_newton: int
@@ -140,9 +145,8 @@ class Preintegrated:
 
     def reading_rate_jacobian(self, readings=slice(None)):
         """``d reading_w / d x`` in the columns ``gyro_cols``, (m, 3, G), at ``x_lin``, of the readings
-        ``readings`` (a slice): the sensor model's inversion of their sample intervals again, the same call
-        as :func:`preintegrate`'s (bit for bit the same values)."""
-        return _reading_rates(self.record, self.layout, self.x_lin, self.n_newton, self.gyro_cols, readings)[1]
+        ``readings`` (a slice): a read-only view of :attr:`reading_J_w`."""
+        return self.reading_J_w[readings]
 
     def readings_corrected(self, x, readings=slice(None)):
         """The encoder readings' part at ``x`` (of the readings ``readings``, a slice):
@@ -151,7 +155,7 @@ class Preintegrated:
         J_w = self.reading_rate_jacobian(readings)
         if not np.any(dx):
             return self.reading_dR[readings], self.reading_w[readings], J_w
-        return (self.reading_dR[readings] @ exp_so3(self.reading_J[readings] @ dx),
+        return (self.reading_dR[readings] @ exp_so3(self.reading_J[readings] @ dx[self.gyro_cols]),
                 self.reading_w[readings] + J_w @ dx[self.gyro_cols], J_w)
 
 
@@ -160,25 +164,24 @@ class Preintegrated:
 READING_BLOCK = 8192
 
 
-def _reading_rates(record, layout, x, n_newton, gyro_cols, readings=slice(None), *, jacobian=True):
-    """Calibrated mean rate of each reading's sample interval (m, 3) and its Jacobian in ``gyro_cols``
-    (m, 3, G; None without ``jacobian``), of the readings ``readings`` (a slice).
+def _reading_rates(record, layout, x, n_newton, gyro_cols):
+    """Calibrated mean rate of each reading's sample interval (M, 3), rad/s, and its Jacobian in ``gyro_cols``
+    (M, 3, G).
 
     Sample by sample (the sensor model's inversion is per sample), in blocks of :data:`READING_BLOCK`.
     """
     r = record
-    n_all = r.reading_interval[readings]
+    n_all = r.reading_interval
     M = n_all.size
     w = np.empty((M, 3))
-    J = np.empty((M, 3, gyro_cols.stop - gyro_cols.start)) if jacobian else None
+    J = np.empty((M, 3, gyro_cols.size))
     for lo in range(0, M, READING_BLOCK):
         n = n_all[lo:lo + READING_BLOCK]
         wb, _, Jb, _ = correct_pair_with_jacobian(layout, x, r.w_raw[n], r.f_raw[n], dTg=r.dTg[n], dTdtg=r.dTdtg[n],
                                                   dTa=r.dTa[n], dTdta=r.dTdta[n], domega=r.dw_raw[n],
                                                   df=r.df_raw[n], n_iter=n_newton)
         w[lo:lo + n.size] = wb
-        if jacobian:
-            J[lo:lo + n.size] = Jb[:, :, gyro_cols]
+        J[lo:lo + n.size] = Jb[:, :, gyro_cols]
     return w, J
 
 
@@ -228,9 +231,16 @@ def preintegrate(record, terms, x, *, layout, n_newton):
     w_b[1:K] = 0.5 * (wl[:-1] + wf[1:])
     Jw_b[1:K] = 0.5 * (Jwl[:-1] + Jwf[1:])
     w_b += r.w_b_fix
-    read_w, _ = _reading_rates(r, layout, x, n_newton, terms.gyro_cols, jacobian=False)
+    # the readings' rates and their Jacobian in the gyro columns at once (the inversion forms both), kept:
+    # every evaluation of the encoder factors at any x reads that Jacobian at x_lin
+    read_w, read_Jw = _reading_rates(r, layout, x, n_newton, terms.gyro_cols)
+    read_Jw.setflags(write=False)
+    # the readings' rotation Jacobian kept in the gyro columns alone (the others are zero; the kernel's (M, 3, P)
+    # array freed): with the rate Jacobian, less than the (M, 3, P) one alone wherever G < P / 2
+    readJ = readJ[:, :, terms.gyro_cols]
     return Preintegrated(x_lin=x.copy(), dR=dR, J_dR=JR, S=S, J_S=JS, S1=S1, J_S1=JS1, w_b=w_b, J_w_b=Jw_b,
-                         reading_dR=readR, reading_J=readJ, reading_w=read_w, gyro_cols=terms.gyro_cols,
+                         reading_dR=readR, reading_J=readJ, reading_w=read_w, reading_J_w=read_Jw,
+                         gyro_cols=terms.gyro_cols,
                          record=record, layout=layout, n_newton=int(n_newton))
 
 

@@ -9,6 +9,7 @@ import pytest
 from graph_calib.sensors import sensor_model as sm
 from graph_calib.model import CalibrationModel, ModelOptions, boundary_rate_correction
 from graph_calib.model.calibration_model import reusing_preintegrations
+from graph_calib.model.preintegration import _reading_rates
 from graph_calib.sensors.effects import FURTHER_EFFECTS
 from graph_calib.sensors.params import Layout
 from graph_calib.navigation.rotations import dcm_to_quat, exp_so3, exp_so3_nb, right_jacobian_nb
@@ -171,6 +172,34 @@ def test_preintegrations_reused_only_inside_the_block_and_only_at_the_same_point
             assert model.preintegrate(nudged) is q
     np.testing.assert_array_equal(p.J_dR, preint.J_dR)                   # the very preintegration, unchanged
     assert model.preintegrate(x) is not p
+
+
+def test_readings_rate_jacobian_is_kept_at_the_linearisation_point(problem):
+    """The readings' rate Jacobian is formed once, with the preintegration: after the encoder factors were
+    evaluated away from ``x_lin`` it is still, bit for bit, the sensor model's inversion at ``x_lin`` (not at
+    the evaluation point), read-only, and it matches central differences of the readings' rates."""
+    model, x, preint, R = problem
+    rng = np.random.default_rng(4)
+    x1 = x + rng.normal(size=x.size) * 1e-4
+    model.encoder_factors(R, preint, x1)
+    gc = preint.gyro_cols
+    n_newton = model.options.n_newton
+    w0, J0 = _reading_rates(model.record, model.layout, preint.x_lin, n_newton, gc)
+    assert preint.reading_J_w.shape == (model.record.reading_sample.size, 3, gc.size)
+    np.testing.assert_array_equal(preint.reading_J_w, J0)
+    np.testing.assert_array_equal(preint.reading_w, w0)
+    np.testing.assert_array_equal(preint.reading_rate_jacobian(slice(3, 17)), J0[3:17])
+    assert not np.array_equal(_reading_rates(model.record, model.layout, x1, n_newton, gc)[1], J0)
+    with pytest.raises(ValueError):
+        preint.reading_J_w[0, 0, 0] = 1.0
+    for i, j in enumerate(gc):
+        d = np.zeros(x.size)
+        d[j] = EPS
+        wp = _reading_rates(model.record, model.layout, preint.x_lin + d, n_newton, gc)[0]
+        wm = _reading_rates(model.record, model.layout, preint.x_lin - d, n_newton, gc)[0]
+        fd = (wp - wm) / (2 * EPS)
+        np.testing.assert_allclose(preint.reading_J_w[:, :, i], fd, rtol=1e-6,
+                                   atol=1e-9 * (1 + np.abs(fd).max()))
 
 
 # ---------------------------------------------------------------------------
@@ -375,6 +404,9 @@ def test_preintegration_kernel_matches_direct_recursion(extra, keyframe_s):
     others = np.setdiff1d(np.arange(model.layout.size), cols)
     for name, b in ref.items():
         a = getattr(preint, name)
+        if name == "reading_J":                 # kept in the gyro columns alone: the others must be zero
+            a = np.zeros(a.shape[:-1] + (model.layout.size,))
+            a[..., preint.gyro_cols] = preint.reading_J
         assert a.shape[:-1] == b.shape[:-1], name
         if name.startswith(("J_", "reading_J")):
             assert not np.any(a[..., others]), name
