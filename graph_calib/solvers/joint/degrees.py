@@ -18,7 +18,8 @@ Why not the Bayesian information criterion: its price ``k ln n`` grows with the 
 for three coefficients at about 300,000), so on a long campaign it drops an order whose coefficients are
 six or seven sigma from zero and leaves that much error in the curve.  The Wald test's threshold does not
 grow with ``n``: what it drops is, jointly, within about 3.4 sigma of zero, so the error the dropped order
-leaves is bounded in the curve's own sigma.
+leaves is bounded in the sigma of the model that holds it.  In the reported (lower-degree) curve's own sigma, which
+is smaller, it can be more: at the edge of the range the leftover can reach 4 of them (docs/campaign.md, "Seeds").
 
 **The next order.**  For every family the test of the order past the chosen degree is part of the evidence
 (``next_order``): below its threshold when the chosen degree is lower than the registry's highest; when the
