@@ -46,7 +46,7 @@ import numpy as np
 from scipy.special import gammaincinv    # not scipy.stats: 0.3 s of every command's start (docs/performance.md)
 
 from graph_calib.model import CalibrationModel
-from graph_calib.model.normal_equations import linearise
+from graph_calib.model.normal_equations import add_prior, linearise
 from graph_calib.solvers.registry import solve
 from graph_calib.solvers.results import PRIOR_DOMINATED_RATIO
 from graph_calib.solvers.variance import FACTOR_MAX, estimate_variance_components, with_variance_factors
@@ -204,9 +204,7 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
     names = gravity.layout.element_names()
 
     def informed(output):
-        sig = output.sigma
-        return np.array([i for i, n in enumerate(names)
-                         if n.startswith(PINNED_PREFIX) and sig[i] < PRIOR_DOMINATED_RATIO * prior[i]], dtype=int)
+        return informed_accel(names, output.sigma, prior)
 
     index = informed(gravity)
     if index.size == 0:
@@ -245,6 +243,13 @@ def stage(problem, *, options, solver, initial=None, fixed=(), progress=None):
                    index=index)
 
 
+def informed_accel(names, sigma, prior_sigma):
+    """Positions of the accelerometer elements whose ``sigma`` is below
+    :data:`graph_calib.solvers.results.PRIOR_DOMINATED_RATIO` of their ``prior_sigma`` (those gravity informs)."""
+    return np.array([i for i, n in enumerate(names)
+                     if n.startswith(PINNED_PREFIX) and sigma[i] < PRIOR_DOMINATED_RATIO * prior_sigma[i]], dtype=int)
+
+
 def chi2_quantile(dof):
     """The chi-square quantile ``1 -`` :data:`STAGE_ALPHA` of ``dof`` degrees of freedom (``chi2.ppf``)."""
     return float(2.0 * gammaincinv(0.5 * dof, 1.0 - STAGE_ALPHA))
@@ -272,15 +277,12 @@ def screen_statistic(gravity_only, *, initial, options):
     system = linearise(model, model.preintegrate(x), R, x, R_prior=model.segment_priors(gravity_only.q_nb0),
                        robust=options.graph.robust, robust_k=options.graph.robust_k)
     A, b, _ = system.reduce(0.0, definite=False)
-    prior = model.calibration_prior(x)
-    A = A + prior.H.T @ prior.H
-    b = b + prior.H.T @ prior.r
+    A, b = A.copy(), b.copy()
+    add_prior(A, b, model.calibration_prior(x), np.arange(x.size))
     C = np.linalg.inv(0.5 * (A + A.T))
     dx = -C @ b
     _, prior_sigma = model.prior()
-    names = model.layout.element_names()
-    a = np.array([i for i, n in enumerate(names) if n.startswith(PINNED_PREFIX)
-                  and np.sqrt(C[i, i]) < PRIOR_DOMINATED_RATIO * prior_sigma[i]], dtype=int)
+    a = informed_accel(model.layout.element_names(), np.sqrt(np.diag(C)), prior_sigma)
     if a.size == 0:
         return 0.0, 0
     return float(dx[a] @ np.linalg.solve(C[np.ix_(a, a)], dx[a])), int(a.size)
