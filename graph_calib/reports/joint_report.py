@@ -93,10 +93,12 @@ def joint_sections(run, fig):
             blocks.append(fig(f, f"{p}: the joint curve (degree {deg}) with its one-sigma band from the joint "
                                  "covariance, over each subrange's estimate at its reference temperature."))
     choice = "; ".join(
-        f"{c['family']}: degree {c['degree']} ("
-        + ", ".join(f"order {t['order']} Wald {t['wald']:.3g} vs "
-                    + (f"BIC price {t['bic_price']:.3g}" if "bic_price" in t else f"threshold {t['threshold']:.3g}")
-                    for t in c["tests"])
+        f"{c['family']}: degree {c['degree']}"
+        + (f" (the data show {c['significant_degree']}; holding the rest widens its sigma by at most "
+           f"{c.get('widening', 1.0):.2f}x)" if c.get("significant_degree") not in (None, c["degree"]) else "")
+        + " (" + ", ".join(f"order {t['order']} Wald {t['wald']:.3g} vs "
+                           + (f"BIC price {t['bic_price']:.3g}" if "bic_price" in t else f"threshold {t['threshold']:.3g}")
+                           for t in c["tests"])
         + ")" for c in entry.get("degree_choice", []))
     tc = entry.get("truth_check") or {}
     truth = (f"Against the truth ({tc['mode']}): {100 * tc['fraction_within_2sigma']:.1f} % of {tc['points']} points "

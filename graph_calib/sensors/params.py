@@ -34,6 +34,27 @@ def split_element_name(flat):
     return name, element
 
 
+#: The six sensors whose temperatures the record holds, in its column order.
+SENSORS = ("gyro.x", "gyro.y", "gyro.z", "accel.x", "accel.y", "accel.z")
+
+
+def sensor_of(element):
+    """Index (0..5, :data:`SENSORS`) of the sensor whose temperature an element follows, or None.
+
+    ``gyro.*`` and ``accel.*`` elements belong to the axis their element name
+    starts with (``gyro.misalignment.zx`` -> gyro z); other parameters (mount,
+    lever arm, time lags) have no sensor.
+
+    >>> sensor_of("accel.bias.y"), sensor_of("gyro.misalignment.zx"), sensor_of("mount.x")
+    (4, 2, None)
+    """
+    name, el = split_element_name(element)
+    triad = name.split(".", 1)[0]
+    if triad not in ("gyro", "accel") or not el:
+        return None
+    return (0 if triad == "gyro" else 3) + "xyz".index(el[0])
+
+
 @dataclass(frozen=True)
 class Layout:
     """Which parameters a calibration vector holds, in canonical catalogue order.
@@ -158,6 +179,7 @@ class Grade:
         for n in layout.names:
             s[layout.slice(n)] = self.prior_sigma[n]
         return s
+
 
 
 def _grade(name, *, gb, gbtc, gs, gstc, gm, ab, abtc, as_, astc, am, mount, lever, lag,

@@ -15,11 +15,9 @@ import numpy as np
 from scipy.stats import norm
 
 from graph_calib.sensors import params
+from graph_calib.sensors.params import SENSORS, sensor_of
 from graph_calib.sensors.curves import evaluate_polynomial_curve
 from graph_calib.sensors.effects import REGISTRY, temperature_family
-
-#: The six sensors whose temperatures the model uses, in ``temperature_map`` order.
-SENSORS = ("gyro.x", "gyro.y", "gyro.z", "accel.x", "accel.y", "accel.z")
 
 #: Models that :func:`graph_calib.stitching.stitch` fits.
 MODELS = ("linear", "cubic", "constant")
@@ -29,23 +27,6 @@ BOUNDARY_Z_LIMIT = 3.0
 
 #: Family-wise false-alarm probability of the boundary verdict (see :func:`family_z_limit`).
 FAMILY_FALSE_ALARM = 0.01
-
-
-def sensor_of(element):
-    """Index (0..5, :data:`SENSORS`) of the sensor whose temperature an element follows, or None.
-
-    ``gyro.*`` and ``accel.*`` elements belong to the axis their element name
-    starts with (``gyro.misalignment.zx`` -> gyro z); other parameters (mount,
-    lever arm, time lags) have no sensor.
-
-    >>> sensor_of("accel.bias.y"), sensor_of("gyro.misalignment.zx"), sensor_of("mount.x")
-    (4, 2, None)
-    """
-    name, el = params.split_element_name(element)
-    triad = name.split(".", 1)[0]
-    if triad not in ("gyro", "accel") or not el:
-        return None
-    return (0 if triad == "gyro" else 3) + "xyz".index(el[0])
 
 
 def family(parameter):

@@ -8,12 +8,12 @@
   driver's (:mod:`graph_calib.solvers.least_squares`), the factor graph's too.
 """
 
-from graph_calib.solvers.joint.degrees import DegreeEvidence, choose_degrees_wald
+from graph_calib.solvers.joint.degrees import DegreeEvidence, choose_degrees
 from graph_calib.solvers.joint.solver import JOINT, JointOutput, JointSolver, WarmStart, solve_joint
 from graph_calib.solvers.joint.unknowns import (
     MAX_DEGREE, SETUP_PARAMETERS, Unknowns, curve_label, curve_row, evaluate_curve, plan_unknowns,
 )
 
-__all__ = ["JOINT", "DegreeEvidence", "JointOutput", "JointSolver", "WarmStart", "choose_degrees_wald", "solve_joint",
+__all__ = ["JOINT", "DegreeEvidence", "JointOutput", "JointSolver", "WarmStart", "choose_degrees", "solve_joint",
            "MAX_DEGREE", "SETUP_PARAMETERS", "Unknowns", "curve_label", "curve_row", "evaluate_curve",
            "plan_unknowns"]

@@ -2,30 +2,50 @@ r"""The degree of each joint curve family, chosen by a rule that controls the er
 
 The joint solve estimates every temperature family (``gyro.bias``, ``gyro.scale``, ``accel.bias``,
 ``accel.scale``) at the highest degree the effect registry holds (:data:`graph_calib.sensors.effects.MAX_TEMPERATURE_ORDER`,
-5).  Then per family, from the highest order down to 2, the order's coefficients ``c`` (all three axes) are
-tested against zero with their covariance ``Sigma`` from the joint solution:
+5).  Two questions are then answered per family, from the highest order down.
+
+**Which orders the data show** (the evidence).  The order's coefficients ``c`` (all three axes) are tested
+against zero with their covariance ``Sigma`` from the joint solution:
 
 .. math::
 
     W = c^T \Sigma^{-1} c \;\sim\; \chi^2_k \text{ under the null } (k = 3),
 
-and the order is kept when ``W > chi2.isf(alpha, k)`` (``alpha`` = :data:`DEGREE_ALPHA`, 0.01, the closed
-loop's level per decision; 11.3 for three coefficients).  An order that is not kept is dropped: the estimate
-is conditioned on its coefficients being zero (the Gauss-Newton solution of the smaller model at the same
-linearisation point) and the next lower order is tested.  The linear terms are declared and always kept.
+significant when ``W > chi2.isf(alpha, k)`` (``alpha`` = :data:`DEGREE_ALPHA`, 0.01, the closed loop's level
+per decision; 11.3 for three coefficients).  An order that is not significant is conditioned to zero
+(the Gauss-Newton solution of the smaller model at the same linearisation point) and the next lower order
+is tested.  The highest significant order is the family's ``significant_degree`` (1 when none is: the linear
+terms are declared).
+
+**Which orders the reported curve holds** (the error it leaves).  Dropping an order the test did not see
+is not free: a real order a test of limited power misses stays in the curve as an error its sigma does not
+cover (model selection makes the reported sigma optimistic).  On ten simulated six-subrange campaigns with
+cubic truths, curves cut back to the significant degree left two campaigns with points 3.7-4.0 sigma off and
+86-89 % within 2 sigma, where the curves holding every order stayed within 3.84 sigma and 91.7 % (docs/
+campaign.md, "Curve degree").  So an order that is not significant is dropped only when holding it costs
+much: when it widens the family's curve sigma by more than :data:`RHO_MAX` (1.5) somewhere over its
+sensor's temperature span,
+
+.. math::
+
+    \rho = \max_T \frac{\sigma_{d}(T)}{\sigma_{d-1}(T)} > \rho_{max},
+
+(``sigma_d`` the curve's sigma holding orders up to ``d``, ``sigma_{d-1}`` with order ``d`` conditioned to
+zero).  The first order kept ends the descent: the curve holds every order up to its ``degree``, and never
+fewer than the significant ones.  Where the data constrain every order (a campaign spanning its range with
+several subranges: ``rho`` 1.25-1.37 measured) the curve keeps the registry's full degree at a cost of at
+most that factor in sigma; where they do not (two subranges, a narrow range), the poorly determined orders
+go and the curve is the significant one.
+
+**The next order.**  For every family the test of the order past the significant degree is part of the
+evidence (``next_order``): below its threshold when the significant degree is lower than the registry's
+highest; when the highest order itself is significant, the curve has no capacity left to test, and
+``next_order.passed`` is False with the reason in words: the campaign's verdict fails on it
+(:mod:`graph_calib.campaign.checks`).
 
 Why not the Bayesian information criterion: its price ``k ln n`` grows with the number of measurements (41
 for three coefficients at about 300,000), so on a long campaign it drops an order whose coefficients are
-six or seven sigma from zero and leaves that much error in the curve.  The Wald test's threshold does not
-grow with ``n``: what it drops is, jointly, within about 3.4 sigma of zero, so the error the dropped order
-leaves is bounded in the sigma of the model that holds it.  In the reported (lower-degree) curve's own sigma, which
-is smaller, it can be more: at the edge of the range the leftover can reach 4 of them (docs/campaign.md, "Seeds").
-
-**The next order.**  For every family the test of the order past the chosen degree is part of the evidence
-(``next_order``): below its threshold when the chosen degree is lower than the registry's highest; when the
-highest order itself was needed, the curve has no capacity left to test, and ``next_order.passed`` is False
-with the reason in words: the campaign's verdict fails on it
-(:mod:`graph_calib.campaign.checks`).
+six or seven sigma from zero and leaves that much error in the curve.
 """
 
 from __future__ import annotations
@@ -36,16 +56,23 @@ import numpy as np
 from scipy import stats
 from scipy.special import gammaln
 
-from graph_calib.sensors.params import split_element_name
-from graph_calib.solvers.joint.unknowns import curve_label
+from graph_calib.sensors.params import sensor_of, split_element_name
+from graph_calib.solvers.joint.unknowns import curve_label, curve_row
 
 #: Level of each order's Wald test (the closed loop's per-decision level).
 DEGREE_ALPHA = 0.01
+#: An order the Wald test did not see is dropped from the curve only when holding it widens the curve's
+#: sigma by more than this factor somewhere over the sensor's span.
+RHO_MAX = 1.5
+#: Temperatures per sensor span at which ``rho`` is evaluated.
+RHO_POINTS = 21
 
 #: The rule in words (result file, campaign.json, report).
-DEGREE_RULE = ("per family, from the highest order down to 2: the order's coefficients (three axes) tested against "
-               "zero by their Wald statistic from the joint covariance, kept when above chi2.isf(alpha, 3); a dropped "
-               "order conditions the estimate on its coefficients being zero")
+DEGREE_RULE = ("per family, from the highest order down: the order's coefficients (three axes) tested against zero "
+               "by their Wald statistic from the joint covariance (significant above chi2.isf(alpha, 3)); an order "
+               f"not significant is dropped from the curve only when holding it widens the curve's sigma by more "
+               f"than {RHO_MAX:g} somewhere over the sensor's span, and the dropped order conditions the estimate "
+               "on its coefficients being zero")
 
 
 @dataclass(frozen=True)
@@ -57,25 +84,36 @@ class DegreeEvidence:
     family : str
         ``gyro.bias``, ...
     degree : int
-        Degree kept.
+        Degree the reported curve holds.
+    significant_degree : int
+        Highest order the Wald tests find significant (1 when none is).
+    widening : float
+        The price of the orders the curve holds beyond the significant ones: ``max_T`` of the reported curve's
+        sigma over the significant curve's, over the sensors' spans (1 when it holds none).
     tests : list of dict
         Per order tested (highest first): ``order``, ``wald``, ``k`` (coefficients), ``threshold``
-        (``chi2.isf(alpha, k)``), ``log10_p``, ``kept``.
+        (``chi2.isf(alpha, k)``), ``log10_p``, ``significant``, ``rho`` (the widening holding it causes; None
+        at or below the significant degree), ``kept`` (in the reported curve).
     next_order : dict
-        The test of order ``degree + 1``: ``order``, ``wald``, ``threshold``, ``passed`` (not significant), and
-        ``text``; with ``wald`` None when ``degree`` is the highest order the curves hold (``passed`` False).
+        The test of order ``significant_degree + 1``: ``order``, ``wald``, ``threshold``, ``passed`` (not
+        significant), and ``text``; with ``wald`` None when the significant degree is the highest order the
+        curves hold (``passed`` False).
     alpha : float
     """
 
     family: str
     degree: int
+    significant_degree: int
+    widening: float
     tests: list
     next_order: dict
     alpha: float = DEGREE_ALPHA
 
     def to_json(self):
-        return {"family": self.family, "degree": self.degree, "rule": "wald", "alpha": self.alpha,
-                "tests": list(self.tests), "next_order": dict(self.next_order)}
+        return {"family": self.family, "degree": self.degree, "significant_degree": self.significant_degree,
+                "widening": self.widening,
+                "rule": "wald+rho", "alpha": self.alpha, "rho_max": RHO_MAX, "tests": list(self.tests),
+                "next_order": dict(self.next_order)}
 
 
 def log10_chi2_sf(statistic, dof):
@@ -89,18 +127,53 @@ def log10_chi2_sf(statistic, dof):
     return float(((h - 1.0) * np.log(x) - 0.5 * x - (h - 1.0) * np.log(2.0) - gammaln(h)) / np.log(10.0))
 
 
-def _next_order(family, degree, max_degree, tests):
-    if degree >= max_degree:
-        return {"order": degree + 1, "wald": None, "threshold": None, "passed": False,
-                "text": f"{family}: order {degree} (the highest the curves hold) is significant, so an order "
-                        f"{degree + 1} cannot be ruled out: the curve may lack the capacity the data need"}
-    t = next(t for t in tests if t["order"] == degree + 1)
-    return {"order": degree + 1, "wald": t["wald"], "threshold": t["threshold"], "passed": not t["kept"],
-            "text": f"{family}: order {degree + 1} Wald {t['wald']:.3g} <= {t['threshold']:.3g} (alpha {t['alpha']:g})"}
+def _next_order(family, significant, max_degree, tests):
+    if significant >= max_degree:
+        return {"order": significant + 1, "wald": None, "threshold": None, "passed": False,
+                "text": f"{family}: order {significant} (the highest the curves hold) is significant, so an order "
+                        f"{significant + 1} cannot be ruled out: the curve may lack the capacity the data need"}
+    t = next(t for t in tests if t["order"] == significant + 1)
+    return {"order": significant + 1, "wald": t["wald"], "threshold": t["threshold"], "passed": not t["significant"],
+            "text": f"{family}: order {significant + 1} Wald {t['wald']:.3g} <= {t['threshold']:.3g} (alpha {t['alpha']:g})"}
 
 
-def choose_degrees_wald(unknowns, theta, covariance, *, n_measurements=None, alpha=DEGREE_ALPHA):
-    """Each curve family's degree by the Wald test at ``alpha`` (module docstring).
+def _condition(th, C, D):
+    """``(th, C)`` conditioned on ``th[D] = 0`` (dropped entries zero)."""
+    cD = th[D]
+    G = np.linalg.lstsq(C[np.ix_(D, D)], C[D, :], rcond=None)[0].T          # C[:, D] C_DD^-1
+    th = th - G @ cD
+    C = C - G @ C[D, :]
+    C = 0.5 * (C + C.T)
+    th[D] = 0.0
+    C[D, :] = 0.0
+    C[:, D] = 0.0
+    return th, C
+
+
+def _curve_sigma(C, cols, V):
+    return np.sqrt(np.clip(np.einsum("ij,jk,ik->i", V, C[np.ix_(cols, cols)], V), 0.0, None))
+
+
+def _widening(unknowns, elements, spans, *, high, low):
+    """``max_T sigma_high(T) / sigma_low(T)`` over the family's elements and their sensors' spans: ``high`` and
+    ``low`` are ``(covariance, degree)`` of the same curve holding more and fewer orders."""
+    idx = unknowns.z_index()
+    (C_hi, d_hi), (C_lo, d_lo) = high, low
+    rho = 1.0
+    for f in elements:
+        T = np.linspace(*spans[sensor_of(f)], RHO_POINTS)
+        V = curve_row(T, unknowns.t0_degC, d_hi)
+        cols = [idx[curve_label(f, k)] for k in range(d_hi + 1)]
+        s_hi = _curve_sigma(C_hi, cols, V)
+        s_lo = _curve_sigma(C_lo, cols[:d_lo + 1], V[:, :d_lo + 1])
+        ok = s_lo > 0
+        if np.any(ok):
+            rho = max(rho, float(np.max(s_hi[ok] / s_lo[ok])))
+    return rho
+
+
+def choose_degrees(unknowns, theta, covariance, *, sensor_spans, alpha=DEGREE_ALPHA, rho_max=RHO_MAX):
+    """Each curve family's significant degree and the degree its reported curve holds (module docstring).
 
     Parameters
     ----------
@@ -108,20 +181,23 @@ def choose_degrees_wald(unknowns, theta, covariance, *, n_measurements=None, alp
         At the full degrees.
     theta : ndarray, shape (Nt,)
     covariance : ndarray, shape (Nt, Nt)
-    n_measurements : int, optional
-        Not used by the rule (kept for the solver's call).
+    sensor_spans : array_like, shape (6, 2)
+        Each sensor's temperature span over the campaign (gyro x, y, z, accel x, y, z), degC: where the curve's
+        widening is judged.
     alpha : float
+    rho_max : float
 
     Returns
     -------
     unknowns : Unknowns
-        With the degrees kept.
+        With the degrees the reported curves hold.
     keep : ndarray of bool, shape (Nt,)
         Which entries of ``theta`` remain.
     theta, covariance : ndarray
         Conditioned on the dropped coefficients being zero (full size; dropped entries zero).
     choices : tuple of DegreeEvidence
     """
+    spans = np.asarray(sensor_spans, dtype=float).reshape(6, 2)
     th = np.asarray(theta, dtype=float).copy()
     C = np.asarray(covariance, dtype=float).copy()
     keep = np.ones(th.size, dtype=bool)
@@ -129,32 +205,40 @@ def choose_degrees_wald(unknowns, theta, covariance, *, n_measurements=None, alp
     degrees, choices = dict(unknowns.degrees), []
     for base, d_max in unknowns.degrees.items():
         elements = [f for f in unknowns.curve_elements() if split_element_name(f)[0] == base]
-        tests, d = [], d_max
-        while d >= 2:
+        tests, degree, significant = [], None, 1
+        th_e, C_e = th, C                    # the evidence's descent: every order not significant conditioned out
+        for d in range(d_max, 1, -1):
             D = [idx[curve_label(f, d)] for f in elements]
-            cD, CD = th[D], C[np.ix_(D, D)]
+            cD, CD = th_e[D], C_e[np.ix_(D, D)]
             wald = float(cD @ np.linalg.lstsq(CD, cD, rcond=None)[0])
             threshold = float(stats.chi2.isf(alpha, len(D)))
-            kept = wald > threshold
-            tests.append({"order": d, "wald": wald, "k": len(D), "threshold": threshold, "alpha": alpha,
-                          "log10_p": log10_chi2_sf(wald, len(D)), "kept": bool(kept)})
-            if kept:
+            test = {"order": d, "wald": wald, "k": len(D), "threshold": threshold, "alpha": alpha,
+                    "log10_p": log10_chi2_sf(wald, len(D)), "significant": bool(wald > threshold), "rho": None}
+            tests.append(test)
+            if test["significant"]:
+                significant = d
                 break
-            G = np.linalg.lstsq(CD, C[D, :], rcond=None)[0].T          # C[:, D] CD^-1
-            th = th - G @ cD
-            C = C - G @ C[D, :]
-            C = 0.5 * (C + C.T)
-            th[D] = 0.0
-            C[D, :] = 0.0
-            C[:, D] = 0.0
-            keep[D] = False
-            d -= 1
-        degrees[base] = d
-        choices.append(DegreeEvidence(family=base, degree=d, tests=tests, next_order=_next_order(base, d, d_max, tests),
-                                      alpha=alpha))
+            th_next, C_next = _condition(th_e, C_e, D)
+            if degree is None:
+                test["rho"] = _widening(unknowns, elements, spans, high=(C_e, d), low=(C_next, d - 1))
+                if test["rho"] <= rho_max:
+                    degree = d                   # the curve holds this order and every lower one
+                else:
+                    th, C = th_next, C_next      # the reported curve drops it too
+                    keep[D] = False
+            th_e, C_e = th_next, C_next
+        degree = max(significant, degree or 1)
+        for t in tests:
+            t["kept"] = t["order"] <= degree
+        widening = (_widening(unknowns, elements, spans, high=(C, degree), low=(C_e, significant))
+                    if degree > significant else 1.0)
+        degrees[base] = degree
+        choices.append(DegreeEvidence(family=base, degree=degree, significant_degree=significant, widening=widening,
+                                      tests=tests,
+                                      next_order=_next_order(base, significant, d_max, tests), alpha=alpha))
     z_names = tuple(n for n, k in zip(unknowns.z_names, keep[:unknowns.nz]) if k)
     reduced = replace(unknowns, degrees=degrees, z_names=z_names)
     return reduced, keep, th, C, tuple(choices)
 
 
-__all__ = ["DEGREE_ALPHA", "DEGREE_RULE", "DegreeEvidence", "choose_degrees_wald"]
+__all__ = ["DEGREE_ALPHA", "DEGREE_RULE", "RHO_MAX", "DegreeEvidence", "choose_degrees"]

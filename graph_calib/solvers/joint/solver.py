@@ -20,9 +20,10 @@ of their reduced information at the solution.  The cost is the graph's error: th
 each experiment's factors and attitude priors.
 
 Curve degree by evidence
-    The solve estimates every family at the highest degree the registry has; each family's degree is then
-    chosen by a Wald test of its highest orders at the loop's alpha, with the test of the next order past
-    the chosen one (:mod:`graph_calib.solvers.joint.degrees`).
+    The solve estimates every family at the highest degree the registry has; a Wald test of its highest
+    orders at the loop's alpha finds the orders the data show, with the test of the next order past them;
+    an order they do not show is dropped from the curve only where holding it would widen the curve's
+    sigma much (:mod:`graph_calib.solvers.joint.degrees`).
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from threadpoolctl import threadpool_limits
 
 from graph_calib.model.residual_list import FACTOR_KINDS, MEASUREMENT_KINDS
 from graph_calib.solvers.least_squares import Experiment, LeastSquares
-from graph_calib.solvers.joint.degrees import choose_degrees_wald
+from graph_calib.solvers.joint.degrees import choose_degrees
 from graph_calib.solvers.joint.unknowns import MAX_DEGREE, Unknowns, coefficient_terms, family_member, plan_unknowns
 from graph_calib.options import GraphOptions
 from graph_calib.sensors.params import Layout, split_element_name
@@ -60,7 +61,7 @@ class JointOutput:
     outputs : tuple of graph_calib.solvers.interface.SolverOutput
         Per experiment, its calibration vector ``x_e`` (its extended layout) with covariance, attitudes and
         whitened residuals: each experiment's view of the joint solution.
-    degree_choices : tuple of DegreeChoice
+    degree_choices : tuple of graph_calib.solvers.joint.degrees.DegreeEvidence
     n_measurements : int
     iterations : int
     converged : bool
@@ -94,6 +95,16 @@ def _extend(problem, unknowns_degrees):
     have = tuple(problem.model.options.extra_effects)
     extra = have + tuple(n for n in need if n not in have and n not in problem.model.options.exclude)
     return problem if extra == have else problem.with_effects(extra)
+
+
+def _sensor_spans(records):
+    """Each sensor's temperature span over the records (gyro x, y, z, accel x, y, z), degC, shape (6, 2)."""
+    lo, hi = np.full(6, np.inf), np.full(6, -np.inf)
+    for r in records:
+        dT = np.hstack([r.dTg, r.dTa])
+        lo = np.minimum(lo, dT.min(axis=0) + r.t_ref_degC)
+        hi = np.maximum(hi, dT.max(axis=0) + r.t_ref_degC)
+    return np.column_stack([lo, hi])
 
 
 def _priors(unknowns, models):
@@ -179,7 +190,7 @@ def _warm_theta(unknowns, models, maps, starts, priors):
     return np.linalg.lstsq(np.vstack(rows), np.concatenate(rhs), rcond=None)[0]
 
 
-def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None, select_degree=True):
+def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None, degrees=None):
     """Solve every experiment of a campaign in one factor graph (module docstring).
 
     Parameters
@@ -191,8 +202,10 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
         Called with a :class:`ProgressEvent` after each iteration.
     initial : sequence of WarmStart or None, optional
         Per experiment, a starting solution (e.g. its own factor graph's result).
-    select_degree : bool
-        Choose each family's degree by evidence (else keep the registry's highest).
+    degrees : dict, optional
+        ``{family: degree}`` of every temperature family, fixed: no choice, no evidence (``degree_choices``
+        empty). Default: each family estimated at the registry's highest degree and its degree chosen by
+        :func:`graph_calib.solvers.joint.degrees.choose_degrees`.
 
     Returns
     -------
@@ -206,17 +219,18 @@ def solve_joint(problems, *, options=GraphOptions(), progress=None, initial=None
     """
     with threadpool_limits(limits=1, user_api="blas"):
         return _solve_joint(problems, options=options, progress=progress, initial=initial,
-                            select_degree=select_degree)
+                            degrees=degrees)
 
 
-def _solve_joint(problems, *, options, progress, initial, select_degree):
+def _solve_joint(problems, *, options, progress, initial, degrees):
     t_start = time.perf_counter()
     problems = list(problems)
     if not problems:
         raise ValueError("the joint solver needs at least one experiment")
     first = problems[0].model.layout
-    from_registry = {b: d for b, d in MAX_DEGREE.items() if b in first}
-    problems = [_extend(p, from_registry) for p in problems]
+    fixed = {b: int(d) for b, d in degrees.items() if b in first} if degrees is not None else None
+    problems = [_extend(p, fixed if fixed is not None else {b: d for b, d in MAX_DEGREE.items() if b in first})
+                for p in problems]
     models = [p.model for p in problems]
     unknowns = plan_unknowns([m.layout for m in models], [m.t_ref_degC for m in models])
     maps = [unknowns.experiment_map(e, m.layout, m.t_ref_degC) for e, m in enumerate(models)]
@@ -262,8 +276,9 @@ def _solve_joint(problems, *, options, progress, initial, select_degree):
     n_meas = int(sum(3 * w[k].shape[0] for w in whitened for k in MEASUREMENT_KINDS))
     cov = sol.covariance * np.outer(sig_theta, sig_theta)
     theta = sol.theta * sig_theta
-    if select_degree:
-        reduced, keep, th_c, cov_c, choices = choose_degrees_wald(unknowns, theta, cov, n_measurements=n_meas)
+    if fixed is None:
+        reduced, keep, th_c, cov_c, choices = choose_degrees(unknowns, theta, cov,
+                                                             sensor_spans=_sensor_spans([m.record for m in models]))
     else:
         reduced, keep, th_c, cov_c, choices = unknowns, np.ones(theta.size, bool), theta, cov, ()
     theta_r, cov_r = th_c[keep], cov_c[np.ix_(keep, keep)]
