@@ -32,10 +32,11 @@ sensor's temperature span,
 
 (``sigma_d`` the curve's sigma holding orders up to ``d``, ``sigma_{d-1}`` with order ``d`` conditioned to
 zero).  The first order kept ends the descent: the curve holds every order up to its ``degree``, and never
-fewer than the significant ones.  Where the data constrain every order (a campaign spanning its range with
-several subranges: ``rho`` 1.25-1.37 measured) the curve keeps the registry's full degree at a cost of at
-most that factor in sigma; where they do not (two subranges, a narrow range), the poorly determined orders
-go and the curve is the significant one.
+fewer than the significant ones.  Where the data (or, over a short record's narrow span, the priors)
+constrain every order, the curve keeps the registry's full degree: on the six-subrange campaigns each step's
+``rho`` was 1.25-1.37, and the total price, the curve's sigma over the significant curve's (``widening``,
+recorded), 1.27-2.27 at the range's edges.  An order whose step costs more than ``RHO_MAX`` goes, and so the
+curve never holds an order the data and priors leave loose.
 
 **The next order.**  For every family the test of the order past the significant degree is part of the
 evidence (``next_order``): below its threshold when the significant degree is lower than the registry's
