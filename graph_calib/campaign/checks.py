@@ -233,6 +233,23 @@ def _curvature_adopted(document, joint):
     return out
 
 
+def _adopted_text(adopted, n_experiments):
+    """``adopted`` in words, each effect once with where it was adopted (a count past three experiments)."""
+    parts = []
+    for family, where in adopted.items():
+        joint = [w for w in where if " in " not in w]
+        per = {}
+        for w in where:
+            if " in " in w:
+                effect, name = w.split(" in ", 1)
+                per.setdefault(effect, {})[name] = None
+        items = joint + [f"{e} in " + (", ".join(names) if len(names) <= 3 else
+                                       "every experiment" if len(names) == n_experiments else
+                                       f"{len(names)} experiments") for e, names in per.items()]
+        parts.append(f"{family}: {', '.join(items)}")
+    return "; ".join(parts)
+
+
 def _curvature_check(document, joint, results):
     adopted = _curvature_adopted(document, joint)
     ranges = {e["name"]: e.get("sensor_temperature_range_degC") for e in document.get("experiments", [])}
@@ -241,12 +258,12 @@ def _curvature_check(document, joint, results):
         return _check("curvature carried", None, "no curvature adopted anywhere", checked=False), bias
     if joint is None:
         return _check("curvature carried", None, "curvature adopted ("
-                      + "; ".join(f"{f}: {', '.join(w)}" for f, w in adopted.items())
+                      + _adopted_text(adopted, len(document.get("experiments", [])))
                       + ") but no joint curve to bound what the subranges without it lack", checked=False), bias
     flagged = sorted(((abs(z), n, s, el, z) for n, per in bias.items() for s, rows in per.items()
                       for el, z in rows.items() if abs(z) >= CURVATURE_FLAG_SIGMA), reverse=True)
     failing = [f for f in flagged if f[0] >= CURVATURE_FAIL_SIGMA]
-    where = "; ".join(f"{f}: {', '.join(w)}" for f, w in adopted.items())
+    where = _adopted_text(adopted, len(document.get("experiments", [])))
     if not flagged:
         text = (f"curvature adopted ({where}); every subrange holds it or lacks less than "
                 f"{CURVATURE_FLAG_SIGMA:g} sigma of it")

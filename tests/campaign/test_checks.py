@@ -233,3 +233,18 @@ def test_the_subranges_truth_check_is_calibrated_for_many_elements():
     # an RMS normalised error of 1.3 over 234 elements fails (its chi-square limit is about 1.12)
     (wide,) = _truth_checks(_truth_document([2.0] * 6, rms=1.3))
     assert not wide["passed"] and "RMS normalised error 1.30" in wide["text"]
+
+
+def test_curvature_adopted_in_many_experiments_is_told_once_per_effect():
+    """Carried orders in every experiment: each effect named once with where (a count past three), not once per
+    experiment (a 6-subrange campaign carrying orders 2-5 of four families wrote 3,000 characters)."""
+    names = [f"sub{i}" for i in range(1, 7)]
+    doc = _document(experiments=names)
+    for i, e in enumerate(doc["experiments"]):
+        e["loop"] = {"added": [{"effect": "accel.bias_tc2"}] + ([{"effect": "gyro.bias_tc3"}] if i < 2 else []),
+                     "pooled": [{"effect": "accel.bias_tc2"}]}
+    checks = campaign_checks(doc, results={n: {} for n in names}, joint=_joint_result([1e-4, 2e-6, 4e-7]))
+    text = next(c for c in checks["checks"] if c["check"] == "curvature carried")["text"]
+    assert "accel.bias: the joint's degree 2, accel.bias_tc2 in every experiment" in text, text
+    assert "gyro.bias: gyro.bias_tc3 in sub1, sub2" in text, text
+    assert text.count("accel.bias_tc2") == 1, text
