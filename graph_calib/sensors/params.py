@@ -181,7 +181,6 @@ class Grade:
         return s
 
 
-
 def _grade(name, *, gb, gbtc, gs, gstc, gm, ab, abtc, as_, astc, am, mount, lever, lag,
            gyro_noise, accel_noise, encoder_noise):
     prior = {
