@@ -24,8 +24,10 @@ from graph_calib.options import CalibrationOptions, FilterOptions, GraphOptions
 from graph_calib.solvers import registry
 
 #: Bumped when a change of the code invalidates cached results (2: the loop's record holds its final round's
-#: candidate statistics, which the pooled score test sums).
-CACHE_VERSION = 2
+#: candidate statistics, which the pooled score test sums; 3: a model holding a curve's order holds the orders
+#: below it, ``sensors.effects.with_lower_orders``).
+CACHE_VERSION = 3
+
 
 def solver_choice(choice):
     """``(per-experiment solvers, campaign solvers)`` a :attr:`CampaignOptions.solvers` (or ``[solver] solvers``)

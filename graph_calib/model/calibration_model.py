@@ -14,7 +14,7 @@ from dataclasses import replace
 import numpy as np
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
-from graph_calib.sensors.effects import uninformed
+from graph_calib.sensors.effects import uninformed, with_lower_orders
 from graph_calib.model import factors
 from graph_calib.model.options import ModelOptions
 from graph_calib.model.preintegration import SensorTerms, preintegrate
@@ -133,7 +133,8 @@ class CalibrationModel:
         # what the record can inform decides the layout
         self.auto_excluded = self._unobservable()
         exclude = tuple(sorted(set(options.exclude) | set(self.auto_excluded)))
-        self.layout = Layout.declared(extra=tuple(options.extra_effects), exclude=exclude)
+        # a curve's order comes with the orders below it (with_lower_orders)
+        self.layout = Layout.declared(extra=with_lower_orders(options.extra_effects), exclude=exclude)
         self.initial_attitude_sigma = self._initial_attitude_sigma(record.experiment)
         self.terms = SensorTerms.of(self.layout)
 

@@ -283,6 +283,41 @@ def temperature_family(name):
     return base, {e.temperature_order: e.name for e in REGISTRY if e.temperature_of == base}
 
 
+def with_lower_orders(names):
+    """``names`` with, before each temperature coefficient of order ``k >= 2``, its family's orders below ``k``.
+
+    A curve grows from its low orders: a model holding ``dT^3`` of a family holds ``dT^2`` of it too.  A cubic
+    term alone, over a subrange whose temperature is skewed (a ramp's lagging sensor), fits the quadratic
+    curvature it is correlated with and leaves the bias and the slope biased: in a 1.5 h campaign a
+    subrange's loop adopted ``accel.bias_tc3`` alone and its ``accel.bias.x`` ended 4.5 sigma off.  The
+    order a model gains this way keeps its prior (:class:`PriorRule`); it is estimated, not tested.
+
+    Parameters
+    ----------
+    names : iterable of str
+        Parameter names (others than :data:`EFFECTS`' pass unchanged).
+
+    Returns
+    -------
+    tuple of str
+        Each name once, in the order given, each missing lower order just before the first name needing it.
+
+    Examples
+    --------
+    >>> with_lower_orders(("accel.bias_tc3", "gyro.g_sensitivity"))
+    ('accel.bias_tc2', 'accel.bias_tc3', 'gyro.g_sensitivity')
+    """
+    out = []
+    for name in names:
+        e = EFFECTS.get(name)
+        if e is not None and e.temperature_order >= 2:
+            orders = temperature_family(name)[1]
+            out.extend(orders[k] for k in range(2, e.temperature_order) if k in orders and orders[k] not in out)
+        if name not in out:
+            out.append(name)
+    return tuple(out)
+
+
 __all__ = ["Effect", "PriorRule", "REGISTRY", "EFFECTS", "DECLARED", "FURTHER_EFFECTS", "CURVE_ORDERS",
-           "MAX_TEMPERATURE_ORDER", "effect", "uninformed",
+           "MAX_TEMPERATURE_ORDER", "effect", "uninformed", "with_lower_orders",
            "temperature_family", "NEEDS_TABLE", "NEEDS_VALID_READINGS", "NEEDS_READINGS_IN_MOTION", "XYZ", "NINE"]
