@@ -411,6 +411,9 @@ def _round(index, *, options, problem, graph, diagnosis_options, candidates, all
                                       allow_add=allow_add, diagnosis_options=diagnosis_options)
     start = None
     if added is not None:
+        below = [n for n in effects.with_lower_orders((added,))[:-1] if n not in model.layout]
+        if below:   # the grown model holds them too (CalibrationModel's layout)
+            decision += f"; with {', '.join(below)} below it (a curve grows from its low orders)"
         # the grown model's first Gauss-Newton step from the current solution, from this linearisation
         dx, delta = system.gauss_newton_step(np.concatenate([system.null, candidate_columns[added]]))
         if np.all(np.isfinite(dx)) and np.all(np.isfinite(delta)):

@@ -176,6 +176,10 @@ def test_the_missing_effect_is_added_first_and_the_error_falls(effect):
     assert ea["rms_z"] < 1.6
     # the whitened residuals shrink
     assert d.rounds[-1].chi2_per_dof <= first.chi2_per_dof
+    # a curve's order comes with the orders below it, and the decision says so (sensors.effects.with_lower_orders)
+    below = effects.with_lower_orders((effect,))[:-1]
+    assert all(b in d.after.results["factor-graph"].effects for b in below)
+    assert all(b in first.decision for b in below), first.decision
     # calibrate, on the same record, does not pass what the loop changes: its verdict fails naming the effect
     # (the structure tests, docs/model.md "The verdict")
     opts = CalibrationOptions(model=ModelOptions(), t_ref_degC=se.truth.t_ref_degC)
