@@ -218,31 +218,36 @@ def curvature_bias(joint, results, sensor_ranges):
 
 
 def _curvature_adopted(document, joint):
-    """``{family: [where]}``: where the campaign adopted curvature of each family."""
+    """``{family: [(effect, where)]}``: where the campaign adopted curvature of each family (``effect`` None for
+    the joint's degree, ``where`` then its words; else the experiment's name)."""
     out = {}
     if joint is not None:
         for f, d in joint.extra[JOINT]["degrees"].items():
             if d >= 2:
-                out.setdefault(f, []).append(f"the joint's degree {d}")
+                out.setdefault(f, []).append((None, f"the joint's degree {d}"))
     for e in document.get("experiments", []):
         loop = e.get("loop") or {}
         for a in list(loop.get("added") or []) + list(loop.get("pooled") or []):
             eff = EFFECTS.get(a.get("effect"))
             if eff is not None and eff.temperature_of and eff.temperature_order >= 2:
-                out.setdefault(eff.temperature_of, []).append(f"{a['effect']} in {e['name']}")
+                out.setdefault(eff.temperature_of, []).append((a["effect"], e["name"]))
     return out
+
+
+def _adopted_json(adopted):
+    """``campaign.json``'s ``details.adopted`` of :func:`_curvature_adopted`: ``{family: ["EFFECT in NAME", ...]}``."""
+    return {f: [w if e is None else f"{e} in {w}" for e, w in where] for f, where in adopted.items()}
 
 
 def _adopted_text(adopted, n_experiments):
     """``adopted`` in words, each effect once with where it was adopted (a count past three experiments)."""
     parts = []
     for family, where in adopted.items():
-        joint = [w for w in where if " in " not in w]
+        joint = [w for e, w in where if e is None]
         per = {}
-        for w in where:
-            if " in " in w:
-                effect, name = w.split(" in ", 1)
-                per.setdefault(effect, {})[name] = None
+        for e, name in where:
+            if e is not None:
+                per.setdefault(e, {})[name] = None
         items = joint + [f"{e} in " + (", ".join(names) if len(names) <= 3 else
                                        "every experiment" if len(names) == n_experiments else
                                        f"{len(names)} experiments") for e, names in per.items()]
@@ -273,8 +278,8 @@ def _curvature_check(document, joint, results):
                 + (f" and {len(flagged) - 6} more" if len(flagged) > 6 else "")
                 + (f" ({len(failing)} beyond {CURVATURE_FAIL_SIGMA:g} sigma: those results are known to be off)"
                    if failing else f" (flagged; none beyond {CURVATURE_FAIL_SIGMA:g} sigma)"))
-    return _check("curvature carried", not failing, text, details={"adopted": adopted,
-                                                                    "flagged": len(flagged)}), bias
+    return _check("curvature carried", not failing, text,
+                  details={"adopted": _adopted_json(adopted), "flagged": len(flagged)}), bias
 
 
 # ---------------------------------------------------------------------------
