@@ -106,8 +106,9 @@ class Campaign:
     solver: dict = field(default_factory=dict)
 
     def layout(self):
-        """The :class:`~graph_calib.sensors.params.Layout` of the modelled parameters."""
-        return params.Layout.declared(extra=self.effects, exclude=self.exclude)
+        """The :class:`~graph_calib.sensors.params.Layout` of the modelled parameters (a curve's order with the
+        orders below it, as the calibration model holds them: :func:`~graph_calib.sensors.effects.with_lower_orders`)."""
+        return params.Layout.declared(extra=effects.with_lower_orders(self.effects), exclude=self.exclude)
 
     def prior_sigmas(self):
         """One-sigma priors per parameter name, SI: the grade's, overridden by ``priors``."""

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 
+from graph_calib.io.manifest import Campaign
 from graph_calib.model import CalibrationModel, ModelOptions
 from graph_calib.sensors.effects import CURVE_ORDERS, EFFECTS, FURTHER_EFFECTS, with_lower_orders
 
@@ -36,3 +39,9 @@ def test_the_calibration_model_holds_the_orders_below_an_added_one():
     assert "accel.bias_tc2" in model.layout and "accel.bias_tc3" in model.layout
     assert model.layout.names.index("accel.bias_tc2") < model.layout.names.index("accel.bias_tc3")
     assert "gyro.bias_tc2" not in model.layout
+
+
+def test_a_manifests_layout_holds_the_orders_below_its_effects():
+    camp = Campaign(path=Path("/nowhere/campaign.toml"), imu_id="X", grade="navigation", experiments=(),
+                    effects=("gyro.bias_tc3",))
+    assert camp.layout().names[-2:] == ("gyro.bias_tc2", "gyro.bias_tc3")
