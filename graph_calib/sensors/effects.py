@@ -295,7 +295,7 @@ def with_lower_orders(names):
     Parameters
     ----------
     names : iterable of str
-        Parameter names (others than :data:`EFFECTS`' pass unchanged).
+        Parameter names (a name not in :data:`EFFECTS` passes unchanged).
 
     Returns
     -------
