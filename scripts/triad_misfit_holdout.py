@@ -15,8 +15,9 @@ alone.
     PYTHONPATH=$PWD python scripts/triad_misfit_holdout.py --seeds 1 2 3 --effect gyro.bias_dtdt --effect-scale 3e4
     PYTHONPATH=$PWD python scripts/triad_misfit_holdout.py --seeds 1 2 3 --diagnose
 
-``--diagnose`` adds a third fit, ``diagnose`` (the loop with its held-out guard, the factor graph), and prints its
-held-out figures and ratio too.
+``--diagnose`` adds a third fit, ``diagnose`` (the loop as it runs by default, the factor graph), and prints its
+held-out figures and ratio too; ``--holdout`` runs that loop with its held-out guard (``DiagnosisOptions.holdout``,
+off by default: :mod:`graph_calib.diagnosis.holdout`).
 """
 
 from __future__ import annotations
@@ -43,9 +44,9 @@ def fitter(options):
                                                  .results["factor-graph"])
 
 
-def diagnose_fitter(options):
+def diagnose_fitter(options, *, holdout=False):
     def fit(train):
-        diag = diagnose(train, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",)))
+        diag = diagnose(train, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",), holdout=holdout))
         print(f"  loop added: {', '.join(diag.added) or 'nothing'}", flush=True)
         return Calibration.from_result(diag.after.results["factor-graph"])
     return fit
@@ -58,6 +59,7 @@ def main(argv=None):
     p.add_argument("--effect-scale", type=float, default=1e4)
     p.add_argument("--poses", type=int, default=30)
     p.add_argument("--diagnose", action="store_true", help="also fit with diagnose (the loop)")
+    p.add_argument("--holdout", action="store_true", help="the loop of --diagnose with its held-out guard")
     args = p.parse_args(argv)
     product = CalibrationOptions(model=ModelOptions(grade="consumer"))
     gravity_only = CalibrationOptions(model=ModelOptions(grade="consumer",
@@ -83,7 +85,7 @@ def main(argv=None):
         cvs = [cross_validate(exp, fit=fitter(gravity_only), folds=2, by="pairs"),
                cross_validate(exp, fit=fitter(product), folds=2, by="pairs")]
         if args.diagnose:
-            cvs.append(cross_validate(exp, fit=diagnose_fitter(product), folds=2, by="pairs"))
+            cvs.append(cross_validate(exp, fit=diagnose_fitter(product, holdout=args.holdout), folds=2, by="pairs"))
         raw = cvs[0].pooled("raw")
         fits = [cv.pooled("calibrated") for cv in cvs]
         rows.append([raw["static_norm_std_mps2"]] + [f["static_norm_std_mps2"] for f in fits]
