@@ -110,4 +110,34 @@ def calibrate(experiment, *, options=CalibrationOptions(), solvers=DEFAULT_SOLVE
     return solve_problem(problem, options=options, solvers=solvers, progress=progress)
 
 
-__all__ = ["CalibrationOptions", "CalibrationRun", "PRIMARY_SOLVER", "build_problem", "solve_problem", "calibrate"]
+def calibrate_with_effects(experiment, *, added, options=CalibrationOptions(), solvers=DEFAULT_SOLVERS, progress=None,
+                           concurrent=False):
+    """Calibrate ``experiment`` with the further effects ``added`` on top of ``options``' model.
+
+    What ``graph-calib diagnose`` writes as its final calibration: the model the closed loop ended with (its
+    ``Diagnosis.added``), solved as :func:`calibrate` solves (variance components, structure tests, the verdict),
+    where the loop itself tests on the identified noise, unscaled.
+
+    Parameters
+    ----------
+    experiment : graph_calib.records.experiment.Experiment
+    added : sequence of str
+        Further effects (model.md) added to ``options.model.extra_effects``.
+    options : CalibrationOptions
+    solvers : sequence of str
+    progress : callable, optional
+    concurrent : bool
+        As for :func:`solve_problem`.
+
+    Returns
+    -------
+    CalibrationRun
+    """
+    model = replace(options.model, extra_effects=tuple(options.model.extra_effects) + tuple(added))
+    final = replace(options, model=model)
+    return solve_problem(build_problem(experiment, options=final), options=final, solvers=solvers, progress=progress,
+                         concurrent=concurrent)
+
+
+__all__ = ["CalibrationOptions", "CalibrationRun", "PRIMARY_SOLVER", "build_problem", "solve_problem", "calibrate",
+           "calibrate_with_effects"]

@@ -97,7 +97,7 @@ def _truth(args, path):
 
 def run(args):
     from graph_calib import io
-    from graph_calib.calibrate import build_problem, solve_problem
+    from graph_calib.calibrate import calibrate_with_effects
     from graph_calib.diagnosis import diagnose, residual_rms
     from graph_calib.reports.diagnosis_report import write_report
 
@@ -128,11 +128,8 @@ def run(args):
         # the final model solved again with one variance factor per measurement kind (solvers/variance.py), as
         # calibrate does: the loop itself tests on the identified noise, unscaled
         say("the final model with variance components ...")
-        fm = replace(calibration_options.model,
-                     extra_effects=tuple(calibration_options.model.extra_effects) + tuple(diag.added))
-        final_options = replace(calibration_options, model=fm)
-        run = solve_problem(build_problem(exp, options=final_options), options=final_options, solvers=tuple(final),
-                            concurrent=True)
+        run = calibrate_with_effects(exp, added=diag.added, options=calibration_options, solvers=tuple(final),
+                                     concurrent=True)
         final = {s: run.results[s] for s in final}          # the loop's order of the files
         comparison, verdict = run.comparison, run.verdict
     extra = {"verdict": verdict.to_json(), "diagnosis": {"added": list(diag.added)}}
