@@ -150,16 +150,14 @@ def pooled_lines(all_m):
     to judge the sigmas by, each beside its expectation for a right model (Gaussian errors, unit variance).
     """
     out = []
+    p_beyond = float(chdtrc(1, 9.0))        # P(|z| > 3) of a unit Gaussian
     solvers = sorted({s for m in all_m.values() for per in m["subranges"].values() for s in per})
     for s in solvers:
         res = [per[s] for m in all_m.values() for per in m["subranges"].values() if s in per]
-        if not res:
-            continue
         n = np.array([r["n"] for r in res], dtype=float)
         beyond = sum(round((1.0 - r["fraction_within_3sigma"]) * r["n"]) for r in res)
         rms = float(np.sqrt(np.sum(n * np.array([r["rms_z"] for r in res]) ** 2) / n.sum()))
         high = sum(r["rms_z"] > SUB_RMS for r in res)
-        p_beyond = float(chdtrc(1, 9.0))
         p_high = np.array([chdtrc(k, SUB_RMS**2 * k) for k in n])
         literal = sum(r["fraction_within_3sigma"] >= SUB_WITHIN_3 and r["rms_z"] <= SUB_RMS for r in res)
         out.append(f"{s}: {len(res)} results, {int(n.sum())} elements: {100 * (1 - beyond / n.sum()):.2f} % within "
