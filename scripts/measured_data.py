@@ -105,8 +105,9 @@ def verdicts(exp, options, added):
     """The verdicts ``graph-calib calibrate`` (the declared model) and ``graph-calib diagnose`` (the model the loop
     ended with, solved again with the variance components) give: ``(declared, final)``."""
     declared = calibrate(exp, options=options).verdict
-    final = calibrate_with_effects(exp, added=added, options=options).verdict
-    return declared, final
+    if not added:               # the same model: the same calibration
+        return declared, declared
+    return declared, calibrate_with_effects(exp, added=added, options=options).verdict
 
 
 def stage_metrics(exp, poses, stage):
@@ -353,11 +354,15 @@ def _short(v):
     return "FAIL (" + "; ".join(f for f in failing if f) + ")" if failing else "FAIL"
 
 
+def _kinds(v):
+    """``{kind: figures}`` of a verdict's first solver (:attr:`Verdict.kinds`), empty without them."""
+    return next(iter(v.kinds.values()), {}) if v.kinds else {}
+
+
 def _factors(v):
     """The measurement kinds' variance factors of a verdict's first solver, in words."""
-    kinds = next(iter(v.kinds.values()), {}) if v.kinds else {}
-    parts = [f"{k} {f['variance_factor']:.2f}" for k, f in kinds.items() if f.get("variance_factor") is not None]
-    return ", ".join(parts)
+    return ", ".join(f"{k} {f['variance_factor']:.2f}" for k, f in _kinds(v).items()
+                     if f.get("variance_factor") is not None)
 
 
 def _fig_row(name, f):
@@ -451,8 +456,7 @@ def _verdict_findings(results):
                        f"(`{t.name}`, score statistic {t.statistic:.0f} against a threshold of {t.threshold:.1f} in "
                        "the loop's first round). `graph-calib calibrate` exits 3 on this session, as it should; "
                        "`graph-calib diagnose` is the command that finds what is missing.")
-        kinds = next(iter(va.kinds.values()), {}) if va.kinds else {}
-        low = {k: f["variance_factor"] for k, f in kinds.items() if (f.get("variance_factor") or 1.0) < 0.5}
+        low = {k: f["variance_factor"] for k, f in _kinds(va).items() if (f.get("variance_factor") or 1.0) < 0.5}
         if low:
             txt.append("After the loop " + ", ".join(f"the {k} kind's variance factor is {f:.2f}" for k, f in
                                                      low.items())
