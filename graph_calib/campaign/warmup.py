@@ -35,7 +35,8 @@ from numba.core.registry import CPUDispatcher
 #: The modules that define cached numba kernels (tests/campaign/test_warmup.py checks that no other module does).
 KERNEL_MODULES = (
     "graph_calib.navigation.rotations", "graph_calib.sensors.sensor_model", "graph_calib.compensation.calibration", "graph_calib.navigation.strapdown",
-    "graph_calib.navigation.static_detection", "graph_calib.model.kernel", "graph_calib.simulation.turntable",
+    "graph_calib.navigation.static_detection", "graph_calib.model.kernel", "graph_calib.model.encoder_kernel",
+    "graph_calib.simulation.turntable",
     "kf_reference.sqrt_kf", "graph_calib.model.redundancy",
 )
 

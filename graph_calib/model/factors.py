@@ -76,7 +76,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from graph_calib.model.preintegration import READING_BLOCK
+from graph_calib.model.encoder_kernel import encoder_rows
 from graph_calib.navigation.rotations import exp_so3, log_so3, right_jacobian, right_jacobian_inv, skew
 
 
@@ -278,25 +278,14 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
         z = np.zeros((0, 3))
         return Residuals(r=z, key=np.zeros(0, dtype=np.int64), H_R=np.zeros((0, 3, 3)), H_R_next=None,
                          H_x=np.zeros((0, 3, P)), sigma=z)
-    # reading by reading, in blocks (the (m, 3, G) temporaries of the gyro columns' chain: 0.4 GB for a
-    # 3-h record's 85,000 readings at once)
+    # reading by reading, in the compiled kernel (graph_calib.model.encoder_kernel); the reading noise in its
+    # principal axes (graph_calib.model.encoder_noise): residual and Jacobians turned by the data-only U^T, each
+    # component then independent with its own sigma
+    frame = record.encoder_noise_frame(noise.encoder)
     r = np.empty((M, 3))
     H_R = np.empty((M, 3, 3))
     H_x = np.zeros((M, 3, P))
-    for lo in range(0, M, READING_BLOCK):
-        sl = slice(lo, min(lo + READING_BLOCK, M))
-        r[sl], H_R[sl] = _encoder_block(record, R, preint, x, sl, layout, H_x[sl])
-    # the reading noise in its principal axes (graph_calib.model.encoder_noise): residual and Jacobians
-    # turned by the data-only U^T, each component then independent with its own sigma
-    frame = record.encoder_noise_frame(noise.encoder)
-    rows = np.flatnonzero(frame.rotated)
-    if rows.size:
-        for a in range(0, rows.size, _ROTATE_CHUNK):
-            rc = rows[a:a + _ROTATE_CHUNK]
-            Ut = np.swapaxes(frame.U[rc], 1, 2)
-            r[rc] = np.einsum("mij,mj->mi", Ut, r[rc])
-            H_R[rc] = Ut @ H_R[rc]
-            H_x[rc] = Ut @ H_x[rc]
+    _encoder_rows(record, R, preint, x, layout, frame, r, H_R, H_x)
     var_gyro = noise.gyro**2 * record.reading_tau
     if noise.gyro_quantization:
         var_gyro = var_gyro + noise.gyro_quantization**2 * record.reading_quantization_gain
@@ -305,63 +294,31 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
 
 
 
-def _encoder_block(record, R, preint, x, sl, layout, H_x):
-    """Residuals (m, 3) and attitude Jacobians (m, 3, 3) of the readings ``sl`` (a slice) of
-    :func:`encoder_factors`; their calibration Jacobians written into ``H_x`` (m, 3, P), zero on entry."""
-    m = sl.stop - sl.start
-    rec_reading_dt = record.reading_dt[sl]
-    rec_reading_phi_shape = record.reading_phi_shape[sl]
-    rec_reading_key = record.reading_key[sl]
-    rec_reading_E = record.reading_E[sl]
-    rec_reading_w_nb_offset = record.reading_w_nb_offset[sl]
-    rec_reading_alpha = record.reading_alpha[sl]
-    rec_reading_f = record.reading_f[sl]
-    rec_reading_C_nb_nominal = record.reading_C_nb_nominal[sl]
-    # the turn from the sample end to the reading, with the calibrated rate of that sample interval
-    # (preintegrated with its Jacobian in the gyro columns, updated to first order like the rest)
-    readR, w_c, J_w = preint.readings_corrected(x, sl)
-    gc = preint.gyro_cols
-    phi = w_c * rec_reading_dt[:, None] + rec_reading_phi_shape
-    Ew = exp_so3(phi)
-    Bp = readR @ Ew
-    Rk = R[rec_reading_key]
-    C_pred = rec_reading_E @ Rk @ Bp
-    mount = layout.get(x, "mount", np.zeros(3))
-    lag = layout.get(x, "time_lag.table", np.zeros(1))[0]
-    Kd = layout.get(x, "damping.stiffness", np.zeros(9)).reshape(3, 3)
-    w_nb = w_c + rec_reading_w_nb_offset                                  # calibrated, at the reading
-    a_lag = w_nb * lag - (0.5 * lag * lag) * rec_reading_alpha               # the turn over the lag before t_m
-    a_damp = rec_reading_f @ Kd.T
-    Ed = exp_so3(a_damp) if np.any(Kd) else np.broadcast_to(np.eye(3), (m, 3, 3))
-    B = exp_so3(a_lag) @ Ed if lag != 0.0 else Ed
-    C_meas = rec_reading_C_nb_nominal @ (exp_so3(mount) @ B)
-    r = log_so3(np.swapaxes(C_meas, 1, 2) @ C_pred)
-    Jr_inv = right_jacobian_inv(r)
-    Jl_inv = right_jacobian_inv(-r)
-    H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
-    # the preintegration and the corrected rate depend on the gyro columns only
-    # (summed in place: one (M, 3, G) temporary fewer, 0.1 GB for a 3-h record's readings)
-    G_w = np.swapaxes(Ew, 1, 2) @ preint.reading_J[sl]
-    G_w += (right_jacobian(phi) * rec_reading_dt[:, None, None]) @ J_w
-    H_x[:, :, gc] = Jr_inv @ G_w
-    del G_w
-    if "mount" in layout:
-        H_x[:, :, layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
-    if "time_lag.table" in layout:
-        G_lag = -Jl_inv @ np.swapaxes(Ed, 1, 2) @ right_jacobian(a_lag)  # d r / d a_lag
-        da = w_nb - lag * rec_reading_alpha
-        H_x[:, :, layout.slice("time_lag.table")] = G_lag @ da[..., None]
-        if lag != 0.0:
-            H_x[:, :, gc] += G_lag @ (lag * J_w)                       # the calibrated rate in the lag
-    if "damping.stiffness" in layout:
-        G = -Jl_inv @ right_jacobian(a_damp)                   # (m, 3, 3) per d(a_damp)
-        # a_damp_i = sum_j K_ij f_j  ->  d a_damp / d K_ij = e_i f_j
-        dK = np.einsum("mab,mj->mabj", G, rec_reading_f).reshape(m, 3, 9)
-        H_x[:, :, layout.slice("damping.stiffness")] = dK
-    return r, H_R
+def _column(layout, name):
+    """First layout column of ``name``, -1 when the layout lacks it."""
+    return layout.slice(name).start if name in layout else -1
 
-#: Readings turned into their noise's principal axes at a time (bounds the temporaries of ``H_x``).
-_ROTATE_CHUNK = 8192
+
+def _encoder_rows(record, R, preint, x, layout, frame, r, H_R, H_x):
+    """:func:`graph_calib.model.encoder_kernel.encoder_rows` on every reading of ``record``: ``r`` (M, 3),
+    ``H_R`` (M, 3, 3) and the model's columns of ``H_x`` (M, 3, P, zero on entry) written."""
+    x = np.asarray(x, dtype=float)
+    gc = np.ascontiguousarray(preint.gyro_cols, dtype=np.int64)
+    dx_g = np.ascontiguousarray((x - preint.x_lin)[gc])
+    mount = np.ascontiguousarray(layout.get(x, "mount", np.zeros(3)), dtype=float)
+    lag = float(layout.get(x, "time_lag.table", np.zeros(1))[0])
+    K_damp = np.ascontiguousarray(layout.get(x, "damping.stiffness", np.zeros(9)), dtype=float).reshape(3, 3)
+    cols = [_column(layout, n) for n in ("mount", "time_lag.table", "damping.stiffness")]
+    spans = [np.arange(c, c + k) for c, k in zip(cols, (3, 1, 9)) if c >= 0]
+    written = np.unique(np.concatenate([gc, *spans])).astype(np.int64)
+    c = np.ascontiguousarray
+    encoder_rows(c(preint.reading_dR), c(preint.reading_w), c(preint.reading_J), c(preint.reading_rate_jacobian()),
+                 dx_g, c(record.reading_dt), c(record.reading_phi_shape), c(record.reading_key, dtype=np.int64),
+                 c(record.reading_E), c(R, dtype=float), c(record.reading_w_nb_offset), c(record.reading_alpha),
+                 c(record.reading_f), c(record.reading_C_nb_nominal), mount, lag, K_damp, bool(np.any(K_damp)), gc,
+                 cols[0], cols[1], cols[2], written, c(frame.U), c(frame.rotated), r, H_R, H_x)
+
+
 
 
 

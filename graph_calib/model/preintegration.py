@@ -148,19 +148,9 @@ class Preintegrated:
         ``readings`` (a slice): a read-only view of :attr:`reading_J_w`."""
         return self.reading_J_w[readings]
 
-    def readings_corrected(self, x, readings=slice(None)):
-        """The encoder readings' part at ``x`` (of the readings ``readings``, a slice):
-        ``(reading_dR Exp(reading_J dx), reading_w + J_w dx, J_w)`` with ``J_w`` :meth:`reading_rate_jacobian`."""
-        dx = np.asarray(x) - self.x_lin
-        J_w = self.reading_rate_jacobian(readings)
-        if not np.any(dx):
-            return self.reading_dR[readings], self.reading_w[readings], J_w
-        return (self.reading_dR[readings] @ exp_so3(self.reading_J[readings] @ dx[self.gyro_cols]),
-                self.reading_w[readings] + J_w @ dx[self.gyro_cols], J_w)
 
-
-#: Readings per block in :func:`_reading_rates` and the encoder factors (the sensor model's (n, 3, P)
-#: Jacobians and the gyro columns' chain are temporaries: 0.35-0.4 GB for a 3-h record's readings at once).
+#: Readings per block in :func:`_reading_rates` (the sensor model's (n, 3, P) Jacobians are temporaries: 0.35-0.4 GB
+#: for a 3-h record's readings at once).
 READING_BLOCK = 8192
 
 

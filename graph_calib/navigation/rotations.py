@@ -226,3 +226,74 @@ def right_jacobian_nb(ax, ay, az, out):
     out[2, 0] = A * ay + B * ax * az
     out[1, 2] = A * ax + B * ay * az
     out[2, 1] = -A * ax + B * ay * az
+
+
+@numba.njit(cache=True, inline="always")
+def right_jacobian_inv_nb(ax, ay, az, out):
+    """Write the inverse of the SO(3) right Jacobian of ``[ax, ay, az]`` into ``out`` (:func:`right_jacobian_inv`)."""
+    t2 = ax * ax + ay * ay + az * az
+    if t2 < 1e-10:
+        c = 1.0 / 12.0 + t2 / 720.0
+    else:
+        t = np.sqrt(t2)
+        c = 1.0 / t2 - (1.0 + np.cos(t)) / (2.0 * t * np.sin(t))
+    # I + K / 2 + c K^2
+    out[0, 0] = 1.0 - c * (ay * ay + az * az)
+    out[1, 1] = 1.0 - c * (ax * ax + az * az)
+    out[2, 2] = 1.0 - c * (ax * ax + ay * ay)
+    out[0, 1] = -0.5 * az + c * ax * ay
+    out[1, 0] = 0.5 * az + c * ax * ay
+    out[0, 2] = 0.5 * ay + c * ax * az
+    out[2, 0] = -0.5 * ay + c * ax * az
+    out[1, 2] = -0.5 * ax + c * ay * az
+    out[2, 1] = 0.5 * ax + c * ay * az
+
+
+@numba.njit(cache=True, inline="always")
+def log_so3_nb(C, out):
+    """Write ``Log(C)`` of the 3x3 rotation ``C`` into the 3-vector ``out`` (:func:`log_so3`: through the quaternion,
+    the branch of the largest of the trace and the diagonal, ``w >= 0``)."""
+    tr = C[0, 0] + C[1, 1] + C[2, 2]
+    best = tr
+    choice = 0
+    for k in range(3):
+        if C[k, k] > best:
+            best = C[k, k]
+            choice = k + 1
+    q0 = q1 = q2 = q3 = 0.0
+    if choice == 0:
+        s = np.sqrt(1.0 + tr) * 2.0
+        q0 = 0.25 * s
+        q1 = (C[2, 1] - C[1, 2]) / s
+        q2 = (C[0, 2] - C[2, 0]) / s
+        q3 = (C[1, 0] - C[0, 1]) / s
+    elif choice == 1:
+        s = np.sqrt(1.0 + C[0, 0] - C[1, 1] - C[2, 2]) * 2.0
+        q0 = (C[2, 1] - C[1, 2]) / s
+        q1 = 0.25 * s
+        q2 = (C[0, 1] + C[1, 0]) / s
+        q3 = (C[0, 2] + C[2, 0]) / s
+    elif choice == 2:
+        s = np.sqrt(1.0 + C[1, 1] - C[2, 2] - C[0, 0]) * 2.0
+        q0 = (C[0, 2] - C[2, 0]) / s
+        q2 = 0.25 * s
+        q3 = (C[1, 2] + C[2, 1]) / s
+        q1 = (C[1, 0] + C[0, 1]) / s
+    else:
+        s = np.sqrt(1.0 + C[2, 2] - C[0, 0] - C[1, 1]) * 2.0
+        q0 = (C[1, 0] - C[0, 1]) / s
+        q3 = 0.25 * s
+        q1 = (C[2, 0] + C[0, 2]) / s
+        q2 = (C[2, 1] + C[1, 2]) / s
+    if q0 < 0.0:
+        q0, q1, q2, q3 = -q0, -q1, -q2, -q3
+    n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
+    q0, q1, q2, q3 = q0 / n, q1 / n, q2 / n, q3 / n
+    s = np.sqrt(q1 * q1 + q2 * q2 + q3 * q3)
+    if s < _SMALL:
+        k = 2.0 / q0 * (1.0 - s * s / (3.0 * q0 * q0))
+    else:
+        k = 2.0 * np.arctan2(s, q0) / s
+    out[0] = k * q1
+    out[1] = k * q2
+    out[2] = k * q3
