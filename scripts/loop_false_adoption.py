@@ -16,7 +16,7 @@ linear (``curvature=False``; the simulator's default adds a small ``*_tc2`` curv
 may rightly find) and no further effect is switched on, so every adopted effect is a false adoption.
 
 The solvers: the rounds linearise at, test at and re-solve with the primary solver (the factor graph) only
-(``diagnosis/loop.py``: ``_round``, ``_decide``, ``_add_effect`` take the primary's solution); the second
+(``diagnosis/loop.py``: ``_round``, ``_add_effect`` and ``diagnosis/decision.py`` take the primary's solution); the second
 solver (the square-root filter) runs only in the stages before and after, which give the verdict and the
 residual figures, not the decisions.  So ``--solvers factor-graph`` gives the same adoptions (checked: the
 150 clean records of seeds 0-149 at 0.4 h rerun with the factor graph alone gave every round-1 statistic
