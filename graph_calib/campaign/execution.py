@@ -361,13 +361,19 @@ class Pool:
     def local(self, n_jobs, bar=None):
         """The client of the local cluster, started here for ``n_jobs`` jobs on first use."""
         if self.client is None:
-            from distributed import Client, LocalCluster  # seconds to import: only here (module docstring)
+            import dask                                   # seconds to import: only here (module docstring)
+            from distributed import Client, LocalCluster
 
             n = self.options.workers if self.options.workers else min(os.cpu_count() or 1, n_jobs)
             n = max(1, min(n, n_jobs))
             _say(bar, f"starting a local Dask cluster: {n} worker process(es), 1 thread each", self.options.progress)
-            self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                         silence_logs=logging.ERROR)
+            # the workers keep glibc's own allocator policy: Dask's nanny would set MALLOC_TRIM_THRESHOLD_=65536,
+            # which fixes glibc's mmap threshold at 128 KiB, so that every large temporary of a job is mapped,
+            # faulted in and unmapped again (a 3 h loop job 1.38 times as long, a third of its CPU in the kernel:
+            # docs/performance.md, "Memory pages"); a value set in the environment is still passed on
+            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+                self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                                             dashboard_address=":0", silence_logs=logging.ERROR)
             self.client = Client(self._cluster)
         return self.client
 
