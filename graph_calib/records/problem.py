@@ -53,7 +53,7 @@ class Problem:
         return replace(self, model=self.model.with_effects(extra_effects))
 
 
-def build_problem(experiment, *, options=CalibrationOptions()):
+def build_problem(experiment, *, options=CalibrationOptions(), check=True):
     """Set up the shared model of ``experiment`` and align it.
 
     Without a table, gravity measurements count only where the IMU is static
@@ -71,12 +71,16 @@ def build_problem(experiment, *, options=CalibrationOptions()):
     ----------
     experiment : graph_calib.records.experiment.Experiment
     options : CalibrationOptions
+    check : bool
+        False: the record is known to pass those checks (a campaign's joint solve, on a file whose own job
+        built its problem from the same bytes), and they are not run again.
 
     Returns
     -------
     Problem
     """
-    check_record(experiment)
+    if check:
+        check_record(experiment)
     model_options = options.model
     # each segment its own threshold: its first seconds' unless they are loud (graph_calib.noise.rests)
     segs = segment_thresholds(experiment)
