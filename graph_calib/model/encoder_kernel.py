@@ -24,33 +24,17 @@ import numba
 import numpy as np
 
 from graph_calib import kernel_cache
-from graph_calib.navigation.rotations import exp_so3_nb, log_so3_nb, right_jacobian_inv_nb, right_jacobian_nb
+from graph_calib.navigation.rotations import (
+    exp_so3_nb,
+    log_so3_nb,
+    mat3_mul_nb as _mul,
+    mat3_mult_nb as _mul_bt,
+    mat3_tmul_nb as _mul_t,
+    right_jacobian_inv_nb,
+    right_jacobian_nb,
+)
 
 kernel_cache.install()     # before the first kernel: cached kernels stamped with the sources they depend on
-
-
-@numba.njit(cache=True, inline="always")
-def _mul(A, B, out):
-    """``out = A @ B`` of 3 x 3 arrays (``out`` distinct from both)."""
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
-
-
-@numba.njit(cache=True, inline="always")
-def _mul_t(A, B, out):
-    """``out = A^T @ B`` of 3 x 3 arrays."""
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = A[0, i] * B[0, j] + A[1, i] * B[1, j] + A[2, i] * B[2, j]
-
-
-@numba.njit(cache=True, inline="always")
-def _mul_bt(A, B, out):
-    """``out = A @ B^T`` of 3 x 3 arrays."""
-    for i in range(3):
-        for j in range(3):
-            out[i, j] = A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
 
 
 @numba.njit(cache=True)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from graph_calib.navigation.rotations import exp_so3_nb, right_jacobian_nb
+from graph_calib.navigation.rotations import exp_so3_nb, mat3_mul_nb as _mm3, right_jacobian_nb
 from graph_calib.sensors.sensor_model import gsens_coupling, invert_sample, is_nonlinear, sample_features
 from graph_calib import kernel_cache
 
@@ -22,14 +22,6 @@ kernel_cache.install()     # before the first kernel: cached kernels stamped wit
 
 _C12 = 1.0 / 12.0   # coning Jacobians
 _C6 = 1.0 / 6.0     # velocity-rotation Jacobians; the values divide by 6 as the recursion is written
-
-
-@numba.njit(cache=True, inline="always")
-def _mm3(A, B, out):
-    """out = A @ B for 3x3 arrays (out must not alias A or B)."""
-    for i in range(3):
-        for m in range(3):
-            out[i, m] = A[i, 0] * B[0, m] + A[i, 1] * B[1, m] + A[i, 2] * B[2, m]
 
 
 @numba.njit(cache=True, inline="always")

@@ -267,24 +267,21 @@ def log_so3_nb(C, out):
         q1 = (C[2, 1] - C[1, 2]) / s
         q2 = (C[0, 2] - C[2, 0]) / s
         q3 = (C[1, 0] - C[0, 1]) / s
-    elif choice == 1:
-        s = np.sqrt(1.0 + C[0, 0] - C[1, 1] - C[2, 2]) * 2.0
-        q0 = (C[2, 1] - C[1, 2]) / s
-        q1 = 0.25 * s
-        q2 = (C[0, 1] + C[1, 0]) / s
-        q3 = (C[0, 2] + C[2, 0]) / s
-    elif choice == 2:
-        s = np.sqrt(1.0 + C[1, 1] - C[2, 2] - C[0, 0]) * 2.0
-        q0 = (C[0, 2] - C[2, 0]) / s
-        q2 = 0.25 * s
-        q3 = (C[1, 2] + C[2, 1]) / s
-        q1 = (C[1, 0] + C[0, 1]) / s
     else:
-        s = np.sqrt(1.0 + C[2, 2] - C[0, 0] - C[1, 1]) * 2.0
-        q0 = (C[1, 0] - C[0, 1]) / s
-        q3 = 0.25 * s
-        q1 = (C[2, 0] + C[0, 2]) / s
-        q2 = (C[2, 1] + C[1, 2]) / s
+        a = choice - 1                      # the branch (a, b, c) of dcm_to_quat
+        b = (a + 1) % 3
+        c = (a + 2) % 3
+        s = np.sqrt(1.0 + C[a, a] - C[b, b] - C[c, c]) * 2.0
+        q0 = (C[c, b] - C[b, c]) / s
+        qa = 0.25 * s
+        qb = (C[a, b] + C[b, a]) / s
+        qc = (C[a, c] + C[c, a]) / s
+        if a == 0:
+            q1, q2, q3 = qa, qb, qc
+        elif a == 1:
+            q1, q2, q3 = qc, qa, qb
+        else:
+            q1, q2, q3 = qb, qc, qa
     if q0 < 0.0:
         q0, q1, q2, q3 = -q0, -q1, -q2, -q3
     n = np.sqrt(q0 * q0 + q1 * q1 + q2 * q2 + q3 * q3)
@@ -297,3 +294,27 @@ def log_so3_nb(C, out):
     out[0] = k * q1
     out[1] = k * q2
     out[2] = k * q3
+
+
+@numba.njit(cache=True, inline="always")
+def mat3_mul_nb(A, B, out):
+    """Write ``A @ B`` of 3x3 arrays into ``out`` (which must not alias ``A`` or ``B``)."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+
+
+@numba.njit(cache=True, inline="always")
+def mat3_tmul_nb(A, B, out):
+    """Write ``A^T @ B`` of 3x3 arrays into ``out`` (not aliasing either)."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[0, i] * B[0, j] + A[1, i] * B[1, j] + A[2, i] * B[2, j]
+
+
+@numba.njit(cache=True, inline="always")
+def mat3_mult_nb(A, B, out):
+    """Write ``A @ B^T`` of 3x3 arrays into ``out`` (not aliasing either)."""
+    for i in range(3):
+        for j in range(3):
+            out[i, j] = A[i, 0] * B[j, 0] + A[i, 1] * B[j, 1] + A[i, 2] * B[j, 2]
