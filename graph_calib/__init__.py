@@ -47,9 +47,9 @@ import sys as _sys
 # Large arrays in ordinary pages, not transparent huge pages.  NumPy asks the kernel for huge pages (madvise) on
 # every array of 4 MiB or more; where the kernel honours that (the THP policy "madvise", a common default) each
 # of the solvers' large short-lived temporaries is faulted in and zeroed 2 MiB at a time, and a 3 h loop job
-# spent a third of its CPU time in the kernel (docs/performance.md, "Huge pages").  The variable is read when
-# numpy is imported: set here for this process's children (a campaign's Dask workers) and, numpy being loaded
-# already, switched in this one too.  A value the user set is kept.
+# spent a third of its CPU time in the kernel (docs/performance.md, "One 3 h job of the first wave").  The
+# variable is read when numpy is imported: set here for this process's children (a campaign's Dask workers)
+# and, numpy being loaded already, switched in this one too.  A value the user set is kept.
 if "NUMPY_MADVISE_HUGEPAGE" not in _os.environ:
     _os.environ["NUMPY_MADVISE_HUGEPAGE"] = "0"
     if "numpy" in _sys.modules:

@@ -370,7 +370,7 @@ class Pool:
             # the workers keep glibc's own allocator policy: Dask's nanny would set MALLOC_TRIM_THRESHOLD_=65536,
             # which fixes glibc's mmap threshold at 128 KiB, so that every large temporary of a job is mapped,
             # faulted in and unmapped again (a 3 h loop job 1.38 times as long, a third of its CPU in the kernel:
-            # docs/performance.md, "Memory pages"); a value set in the environment is still passed on
+            # docs/performance.md, "One 3 h job of the first wave"); a value set in the environment is passed on
             with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
                 self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                              dashboard_address=":0", silence_logs=logging.ERROR)

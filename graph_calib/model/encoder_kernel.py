@@ -15,7 +15,8 @@ should.  Per reading ``i`` (the formulas of that function's docstring, written o
   turned by ``U^T``.
 
 Every small product is a loop over 3 x 3 blocks, with no temporaries: the numpy version this replaces formed
-``(m, 3, G)`` stacks for each step (docs/performance.md, "The encoder factors").
+``(m, 3, G)`` stacks for each step (docs/performance.md, "One 3 h job of the first wave";
+``tests/model/test_encoder_kernel.py`` keeps it as the oracle).
 """
 
 from __future__ import annotations
