@@ -157,8 +157,9 @@ def encoder_rows(reading_dR, reading_w, reading_J, J_w, dx_g, dt, phi_shape, key
                 Jphi[p, q] *= dt[i]
         for g in range(G):
             for p in range(3):
-                col[p] = (Ew[0, p] * reading_J[i, 0, g] + Ew[1, p] * reading_J[i, 1, g] + Ew[2, p] * reading_J[i, 2, g]) \
-                    + (Jphi[p, 0] * J_w[i, 0, g] + Jphi[p, 1] * J_w[i, 1, g] + Jphi[p, 2] * J_w[i, 2, g])
+                col[p] = ((Ew[0, p] * reading_J[i, 0, g] + Ew[1, p] * reading_J[i, 1, g]
+                           + Ew[2, p] * reading_J[i, 2, g])
+                          + (Jphi[p, 0] * J_w[i, 0, g] + Jphi[p, 1] * J_w[i, 1, g] + Jphi[p, 2] * J_w[i, 2, g]))
             cg = gyro_cols[g]
             for p in range(3):
                 H_x[i, p, cg] = Jri[p, 0] * col[0] + Jri[p, 1] * col[1] + Jri[p, 2] * col[2]

@@ -38,7 +38,8 @@ def _reference_rows(record, R, preint, x, layout, frame):
     Jr_inv, Jl_inv = right_jacobian_inv(r), right_jacobian_inv(-r)
     H_R = Jr_inv @ np.swapaxes(Bp, 1, 2)
     H_x = np.zeros((M, 3, P))
-    H_x[:, :, gc] = Jr_inv @ (np.swapaxes(Ew, 1, 2) @ preint.reading_J + (right_jacobian(phi) * dt[:, None, None]) @ J_w)
+    G_w = np.swapaxes(Ew, 1, 2) @ preint.reading_J + (right_jacobian(phi) * dt[:, None, None]) @ J_w
+    H_x[:, :, gc] = Jr_inv @ G_w
     if "mount" in layout:
         H_x[:, :, layout.slice("mount")] = -Jl_inv @ np.swapaxes(B, 1, 2) @ right_jacobian(mount)
     if "time_lag.table" in layout:
