@@ -293,7 +293,6 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
     return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
 
 
-
 def _column(layout, name):
     """First layout column of ``name``, -1 when the layout lacks it."""
     return layout.slice(name).start if name in layout else -1
@@ -317,9 +316,6 @@ def _encoder_rows(record, R, preint, x, layout, frame, r, H_R, H_x):
                  c(record.reading_E), c(R, dtype=float), c(record.reading_w_nb_offset), c(record.reading_alpha),
                  c(record.reading_f), c(record.reading_C_nb_nominal), mount, lag, K_damp, bool(np.any(K_damp)), gc,
                  cols[0], cols[1], cols[2], written, c(frame.U), c(frame.rotated), r, H_R, H_x)
-
-
-
 
 
 @dataclass(frozen=True)
