@@ -133,8 +133,7 @@ def calibrate_with_effects(experiment, *, added, options=CalibrationOptions(), s
     -------
     CalibrationRun
     """
-    model = replace(options.model, extra_effects=tuple(options.model.extra_effects) + tuple(added))
-    final = replace(options, model=model)
+    final = options.with_added_effects(added)
     return solve_problem(build_problem(experiment, options=final), options=final, solvers=solvers, progress=progress,
                          concurrent=concurrent)
 

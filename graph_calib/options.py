@@ -6,7 +6,7 @@ solvers so that the problem builder, every solver and the commands share one def
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from graph_calib.model import REPREINTEGRATE_TOL, ModelOptions
 
@@ -102,6 +102,10 @@ class CalibrationOptions:
     t_ref_degC: float | None = None
     variance_components: bool = True
     structure_tests: bool = True
+
+    def with_added_effects(self, added):
+        """The same options with the further effects ``added`` after the model's own (``ModelOptions.extra_effects``)."""
+        return replace(self, model=replace(self.model, extra_effects=tuple(self.model.extra_effects) + tuple(added)))
 
 
 __all__ = ["GraphOptions", "FilterOptions", "CalibrationOptions", "ModelOptions"]

@@ -57,11 +57,6 @@ from graph_calib.solvers.variance import KINDS, estimate_variance_components
 from graph_calib.records.problem import MOVING_ESTIMATED
 
 
-def _with_effects(options, extra_effects):
-    """``options`` with ``extra_effects`` as the model's further effects."""
-    return replace(options, model=replace(options.model, extra_effects=tuple(extra_effects)))
-
-
 def _primary(diagnosis_options):
     """The solver the rounds linearise at: the first of ``diagnosis_options.solvers``."""
     return diagnosis_options.solvers[0]
@@ -235,7 +230,7 @@ def _add_effect(name, *, options, problem, graph, lin, diagnosis_options, say):
     Gauss-Newton step of the grown model, else from the previous solution (the new parameters zero).
     Either way the solver iterates to its own fixed point; from the step it needs one iteration fewer.
     """
-    options = _with_effects(options, tuple(options.model.extra_effects) + (name,))
+    options = options.with_added_effects((name,))
     grown = problem.with_effects(options.model.extra_effects)
     if lin is not None and lin.start is not None:
         initial = (lin.start[0], grown.model.layout.embed(lin.model.layout, lin.start[1]))
@@ -250,7 +245,7 @@ def _guard(rnd, experiment, *, options, diagnosis, say):
     """``rnd`` with its effect kept only when the held-out figures allow it (:mod:`graph_calib.diagnosis.holdout`)."""
     say(f"round {rnd.index}: {rnd.added} passes its test; held-out check (two folds) ...")
     check = held_out_check(experiment, options=options, solver=_primary(diagnosis),
-                           grown=_with_effects(options, tuple(options.model.extra_effects) + (rnd.added,)))
+                           grown=options.with_added_effects((rnd.added,)))
     if check is None:
         return rnd
     if check.adopted:
