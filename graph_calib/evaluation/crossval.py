@@ -30,7 +30,8 @@ the units are dealt to the ``K`` folds:
 A unit's held-out span runs from the first sample of its first rest to the first sample of the rest
 after its last (or the record's end), so the rotations inside a unit are held out with its rests and
 the training record's pieces (marked as segments) each start at rest.  A training piece without a rest
-(motion before the first rest) cannot be aligned and is left out.
+(motion before the first rest), or one in which the calibration's own detection, with the piece's own
+threshold, finds none (a short first rest after a start in motion), cannot be aligned and is left out.
 
 Held-out figures (per fold, and pooled over the folds)
 ------------------------------------------------------
@@ -106,7 +107,12 @@ class HeldOutFigures:
     static_rate_rms_dps: float
 
     def to_json(self):
-        return {k: (float(v) if isinstance(v, float) else v) for k, v in self.__dict__.items()}
+        """The figures; one not held out (NaN: the static ones of ``by="transitions"``) as None (JSON null)."""
+        return {k: _json_float(v) if isinstance(v, float) else v for k, v in self.__dict__.items()}
+
+
+def _json_float(v):
+    return float(v) if np.isfinite(v) else None
 
 
 @dataclass(frozen=True)
@@ -157,7 +163,7 @@ class CrossValidation:
             "folds": [{"index": f.fold.index, "spans": [[int(a), int(b)] for a, b in f.fold.spans],
                        "rests": f.fold.n_rests, "calibrated": f.calibrated.to_json(),
                        "raw": f.raw.to_json()} for f in self.folds],
-            "pooled": {"calibrated": self.pooled("calibrated"), "raw": self.pooled("raw")},
+            "pooled": {w: {k: _json_float(v) for k, v in self.pooled(w).items()} for w in ("calibrated", "raw")},
             "worse_than_raw": list(self.worse_than_raw()),
         }
 
@@ -259,7 +265,13 @@ def _complement(spans, n):
 
 
 def training_record(experiment, fold, *, rests):
-    """The record without the fold's spans, its pieces marked as segments (those without a rest left out)."""
+    """The record without the fold's spans, its pieces marked as segments (those without a rest left out).
+
+    A piece counts as having a rest when the calibration finds one in it: segment by segment, with the piece's
+    own threshold (:func:`record_rests` of the cut record), which need not see the rest the whole record's
+    detection found there (a short first rest after a start in motion); a piece where it finds none is left
+    out, since the calibration could not align it.
+    """
     seg = _segments_of(experiment)
     pieces = []
     for a, b in _complement(fold.spans, experiment.n_samples):
@@ -268,9 +280,24 @@ def training_record(experiment, fold, *, rests):
         for s, e in zip(cuts[:-1], cuts[1:]):
             if np.any((rests[:, 0] >= s) & (rests[:, 1] <= e)):
                 pieces.append((s, e))
-    if not pieces:
-        raise InputError(f"fold {fold.index + 1}: nothing with a rest is left to calibrate on",
-                         path=experiment.source or None, dataset="/imu")
+    while True:
+        if not pieces:
+            raise InputError(f"fold {fold.index + 1}: nothing with a rest is left to calibrate on",
+                             path=experiment.source or None, dataset="/imu")
+        cut = _cut(experiment, fold, pieces)
+        if len(pieces) == 1:
+            return cut
+        found = record_rests(cut)
+        starts = np.cumsum([0] + [e - s for s, e in pieces])
+        keep = [(s, e) for (s, e), a, b in zip(pieces, starts[:-1], starts[1:])
+                if np.any((found[:, 0] >= a) & (found[:, 1] <= b))]
+        if len(keep) == len(pieces):
+            return cut
+        pieces = keep
+
+
+def _cut(experiment, fold, pieces):
+    """``experiment`` restricted to ``pieces`` (``[(start, stop)]``), each marked as a segment when there are several."""
     idx = np.concatenate([np.arange(s, e) for s, e in pieces])
     labels = np.concatenate([np.full(e - s, i, dtype=np.int32) for i, (s, e) in enumerate(pieces)])
     table = experiment.table

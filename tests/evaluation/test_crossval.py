@@ -11,6 +11,10 @@ from graph_calib.compensation.calibration import Calibration
 from graph_calib.errors import InputError
 from graph_calib.evaluation.crossval import (cross_validate, held_out_figures, make_folds, record_rests,
                                              training_record)
+from graph_calib.model import ModelOptions
+from graph_calib.options import CalibrationOptions
+from graph_calib.records.problem import build_problem
+from graph_calib.simulation.scenarios import SHORT_REST_FERRARIS, simulate
 
 
 @pytest.fixture(scope="module")
@@ -88,3 +92,38 @@ def test_crossval_refuses_too_few_folds_and_too_few_rests(ferraris, tmp_path, ca
         make_folds(exp, folds=8, rests=record_rests(exp)[:6])
     with pytest.raises(InputError, match="segment"):
         make_folds(exp, folds=2, by="segments")
+
+
+@pytest.fixture(scope="module")
+def short_first_rest(tmp_path_factory):
+    """A hand-held Ferraris session (seed 9) that starts in motion and whose first rest is short: cutting out the motion
+    after it leaves a first piece in which the piece's own detection threshold finds no rest."""
+    exp = simulate("consumer-ferraris", rng=np.random.default_rng(9), **SHORT_REST_FERRARIS).plans[0].make().experiment
+    path = tmp_path_factory.mktemp("fer9") / "fer9.h5"
+    io.write_experiment(exp, path)
+    return io.read_experiment(path), path
+
+
+def test_a_training_piece_the_calibration_cannot_align_is_left_out(short_first_rest):
+    exp, _ = short_first_rest
+    rests = record_rests(exp)
+    fold = make_folds(exp, folds=2, by="transitions", rests=rests)[0]
+    first_motion = (int(rests[0, 1]), int(rests[1, 0]))
+    assert first_motion in fold.spans                      # the motion after the short first rest is held out
+    train = training_record(exp, fold, rests=rests)
+    # the first piece (the start in motion and the short rest) is gone, so every segment left can be aligned
+    assert train.n_samples < exp.n_samples - sum(b - a for a, b in fold.spans)
+    problem = build_problem(train, options=CalibrationOptions(model=ModelOptions(grade="consumer")))
+    assert problem.model.n_keyframes > 0
+
+
+def test_crossval_by_transitions_writes_null_for_the_figures_it_does_not_hold_out(short_first_rest, tmp_path, capsys):
+    _, path = short_first_rest
+    code = main(["crossval", str(path), "--out", str(tmp_path / "cv"), "--grade", "consumer", "--by", "transitions"])
+    doc = json.loads((tmp_path / "cv" / "crossval.json").read_text())
+    assert code == (3 if doc["worse_than_raw"] else 0)
+    for f in doc["folds"]:
+        assert f["calibrated"]["static_norm_std_mps2"] is None and f["raw"]["static_rate_rms_dps"] is None
+        assert f["calibrated"]["transitions_rms_deg"] > 0
+    assert doc["pooled"]["calibrated"]["static_norm_std_mps2"] is None
+    assert doc["pooled"]["raw"]["transitions_rms_deg"] > doc["pooled"]["calibrated"]["transitions_rms_deg"]
