@@ -73,7 +73,7 @@ def run(args):
     exp = io.read_experiment(path)
     choice = None
     if args.grade is None:
-        choice = choose_grade(exp)
+        choice = choose_grade(exp, keyframe_s=args.keyframe)
         print(f"grade: {choice.reason}")
     options = options_from_args(args, grade=choice.grade if choice else None)
     out = Path(args.out)

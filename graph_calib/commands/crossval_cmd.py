@@ -57,7 +57,7 @@ def run(args):
     exp = io.read_experiment(path)
     grade = args.grade
     if grade is None:
-        choice = choose_grade(exp)
+        choice = choose_grade(exp, keyframe_s=args.keyframe)
         print(f"grade: {choice.reason}")
         grade = choice.grade
     options = options_from_args(args, grade=grade)

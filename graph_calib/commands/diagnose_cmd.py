@@ -108,7 +108,7 @@ def run(args):
     exp = io.read_experiment(path)
     choice = None
     if args.grade is None:
-        choice = choose_grade(exp)
+        choice = choose_grade(exp, keyframe_s=args.keyframe)
         print(f"grade: {choice.reason}")
     calibration_options, diagnosis_options = _options(args, grade=choice.grade if choice else "navigation")
     truth, tp = _truth(args, path)

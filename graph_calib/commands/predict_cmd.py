@@ -71,7 +71,7 @@ def run(args):
     else:
         exp = io.read_experiment(path)
         if args.grade is None:
-            choice = choose_grade(exp)
+            choice = choose_grade(exp, keyframe_s=args.keyframe)
             print(f"grade: {choice.reason}")
     options = options_from_args(args, grade=choice.grade if choice else None)
     problem = build_problem(exp, options=options)

@@ -46,6 +46,12 @@ def test_calibrate_prints_and_records_the_choice(tmp_path, capsys):
     assert "grade: navigation" in out
     doc = json.loads((tmp_path / "cal" / "factor-graph.json").read_text())
     assert doc["grade"] == "navigation" and doc["grade_choice"]["grade"] == "navigation"
+    # the choice judges the densities the solvers use: those of the record's own keyframe
+    rc = main(["calibrate", str(h5), "--out", str(tmp_path / "cal05"), "--solver", "factor-graph", "--keyframe", "0.5"])
+    doc = json.loads((tmp_path / "cal05" / "factor-graph.json").read_text())
+    assert doc["noise"]["identified"]["gyro"]["keyframe_s"] == 0.5
+    assert doc["grade_choice"]["gyro_noise_rad_per_sqrt_s"] == doc["noise"]["identified"]["gyro"]["density"]
+    assert doc["grade_choice"]["accel_noise_mps_per_sqrt_s"] == doc["noise"]["identified"]["accel"]["density"]
     # a named grade is used as given, and no choice is recorded
     rc = main(["calibrate", str(h5), "--out", str(tmp_path / "cal2"), "--solver", "factor-graph",
                "--grade", "tactical"])
