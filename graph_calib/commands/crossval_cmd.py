@@ -80,10 +80,11 @@ def run(args):
     doc = {**cv.to_json(), "source": path.name, "solver": solver, "grade": grade, "diagnose": bool(args.diagnose)}
     io.atomic_write_json(out / "crossval.json", doc)
     print(crossval_table(cv))
-    worse = cv.worse_than_raw()
-    if worse:
-        print(f"verdict: FAIL: on the held-out poses the calibration is worse than the raw samples in "
-              f"{', '.join(worse)} -> {out / 'crossval.json'}")
+    if cv.failed():
+        where = ([f"pooled: {', '.join(cv.worse_than_raw())}"] if cv.worse_than_raw() else []) + \
+            [f"fold {i + 1}: {', '.join(w)}" for i, w in cv.folds_worse_than_raw()]
+        print(f"verdict: FAIL: on the held-out poses the calibration is worse than the raw samples ("
+              f"{'; '.join(where)}) -> {out / 'crossval.json'}")
         return 3
     print(f"verdict: pass: on the held-out poses the calibration beats the raw samples in every figure "
           f"-> {out / 'crossval.json'}")

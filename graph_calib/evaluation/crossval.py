@@ -46,7 +46,7 @@ Held-out figures (per fold, and pooled over the folds)
     the Earth rate (at most 0.0042 deg/s) included.
 
 A calibration whose held-out figures are worse than the raw samples' is worse than none: the command
-line says so and exits 3.
+line says so and exits 3, whether pooled over the folds or on any one fold.
 """
 
 from __future__ import annotations
@@ -157,12 +157,20 @@ class CrossValidation:
         cal, raw = self.pooled("calibrated"), self.pooled("raw")
         return tuple(k for k in FIGURES if np.isfinite(cal[k]) and cal[k] > WORSE_FACTOR * raw[k])
 
+    def folds_worse_than_raw(self):
+        """``((fold index, figure names), ...)`` of the folds where the calibration is worse than the raw samples."""
+        return tuple((f.fold.index, w) for f in self.folds if (w := f.worse_than_raw()))
+
+    def failed(self):
+        """Whether the calibration is worse than none on what it did not see: pooled, or on any one fold."""
+        return bool(self.worse_than_raw() or self.folds_worse_than_raw())
+
     def to_json(self):
         return {
             "format": "imu-calibration-crossval", "version": 1, "by": self.by,
             "folds": [{"index": f.fold.index, "spans": [[int(a), int(b)] for a, b in f.fold.spans],
                        "rests": f.fold.n_rests, "calibrated": f.calibrated.to_json(),
-                       "raw": f.raw.to_json()} for f in self.folds],
+                       "raw": f.raw.to_json(), "worse_than_raw": list(f.worse_than_raw())} for f in self.folds],
             "pooled": {w: {k: _json_float(v) for k, v in self.pooled(w).items()} for w in ("calibrated", "raw")},
             "worse_than_raw": list(self.worse_than_raw()),
         }

@@ -78,9 +78,10 @@ def test_crossval_command_writes_its_file_and_its_exit_code_follows_the_figures(
     code = main(["crossval", str(folder / "ferraris.h5"), "--out", str(tmp_path / "cv"), "--grade", "consumer",
                  "--by", "rests"])
     doc = json.loads((tmp_path / "cv" / "crossval.json").read_text())
-    assert code == (3 if doc["worse_than_raw"] else 0)
+    failed = bool(doc["worse_than_raw"] or any(f["worse_than_raw"] for f in doc["folds"]))
+    assert code == (3 if failed else 0)
     out = capsys.readouterr().out
-    assert "transitions rms" in out and ("verdict: FAIL" in out) == bool(doc["worse_than_raw"])
+    assert "transitions rms" in out and ("verdict: FAIL" in out) == failed
     assert doc["by"] == "rests" and doc["grade"] == "consumer"
 
 
@@ -121,7 +122,10 @@ def test_crossval_by_transitions_writes_null_for_the_figures_it_does_not_hold_ou
     _, path = short_first_rest
     code = main(["crossval", str(path), "--out", str(tmp_path / "cv"), "--grade", "consumer", "--by", "transitions"])
     doc = json.loads((tmp_path / "cv" / "crossval.json").read_text())
-    assert code == (3 if doc["worse_than_raw"] else 0)
+    # the default calibration turns the first fold's held-out motions worse than raw (5.33 against 5.07 deg) while
+    # the pooled figure is better (3.89 against 4.73): one fold worse than none fails the verdict too
+    assert doc["worse_than_raw"] == [] and doc["folds"][0]["worse_than_raw"] == ["transitions_rms_deg"]
+    assert code == 3 and "fold 1: transitions_rms_deg" in capsys.readouterr().out
     for f in doc["folds"]:
         assert f["calibrated"]["static_norm_std_mps2"] is None and f["raw"]["static_rate_rms_dps"] is None
         assert f["calibrated"]["transitions_rms_deg"] > 0
