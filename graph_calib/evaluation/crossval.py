@@ -388,12 +388,17 @@ def crossval_table(cv):
     head = f"{'fold':>6} {'rests':>5} {'|f| spread [m/s^2]':>22} {'transitions rms [deg]':>24} {'static rate [deg/s]':>22}"
     lines = [head, f"{'':>6} {'':>5} {'calibrated':>11}{'raw':>11} {'calibrated':>12}{'raw':>12} {'calibrated':>11}{'raw':>11}"]
 
+    def cell(v, width, spec):
+        return f"{v:>{width}{spec}}" if np.isfinite(v) else f"{'-':>{width}}"
+
     def row(name, n, c, r):
-        return (f"{name:>6} {n:>5} {c['static_norm_std_mps2']:>11.3e}{r['static_norm_std_mps2']:>11.3e} "
-                f"{c['transitions_rms_deg']:>12.3f}{r['transitions_rms_deg']:>12.3f} "
-                f"{c['static_rate_rms_dps']:>11.4f}{r['static_rate_rms_dps']:>11.4f}")
+        return (f"{name:>6} {n:>5} " + "".join(cell(d[k], w, spec) + (" " if d is r else "") for k, w, spec in (
+            ("static_norm_std_mps2", 11, ".3e"), ("transitions_rms_deg", 12, ".3f"), ("static_rate_rms_dps", 11, ".4f"))
+            for d in (c, r))).rstrip()
 
     for f in cv.folds:
         lines.append(row(str(f.fold.index + 1), f.calibrated.n_rests, f.calibrated.__dict__, f.raw.__dict__))
     lines.append(row("all", sum(f.calibrated.n_rests for f in cv.folds), cv.pooled("calibrated"), cv.pooled("raw")))
+    if cv.by == "transitions":
+        lines.append("(-: not held out; with folds by transitions every rest stays in the training record)")
     return "\n".join(lines)

@@ -125,7 +125,9 @@ def test_crossval_by_transitions_writes_null_for_the_figures_it_does_not_hold_ou
     # the default calibration turns the first fold's held-out motions worse than raw (5.33 against 5.07 deg) while
     # the pooled figure is better (3.89 against 4.73): one fold worse than none fails the verdict too
     assert doc["worse_than_raw"] == [] and doc["folds"][0]["worse_than_raw"] == ["transitions_rms_deg"]
-    assert code == 3 and "fold 1: transitions_rms_deg" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert code == 3 and "fold 1: transitions_rms_deg" in out
+    assert "nan" not in out and "-: not held out" in out        # the table marks what it does not hold out
     for f in doc["folds"]:
         assert f["calibrated"]["static_norm_std_mps2"] is None and f["raw"]["static_rate_rms_dps"] is None
         assert f["calibrated"]["transitions_rms_deg"] > 0
