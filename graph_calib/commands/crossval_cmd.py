@@ -80,9 +80,10 @@ def run(args):
     doc = {**cv.to_json(), "source": path.name, "solver": solver, "grade": grade, "diagnose": bool(args.diagnose)}
     io.atomic_write_json(out / "crossval.json", doc)
     print(crossval_table(cv))
-    if cv.failed():
-        where = ([f"pooled: {', '.join(cv.worse_than_raw())}"] if cv.worse_than_raw() else []) + \
-            [f"fold {i + 1}: {', '.join(w)}" for i, w in cv.folds_worse_than_raw()]
+    pooled, folds = cv.worse_than_raw(), cv.folds_worse_than_raw()
+    if pooled or folds:
+        where = ([f"pooled: {', '.join(pooled)}"] if pooled else []) + \
+            [f"fold {i + 1}: {', '.join(w)}" for i, w in folds]
         print(f"verdict: FAIL: on the held-out poses the calibration is worse than the raw samples ("
               f"{'; '.join(where)}) -> {out / 'crossval.json'}")
         return 3

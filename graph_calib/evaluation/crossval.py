@@ -161,10 +161,6 @@ class CrossValidation:
         """``((fold index, figure names), ...)`` of the folds where the calibration is worse than the raw samples."""
         return tuple((f.fold.index, w) for f in self.folds if (w := f.worse_than_raw()))
 
-    def failed(self):
-        """Whether the calibration is worse than none on what it did not see: pooled, or on any one fold."""
-        return bool(self.worse_than_raw() or self.folds_worse_than_raw())
-
     def to_json(self):
         return {
             "format": "imu-calibration-crossval", "version": 1, "by": self.by,
@@ -392,9 +388,8 @@ def crossval_table(cv):
         return f"{v:>{width}{spec}}" if np.isfinite(v) else f"{'-':>{width}}"
 
     def row(name, n, c, r):
-        return (f"{name:>6} {n:>5} " + "".join(cell(d[k], w, spec) + (" " if d is r else "") for k, w, spec in (
-            ("static_norm_std_mps2", 11, ".3e"), ("transitions_rms_deg", 12, ".3f"), ("static_rate_rms_dps", 11, ".4f"))
-            for d in (c, r))).rstrip()
+        return f"{name:>6} {n:>5} " + " ".join(cell(c[k], w, spec) + cell(r[k], w, spec) for k, w, spec in (
+            ("static_norm_std_mps2", 11, ".3e"), ("transitions_rms_deg", 12, ".3f"), ("static_rate_rms_dps", 11, ".4f")))
 
     for f in cv.folds:
         lines.append(row(str(f.fold.index + 1), f.calibrated.n_rests, f.calibrated.__dict__, f.raw.__dict__))
