@@ -36,6 +36,7 @@ from numba.core.registry import CPUDispatcher
 KERNEL_MODULES = (
     "graph_calib.navigation.rotations", "graph_calib.sensors.sensor_model", "graph_calib.compensation.calibration", "graph_calib.navigation.strapdown",
     "graph_calib.navigation.static_detection", "graph_calib.model.kernel", "graph_calib.model.encoder_kernel",
+    "graph_calib.model.shared_gyro_noise",
     "graph_calib.simulation.turntable",
     "kf_reference.sqrt_kf", "graph_calib.model.redundancy",
 )

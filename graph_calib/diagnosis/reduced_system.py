@@ -10,7 +10,12 @@ attitudes are eliminated (block-tridiagonal: banded Cholesky,
 the :class:`ReducedSystem` ``(A, b)`` in the calibration columns, to which the generic
 driver columns (:mod:`graph_calib.diagnosis.drivers`) are appended; a driver column is
 its bias column times each factor's mean of the series, accumulated without forming it
-(:func:`_driver_blocks`).  The normal equations are the model's one builder
+(:func:`_driver_blocks`).  The factors are the residual list's: a table reading's and a rotation factor's
+bias column is the one after their shared gyro noise is made independent
+(:mod:`graph_calib.model.shared_gyro_noise`), which mixes the columns of the readings of one keyframe
+interval, each with its own window; so a driver column there is a close stand-in for the series
+taken through that map, not the map of each original column (any column of the data alone gives a score
+test of the null's level; only the alternative it is most powerful against moves, within a keyframe).  The normal equations are the model's one builder
 (:func:`graph_calib.model.normal_equations.linearise`, the solvers' too).  The score tests
 (:mod:`graph_calib.diagnosis.score`) work on it; :meth:`ReducedSystem.gauss_newton_step` gives the step of a grown model from it.
 """

@@ -14,8 +14,11 @@ Modules, from the data up:
   correction in the calibration, and :func:`preintegrate`;
 - :mod:`graph_calib.model.factors`: the rotation, gravity and encoder factors and the priors, each a
   residual with its Jacobians (equations in that module's docstring);
+- :mod:`graph_calib.model.shared_gyro_noise`: the gyro noise a keyframe interval's table readings share with
+  each other and with its rotation factor, made independent by one linear map;
 - :mod:`graph_calib.model.residual_list`: the factor kinds enumerated once (:data:`FACTOR_KINDS`), each with
-  its robust-loss policy, and the one whitening;
+  its robust-loss policy, the residual list (the kinds with their shared noise made independent) and the one
+  whitening;
 - :mod:`graph_calib.model.attitude_elimination`, :mod:`graph_calib.model.normal_equations`: the one builder
   of the normal equations, the keyframe attitudes eliminated by their banded Schur complement;
 - :mod:`graph_calib.model.unresolved`: the directions a record cannot resolve (a heading drift that

@@ -52,7 +52,10 @@ Encoder measurement
     ``Sigma_enc`` is a static dwell's scatter, or the declared ``sigma_enc^2`` about the table's axes
     when they are known, or ``sigma_enc^2 I`` (readings in motion), principal variances floored
     (:mod:`graph_calib.model.encoder_noise`); residual and Jacobians are turned into its principal
-    axes, ``U^T r``, so that each component has its own sigma.
+    axes, ``U^T r``, so that each component has its own sigma.  The gyro term is shared: the readings of one
+    interval and its rotation factor carry the same gyro noise up to the earlier time, which
+    :mod:`graph_calib.model.shared_gyro_noise` makes independent in the residual list (each function here
+    gives its kind on its own).
 
 Jacobians are with respect to the right perturbation of ``R_k``
 (``R_k Exp(delta)``) and the calibration vector; the preintegration carries its

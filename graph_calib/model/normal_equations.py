@@ -145,8 +145,9 @@ def linearise(model, preint, R, x, *, R_prior, M=None, n_extra=0, robust=None, r
         ne.add_attitude_prior(key, att_prior.H, att_prior.r)
         cost += att_prior.cost
     whitened, kept = {}, {}
+    factors = residual_list(model, R, preint, x)
     for kind in FACTOR_KINDS:
-        res = kind.evaluate(model, R, preint, x)
+        res = factors.pop(kind.name)
         F = res.r.shape[0]
         if keep_factors:
             kept[kind.name] = _without_jacobians(res)

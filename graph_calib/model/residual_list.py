@@ -5,6 +5,11 @@ A record's residuals are its factors (:mod:`graph_calib.model.factors`), one :cl
 :class:`graph_calib.model.factors.PriorResidual`).  Every solver, the diagnosis and the filter read the kinds
 from here; a new kind is one entry (its residual function in ``factors`` and a method of the model).
 
+The residual list (:func:`residual_list`) gives every kind as the solvers use it: the rotation and encoder
+factors of a keyframe interval share gyro noise, which :mod:`graph_calib.model.shared_gyro_noise` makes
+independent (one linear map of their residuals and Jacobians), so that every component is then independent
+of every other.
+
 Whitening (:func:`whiten`): a factor's rows divided by its one-sigma noise (the model's
 :class:`graph_calib.model.factors.Noise` gives each kind's sigma), then, under a robust loss, scaled by the
 square root of the M-estimator's weight of the norm of the factor's whole whitened residual (GTSAM's
@@ -19,6 +24,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+
+from graph_calib.model.shared_gyro_noise import decorrelate
 
 
 @dataclass(frozen=True)
@@ -43,7 +50,9 @@ class FactorKind:
     per_keyframe: bool = False
 
     def evaluate(self, model, R, preint, x):
-        """The kind's :class:`graph_calib.model.factors.Residuals` at ``(R, x)``."""
+        """The kind's :class:`graph_calib.model.factors.Residuals` at ``(R, x)``, on its own: the rotation and
+        encoder kinds before their shared gyro noise is made independent (:func:`residual_list` gives every
+        kind as the solvers use it)."""
         return getattr(model, self.method)(R, preint, x)
 
     def times(self, model):
@@ -124,8 +133,16 @@ def cost_by_key(kind, res, n_keys, *, robust=None, robust_k=3.0):
 
 
 def residual_list(model, R, preint, x):
-    """``{kind name: Residuals}`` of every factor kind at ``(R, x)``, in :data:`FACTOR_KINDS` order."""
-    return {kind.name: kind.evaluate(model, R, preint, x) for kind in FACTOR_KINDS}
+    """``{kind name: Residuals}`` of every factor kind at ``(R, x)``, in :data:`FACTOR_KINDS` order.
+
+    The rotation and encoder factors come out with the gyro noise they share made independent
+    (:func:`graph_calib.model.shared_gyro_noise.decorrelate`), so that every whitened component is
+    independent of every other: evaluate the kinds through this list, not one by one.
+    """
+    factors = {kind.name: kind.evaluate(model, R, preint, x) for kind in FACTOR_KINDS}
+    factors["rotation"], factors["encoder"] = decorrelate(model.record, preint, model.noise, factors["rotation"],
+                                                          factors["encoder"])
+    return factors
 
 
 __all__ = ["FactorKind", "FACTOR_KINDS", "KIND_NAMES", "MEASUREMENT_KINDS", "robust_loss", "whiten", "cost_by_key",

@@ -20,6 +20,7 @@ from graph_calib.diagnosis.drivers import (
     keyframe_context,
 )
 from graph_calib.model.attitude_elimination import eliminate
+from graph_calib.model.residual_list import residual_list
 from graph_calib.simulation import simulate
 
 EFFECT = "accel.bias_tc2"
@@ -55,8 +56,9 @@ def _dense_system(model, R, x, *, q_nb0, null_names, sums):
     pre = model.preintegrate(x)
     k0 = model.record.k0
     rows = []
+    factors = residual_list(model, R, pre, x)      # the readings and rotation factors decorrelated, as solved
     for kind in ("rotation", "gravity", "encoder"):
-        res = getattr(model, f"{kind}_factors")(R, pre, x)
+        res = factors[kind]
         s = 1.0 / res.sigma[:, :, None]
         r, HR, Hx = res.whitened(), res.H_R * s, res.H_x * s
         HRn = None if res.H_R_next is None else res.H_R_next * s

@@ -12,6 +12,7 @@ import scipy.sparse
 
 import kf_reference
 from graph_calib.model import CalibrationModel, ModelOptions
+from graph_calib.model.residual_list import residual_list
 from graph_calib.sensors.params import Layout, grade
 from graph_calib.navigation.rotations import exp_so3, log_so3, right_jacobian_inv
 from graph_calib.solvers.interface import ProgressEvent
@@ -164,8 +165,7 @@ def _batch_gauss_newton(model, *, R, x, R_prior, iterations=6):
         add(np.repeat(np.arange(3), 3), np.tile(np.arange(3), 3), J0)
         res.append(r0 / s0)
         n_rows += 3
-        for f in (model.rotation_factors, model.gravity_factors, model.encoder_factors):
-            fr = f(R, preint, x)
+        for fr in residual_list(model, R, preint, x).values():
             F = fr.r.shape[0]
             rr = (np.arange(3 * F).reshape(F, 3))[:, :, None]
             w = 1.0 / fr.sigma[:, :, None]
@@ -332,8 +332,8 @@ def _batch_cost(model, R, x, *, preint, R_prior, x_prior, x_sigma):
     """The batch least-squares cost straight from the model's factors: every whitened residual squared,
     plus the priors (twice GTSAM's error of the factor graph)."""
     cost = 0.0
-    for f in (model.rotation_factors, model.gravity_factors, model.encoder_factors):
-        cost += float(np.sum(f(R, preint, x).whitened() ** 2))
+    for fr in residual_list(model, R, preint, x).values():
+        cost += float(np.sum(fr.whitened() ** 2))
     cost += float(np.sum(((x - x_prior) / x_sigma) ** 2))
     r0 = log_so3(R_prior.T @ R[0]) / model.initial_attitude_sigma
     return cost + float(r0 @ r0)

@@ -16,7 +16,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import X
 
-from graph_calib.model.residual_list import FACTOR_KINDS
+from graph_calib.model.residual_list import FACTOR_KINDS, residual_list
 
 #: Key offset of each experiment's attitudes: ``X(e * STRIDE + k)``.
 STRIDE = 10**6
@@ -41,7 +41,7 @@ class _Evaluation:
             self.R = np.array([values.atRot3(attitude_key(self.e, k)).matrix() for k in range(n)])
             theta = np.concatenate([np.asarray(values.atVector(key), dtype=float) for key in self.c.keys])
             x = theta if self.c.M is None else self.c.M @ theta
-            self.factors = {kind.name: kind.evaluate(self.c.model, self.R, self.c.preint, x) for kind in FACTOR_KINDS}
+            self.factors = residual_list(self.c.model, self.R, self.c.preint, x)
 
     def theta_blocks(self, Hx, H, first):
         M = np.eye(Hx.shape[1]) if self.c.M is None else self.c.M

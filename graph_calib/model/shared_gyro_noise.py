@@ -1,0 +1,216 @@
+r"""The gyro noise the table readings of a keyframe interval share with each other and with its rotation factor.
+
+An encoder reading ``i`` at ``tau_i`` into keyframe interval ``k`` compares the table's attitude with
+``R_k dR(tau_i)``, and the rotation factor of ``k`` compares ``R_{k+1}`` with ``R_k dR(T_k)``.  Both
+preintegrated rotations carry the same gyro noise up to the earlier time: with ``W(tau) = sum_s dR_s n_s h``
+(the gyro's white noise ``n`` integrated in the keyframe's body frame, covariance ``q_g^2 tau I``), a reading's
+residual (:func:`graph_calib.model.factors.encoder_factors`, turned into its noise frame ``U_i``) holds
+``U_i^T dR_i^T W(tau_i)`` and the rotation factor ``-dR_T^T W(T_k)``, so
+
+.. math::
+
+    \operatorname{cov}(e_i, e_j) = q_g^2 \min(\tau_i, \tau_j)\, U_i^T dR_i^T dR_j U_j + \delta_{ij} D_i, \qquad
+    \operatorname{cov}(e_i, \rho_k) = -q_g^2 \tau_i\, U_i^T dR_i^T dR_T,
+
+``D_i`` the reading's own noise (the table's and a ring-laser gyro's quantization).  Treated as independent,
+the interval's readings and its rotation factor count the same gyro noise several times: the mean of an
+interval's readings then has more variance than the model gives it (with ten readings a second, about a
+tenth more on a navigation-grade table of 2 arcsec when the gyro's noise is three times the grade's), which the
+score tests of the gyro's candidates read as structure (docs/model.md, "The loop's false adoptions").
+
+This module replaces, exactly and linearly, an interval's readings and its rotation factor by independent
+ones: a Kalman recursion over the interval's readings in time order, its state ``W``, gives each reading's
+innovation ``e_i - U_i^T dR_i^T W_hat`` (independent of the earlier readings) with its covariance ``S_i``, and
+the rotation factor less its expectation given every reading of the interval,
+``rho + dR_T^T W_hat`` (independent of them all), with covariance
+``dR_T^T (P + q_g^2 (T_k - tau_last) I) dR_T``.  Each is then whitened by the unit-lower-triangular factor of
+its covariance (``S = L D L^T``: ``L^-1 e`` has the independent sigmas ``sqrt(D)``, and its components stay
+nearest the reading's noise frame, so the residual still reads as body axes).  Residuals and Jacobians go
+through the same map (it depends on the record, the preintegration's rotations at its linearisation point and
+the noise, never on the attitudes or the calibration), so the Jacobians stay those of the residual.  The
+chi-square of the interval is unchanged in form: the Mahalanobis norm of the original residuals under the
+covariance above.  An interval without readings keeps its rotation factor as it was.
+
+The variance factors (:class:`graph_calib.model.factors.Noise`): each kind keeps its own marginal
+covariance: a reading's ``D_i + v_enc q_g^2 tau_i``, the rotation factor's ``v_rot q_g^2 T``, and the shared
+part is scaled by ``sqrt(v_enc v_rot)`` between them.  The keyframe attitudes are the gyros' indicated ones,
+so a quantization error at the keyframe is in neither and nothing else is shared.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numba
+import numpy as np
+
+from graph_calib import kernel_cache
+
+kernel_cache.install()     # before the first kernel
+
+#: A reading's own variance is never taken below this (rad^2): a record declared noiseless on the table.
+MIN_VARIANCE = 1e-30
+
+
+def _ldl_whiten(S):
+    """``(L^-1 as (n, 3, 3), sqrt(D) (n, 3))`` of ``S = L D L^T`` (``L`` unit lower triangular), ``S`` (n, 3, 3)."""
+    C = np.linalg.cholesky(S)
+    d = np.diagonal(C, axis1=1, axis2=2)
+    C_inv = np.linalg.inv(C)
+    return C_inv * d[:, :, None], d.copy()
+
+
+@numba.njit(cache=True)
+def _gains(order, group, tau, H, D, q2, K, L_inv, sigma, Pw, tau_last):
+    """The recursion's gains, reading by reading in ``order``: ``K`` (M, 3, 3), ``L_inv`` (M, 3, 3) and
+    ``sigma`` (M, 3) written; ``Pw`` (G, 3, 3) and ``tau_last`` (G,), zero on entry, end as each interval's
+    covariance of its gyro noise given its readings and its last reading's time.
+
+    ``P = Pw_g + q2 (tau_i - tau_last_g) I``, ``S = H_i P H_i^T + diag(D_i) = C C^T`` (Cholesky, written out),
+    ``K_i = P H_i^T S^-1``, ``Pw_g = P - K_i H_i P``, ``L_inv = diag(C) C^-1``, ``sigma = diag(C)``.
+    """
+    P = np.empty((3, 3))
+    PHt = np.empty((3, 3))
+    S = np.empty((3, 3))
+    Ci = np.zeros((3, 3))
+    Si = np.empty((3, 3))
+    KH = np.empty((3, 3))
+    for n in range(order.size):
+        i = order[n]
+        g = group[i]
+        dq = q2 * (tau[i] - tau_last[g])
+        for a in range(3):
+            for b in range(3):
+                P[a, b] = Pw[g, a, b] + (dq if a == b else 0.0)
+        for a in range(3):
+            for b in range(3):
+                PHt[a, b] = P[a, 0] * H[i, b, 0] + P[a, 1] * H[i, b, 1] + P[a, 2] * H[i, b, 2]
+        for a in range(3):
+            for b in range(3):
+                S[a, b] = H[i, a, 0] * PHt[0, b] + H[i, a, 1] * PHt[1, b] + H[i, a, 2] * PHt[2, b]
+        for a in range(3):
+            S[a, a] += D[i, a]
+        c00 = np.sqrt(S[0, 0])
+        c10 = 0.5 * (S[1, 0] + S[0, 1]) / c00
+        c20 = 0.5 * (S[2, 0] + S[0, 2]) / c00
+        c11 = np.sqrt(S[1, 1] - c10 * c10)
+        c21 = (0.5 * (S[2, 1] + S[1, 2]) - c20 * c10) / c11
+        c22 = np.sqrt(S[2, 2] - c20 * c20 - c21 * c21)
+        Ci[0, 0], Ci[1, 1], Ci[2, 2] = 1.0 / c00, 1.0 / c11, 1.0 / c22
+        Ci[1, 0] = -c10 * Ci[0, 0] / c11
+        Ci[2, 1] = -c21 * Ci[1, 1] / c22
+        Ci[2, 0] = -(c20 * Ci[0, 0] + c21 * Ci[1, 0]) / c22
+        for a in range(3):                               # S^-1 = C^-T C^-1
+            for b in range(3):
+                Si[a, b] = Ci[0, a] * Ci[0, b] + Ci[1, a] * Ci[1, b] + Ci[2, a] * Ci[2, b]
+        for a in range(3):
+            for b in range(3):
+                K[i, a, b] = PHt[a, 0] * Si[0, b] + PHt[a, 1] * Si[1, b] + PHt[a, 2] * Si[2, b]
+        for a in range(3):
+            for b in range(3):
+                KH[a, b] = K[i, a, 0] * H[i, 0, b] + K[i, a, 1] * H[i, 1, b] + K[i, a, 2] * H[i, 2, b]
+        for a in range(3):
+            for b in range(3):
+                Pw[g, a, b] = P[a, b] - (KH[a, 0] * P[0, b] + KH[a, 1] * P[1, b] + KH[a, 2] * P[2, b])
+        diag = (c00, c11, c22)
+        for a in range(3):
+            sigma[i, a] = diag[a]
+            for b in range(3):
+                L_inv[i, a, b] = diag[a] * Ci[a, b]
+        tau_last[g] = tau[i]
+
+
+@numba.njit(cache=True)
+def _innovations(order, group, H, K, L_inv, Y, W):
+    """The readings' whitened innovations, in place: ``Y`` (M, 3, C) the residuals or a Jacobian's columns.
+
+    In ``order`` (interval by interval, each in time), reading ``i`` of interval ``group[i]``:
+    ``e = Y_i - H_i W_g``, ``W_g += K_i e``, ``Y_i = L_inv_i e``; ``W`` (G, 3, C), zero on entry, ends as each
+    interval's estimate of its gyro noise given its readings, in the same columns.
+    """
+    C = Y.shape[2]
+    e = np.empty((3, C))
+    for n in range(order.size):
+        i = order[n]
+        g = group[i]
+        for a in range(3):
+            for c in range(C):
+                e[a, c] = Y[i, a, c] - H[i, a, 0] * W[g, 0, c] - H[i, a, 1] * W[g, 1, c] - H[i, a, 2] * W[g, 2, c]
+        for a in range(3):
+            for c in range(C):
+                W[g, a, c] += K[i, a, 0] * e[0, c] + K[i, a, 1] * e[1, c] + K[i, a, 2] * e[2, c]
+                Y[i, a, c] = L_inv[i, a, 0] * e[0, c] + L_inv[i, a, 1] * e[1, c] + L_inv[i, a, 2] * e[2, c]
+
+
+def decorrelate(record, preint, noise, rot, enc):
+    """The rotation and encoder factors with their shared gyro noise made independent (module docstring).
+
+    Parameters
+    ----------
+    record : graph_calib.model.record.PreparedRecord
+    preint : graph_calib.model.preintegration.Preintegrated
+        Its rotations at the linearisation point set the frames of the map.
+    noise : graph_calib.model.factors.Noise
+        The model's noise, its variance factors included.
+    rot, enc : graph_calib.model.factors.Residuals
+        The rotation and encoder factors as the model gives them (each kind's variance factor applied).
+
+    Returns
+    -------
+    rot, enc : graph_calib.model.factors.Residuals
+        The same factors after the map: same keys and shapes; the readings' and the rotation factors' sigmas
+        those of the independent residuals.
+    """
+    M = enc.r.shape[0]
+    if M == 0 or noise.gyro <= 0.0:
+        return rot, enc
+    v_enc = float(noise.variance_factors.get("encoder", 1.0))
+    v_rot = float(noise.variance_factors.get("rotation", 1.0))
+    q2 = noise.gyro**2
+    tau = record.reading_tau
+    D = np.maximum(enc.sigma**2 - (v_enc * q2 * tau)[:, None], MIN_VARIANCE)       # the reading's own noise
+    H = np.swapaxes(record.encoder_noise_frame(noise.encoder).U, 1, 2) @ np.swapaxes(preint.reading_dR, 1, 2)
+
+    keys, group = np.unique(enc.key, return_inverse=True)
+    order = np.lexsort((tau, group))
+    first = np.searchsorted(group[order], np.arange(keys.size))
+    position = np.empty(M, dtype=np.int64)
+    position[order] = np.arange(M) - first[group[order]]
+
+    G = keys.size
+    # the recursion's gains from the data and the noise alone, then the same linear map on the residuals and
+    # every Jacobian (both compiled)
+    K, L_inv, sigma = np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3))
+    Pw, tau_last, eye = np.zeros((G, 3, 3)), np.zeros(G), np.eye(3)
+    _gains(order, group, np.ascontiguousarray(tau, dtype=float), H, np.ascontiguousarray(D), v_enc * q2,
+           K, L_inv, sigma, Pw, tau_last)
+    W_r, W_R, W_x = np.zeros((G, 3, 1)), np.zeros((G, 3, 3)), np.zeros((G, 3, enc.H_x.shape[2]))
+    r = np.array(enc.r, dtype=float, order="C")[:, :, None]
+    H_R = np.array(enc.H_R, dtype=float, order="C")
+    H_x = np.array(enc.H_x, dtype=float, order="C")
+    for Y, W in ((r, W_r), (H_R, W_R), (H_x, W_x)):
+        _innovations(order, group, H, K, L_inv, Y, W)
+    r, W_r = r[:, :, 0], W_r[:, :, 0]
+    enc = replace(enc, r=r, H_R=H_R, H_x=H_x, sigma=sigma)
+
+    # each rotation factor less its expectation given its interval's readings
+    f = np.flatnonzero(np.isin(rot.key, keys))
+    if f.size == 0:
+        return rot, enc
+    g = np.searchsorted(keys, rot.key[f])
+    dR_T = preint.dR[rot.key[f]]
+    A = np.sqrt(v_rot / v_enc) * np.swapaxes(dR_T, 1, 2)                             # dR_T^T, scaled
+    rest = (q2 * (record.T_key[rot.key[f]] - tau_last[g]))[:, None, None] * eye
+    C = v_rot * np.swapaxes(dR_T, 1, 2) @ (Pw[g] / v_enc + rest) @ dR_T
+    L_inv, s = _ldl_whiten(0.5 * (C + np.swapaxes(C, 1, 2)))
+    rr, rR, rx = rot.r.copy(), rot.H_R.copy(), rot.H_x.copy()
+    rN, rs = rot.H_R_next.copy(), rot.sigma.copy()
+    rr[f] = np.einsum("nab,nb->na", L_inv, rot.r[f] + np.einsum("nab,nb->na", A, W_r[g]))
+    rR[f] = L_inv @ (rot.H_R[f] + A @ W_R[g])
+    rx[f] = L_inv @ (rot.H_x[f] + A @ W_x[g])
+    rN[f] = L_inv @ rot.H_R_next[f]
+    rs[f] = s
+    return replace(rot, r=rr, H_R=rR, H_R_next=rN, H_x=rx, sigma=rs), enc
+
+
+__all__ = ["decorrelate", "MIN_VARIANCE"]
