@@ -301,6 +301,15 @@ def _column(layout, name):
     return layout.slice(name).start if name in layout else -1
 
 
+def encoder_columns(layout, preint):
+    """The calibration columns an encoder factor's Jacobian can touch (sorted int64): the gyro columns of the
+    preintegration, ``mount``, ``time_lag.table`` and ``damping.stiffness``; every other column of its ``H_x``
+    is zero."""
+    cols = [_column(layout, n) for n in ("mount", "time_lag.table", "damping.stiffness")]
+    spans = [np.arange(c, c + k) for c, k in zip(cols, (3, 1, 9)) if c >= 0]
+    return np.unique(np.concatenate([np.asarray(preint.gyro_cols, dtype=np.int64), *spans])).astype(np.int64)
+
+
 def _encoder_rows(record, R, preint, x, layout, frame, r, H_R, H_x):
     """:func:`graph_calib.model.encoder_kernel.encoder_rows` on every reading of ``record``: ``r`` (M, 3),
     ``H_R`` (M, 3, 3) and the model's columns of ``H_x`` (M, 3, P, zero on entry) written."""
@@ -311,8 +320,7 @@ def _encoder_rows(record, R, preint, x, layout, frame, r, H_R, H_x):
     lag = float(layout.get(x, "time_lag.table", np.zeros(1))[0])
     K_damp = np.ascontiguousarray(layout.get(x, "damping.stiffness", np.zeros(9)), dtype=float).reshape(3, 3)
     cols = [_column(layout, n) for n in ("mount", "time_lag.table", "damping.stiffness")]
-    spans = [np.arange(c, c + k) for c, k in zip(cols, (3, 1, 9)) if c >= 0]
-    written = np.unique(np.concatenate([gc, *spans])).astype(np.int64)
+    written = encoder_columns(layout, preint)
     c = np.ascontiguousarray
     encoder_rows(c(preint.reading_dR), c(preint.reading_w), c(preint.reading_J), c(preint.reading_rate_jacobian()),
                  dx_g, c(record.reading_dt), c(record.reading_phi_shape), c(record.reading_key, dtype=np.int64),

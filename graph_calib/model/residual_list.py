@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from graph_calib.model.factors import encoder_columns
 from graph_calib.model.shared_gyro_noise import decorrelate
 
 
@@ -140,8 +141,9 @@ def residual_list(model, R, preint, x):
     independent of every other: evaluate the kinds through this list, not one by one.
     """
     factors = {kind.name: kind.evaluate(model, R, preint, x) for kind in FACTOR_KINDS}
-    factors["rotation"], factors["encoder"] = decorrelate(model.record, preint, model.noise, factors["rotation"],
-                                                          factors["encoder"])
+    factors["rotation"], factors["encoder"] = decorrelate(
+        model.record, preint, model.noise, factors["rotation"], factors["encoder"],
+        columns=encoder_columns(model.layout, preint), overwrite_input=True)
     return factors
 
 

@@ -67,8 +67,8 @@ def _ldl_whiten(S):
 
 
 @numba.njit(cache=True)
-def _gains(order, group, tau, H, D, q2, K, L_inv, sigma, Pw, tau_last):
-    """The recursion's gains, reading by reading in ``order``: ``K`` (M, 3, 3), ``L_inv`` (M, 3, 3) and
+def _gains(order, group, tau, U, dR, D, q2, H, K, L_inv, sigma, Pw, tau_last):
+    """The recursion's gains, reading by reading in ``order``: ``H = U^T dR^T``, ``K``, ``L_inv`` (M, 3, 3) and
     ``sigma`` (M, 3) written; ``Pw`` (G, 3, 3) and ``tau_last`` (G,), zero on entry, end as each interval's
     covariance of its gyro noise given its readings and its last reading's time.
 
@@ -84,6 +84,9 @@ def _gains(order, group, tau, H, D, q2, K, L_inv, sigma, Pw, tau_last):
     for n in range(order.size):
         i = order[n]
         g = group[i]
+        for a in range(3):                               # H = U^T dR^T: H[a, b] = sum_c U[c, a] dR[b, c]
+            for b in range(3):
+                H[i, a, b] = U[i, 0, a] * dR[i, b, 0] + U[i, 1, a] * dR[i, b, 1] + U[i, 2, a] * dR[i, b, 2]
         dq = q2 * (tau[i] - tau_last[g])
         for a in range(3):
             for b in range(3):
@@ -127,28 +130,30 @@ def _gains(order, group, tau, H, D, q2, K, L_inv, sigma, Pw, tau_last):
 
 
 @numba.njit(cache=True)
-def _innovations(order, group, H, K, L_inv, Y, W):
-    """The readings' whitened innovations, in place: ``Y`` (M, 3, C) the residuals or a Jacobian's columns.
+def _innovations(order, group, H, K, L_inv, Y, out, W, cols):
+    """The readings' whitened innovations: the columns ``cols`` of ``out`` (M, 3, C) from those of ``Y``, the
+    residuals or a Jacobian (its other columns zero and left alone).
 
     In ``order`` (interval by interval, each in time), reading ``i`` of interval ``group[i]``:
-    ``e = Y_i - H_i W_g``, ``W_g += K_i e``, ``Y_i = L_inv_i e``; ``W`` (G, 3, C), zero on entry, ends as each
-    interval's estimate of its gyro noise given its readings, in the same columns.
+    ``e = Y_i - H_i W_g``, ``W_g += K_i e``, ``out_i = L_inv_i e``; ``W`` (G, 3, len(cols)), zero on entry, ends
+    as each interval's estimate of its gyro noise given its readings, in those columns.
     """
-    C = Y.shape[2]
-    e = np.empty((3, C))
+    n_c = cols.size
+    e = np.empty((3, n_c))
     for n in range(order.size):
         i = order[n]
         g = group[i]
         for a in range(3):
-            for c in range(C):
-                e[a, c] = Y[i, a, c] - H[i, a, 0] * W[g, 0, c] - H[i, a, 1] * W[g, 1, c] - H[i, a, 2] * W[g, 2, c]
+            for j in range(n_c):
+                e[a, j] = (Y[i, a, cols[j]] - H[i, a, 0] * W[g, 0, j] - H[i, a, 1] * W[g, 1, j]
+                           - H[i, a, 2] * W[g, 2, j])
         for a in range(3):
-            for c in range(C):
-                W[g, a, c] += K[i, a, 0] * e[0, c] + K[i, a, 1] * e[1, c] + K[i, a, 2] * e[2, c]
-                Y[i, a, c] = L_inv[i, a, 0] * e[0, c] + L_inv[i, a, 1] * e[1, c] + L_inv[i, a, 2] * e[2, c]
+            for j in range(n_c):
+                W[g, a, j] += K[i, a, 0] * e[0, j] + K[i, a, 1] * e[1, j] + K[i, a, 2] * e[2, j]
+                out[i, a, cols[j]] = L_inv[i, a, 0] * e[0, j] + L_inv[i, a, 1] * e[1, j] + L_inv[i, a, 2] * e[2, j]
 
 
-def decorrelate(record, preint, noise, rot, enc):
+def decorrelate(record, preint, noise, rot, enc, *, columns=None, overwrite_input=False):
     """The rotation and encoder factors with their shared gyro noise made independent (module docstring).
 
     Parameters
@@ -160,6 +165,13 @@ def decorrelate(record, preint, noise, rot, enc):
         The model's noise, its variance factors included.
     rot, enc : graph_calib.model.factors.Residuals
         The rotation and encoder factors as the model gives them (each kind's variance factor applied).
+    columns : ndarray of int, optional
+        The calibration columns the encoder factors' Jacobian can touch (:func:`graph_calib.model.factors.encoder_columns`;
+        default every column): the others are zero and stay zero, and are not mapped.
+    overwrite_input : bool
+        Write the results into the factors' own residual and Jacobian arrays (C-contiguous float64) instead of
+        new ones (scipy.linalg's ``overwrite_a``): the residual list's fresh factors, whose Jacobians on a 3 h
+        record are some 80 MB.
 
     Returns
     -------
@@ -175,28 +187,36 @@ def decorrelate(record, preint, noise, rot, enc):
     q2 = noise.gyro**2
     tau = record.reading_tau
     D = np.maximum(enc.sigma**2 - (v_enc * q2 * tau)[:, None], MIN_VARIANCE)       # the reading's own noise
-    H = np.swapaxes(record.encoder_noise_frame(noise.encoder).U, 1, 2) @ np.swapaxes(preint.reading_dR, 1, 2)
-
-    keys, group = np.unique(enc.key, return_inverse=True)
-    order = np.lexsort((tau, group))
-    first = np.searchsorted(group[order], np.arange(keys.size))
-    position = np.empty(M, dtype=np.int64)
-    position[order] = np.arange(M) - first[group[order]]
-
+    # the readings interval by interval, each in time (the record's order already, or sorted)
+    key = np.asarray(enc.key, dtype=np.int64)
+    if np.all(np.diff(key) >= 0) and np.all((np.diff(tau) >= 0) | (np.diff(key) > 0)):
+        order = np.arange(M, dtype=np.int64)
+    else:
+        order = np.lexsort((tau, key)).astype(np.int64)
+    new = np.empty(M, dtype=bool)
+    new[0], new[1:] = True, np.diff(key[order]) != 0
+    group = np.empty(M, dtype=np.int64)
+    group[order] = np.cumsum(new) - 1
+    keys = key[order][new]
     G = keys.size
     # the recursion's gains from the data and the noise alone, then the same linear map on the residuals and
     # every Jacobian (both compiled)
-    K, L_inv, sigma = np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3))
+    c = np.ascontiguousarray
+    H, K, L_inv, sigma = np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3))
     Pw, tau_last, eye = np.zeros((G, 3, 3)), np.zeros(G), np.eye(3)
-    _gains(order, group, np.ascontiguousarray(tau, dtype=float), H, np.ascontiguousarray(D), v_enc * q2,
-           K, L_inv, sigma, Pw, tau_last)
-    W_r, W_R, W_x = np.zeros((G, 3, 1)), np.zeros((G, 3, 3)), np.zeros((G, 3, enc.H_x.shape[2]))
-    r = np.array(enc.r, dtype=float, order="C")[:, :, None]
-    H_R = np.array(enc.H_R, dtype=float, order="C")
-    H_x = np.array(enc.H_x, dtype=float, order="C")
-    for Y, W in ((r, W_r), (H_R, W_R), (H_x, W_x)):
-        _innovations(order, group, H, K, L_inv, Y, W)
+    _gains(order, group, c(tau, dtype=float), c(record.encoder_noise_frame(noise.encoder).U, dtype=float),
+           c(preint.reading_dR, dtype=float), c(D), v_enc * q2, H, K, L_inv, sigma, Pw, tau_last)
+    P = enc.H_x.shape[2]
+    cols = np.arange(P, dtype=np.int64) if columns is None else np.asarray(columns, dtype=np.int64)
+    W_r, W_R, W_xc = np.zeros((G, 3, 1)), np.zeros((G, 3, 3)), np.zeros((G, 3, cols.size))
+    ins = [c(enc.r, dtype=float)[:, :, None], c(enc.H_R, dtype=float), c(enc.H_x, dtype=float)]
+    r, H_R, H_x = ins if overwrite_input else [np.zeros_like(a) for a in ins]
+    for Y, out, W, cl in zip(ins, (r, H_R, H_x), (W_r, W_R, W_xc),
+                             (np.arange(1, dtype=np.int64), np.arange(3, dtype=np.int64), cols)):
+        _innovations(order, group, H, K, L_inv, Y, out, W, cl)
     r, W_r = r[:, :, 0], W_r[:, :, 0]
+    W_x = np.zeros((G, 3, P))
+    W_x[:, :, cols] = W_xc
     enc = replace(enc, r=r, H_R=H_R, H_x=H_x, sigma=sigma)
 
     # each rotation factor less its expectation given its interval's readings
@@ -209,12 +229,14 @@ def decorrelate(record, preint, noise, rot, enc):
     rest = (q2 * (record.T_key[rot.key[f]] - tau_last[g]))[:, None, None] * eye
     C = v_rot * np.swapaxes(dR_T, 1, 2) @ (Pw[g] / v_enc + rest) @ dR_T
     L_inv, s = _ldl_whiten(0.5 * (C + np.swapaxes(C, 1, 2)))
-    rr, rR, rx = rot.r.copy(), rot.H_R.copy(), rot.H_x.copy()
-    rN, rs = rot.H_R_next.copy(), rot.sigma.copy()
-    rr[f] = np.einsum("nab,nb->na", L_inv, rot.r[f] + np.einsum("nab,nb->na", A, W_r[g]))
-    rR[f] = L_inv @ (rot.H_R[f] + A @ W_R[g])
-    rx[f] = L_inv @ (rot.H_x[f] + A @ W_x[g])
-    rN[f] = L_inv @ rot.H_R_next[f]
+    if overwrite_input:
+        rr, rR, rx, rN, rs = rot.r, rot.H_R, rot.H_x, rot.H_R_next, rot.sigma
+    else:
+        rr, rR, rx, rN, rs = rot.r.copy(), rot.H_R.copy(), rot.H_x.copy(), rot.H_R_next.copy(), rot.sigma.copy()
+    rr[f] = np.einsum("nab,nb->na", L_inv, rr[f] + np.einsum("nab,nb->na", A, W_r[g]))
+    rR[f] = L_inv @ (rR[f] + A @ W_R[g])
+    rx[f] = L_inv @ (rx[f] + A @ W_x[g])
+    rN[f] = L_inv @ rN[f]
     rs[f] = s
     return replace(rot, r=rr, H_R=rR, H_R_next=rN, H_x=rx, sigma=rs), enc
 
