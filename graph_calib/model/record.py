@@ -382,6 +382,9 @@ class PreparedRecord:
             keep = np.isin(tm, self.reading_t)
             self.reading_axes_b = tab.axes_f[tab.valid][keep] @ self.C_fb
         self._noise_frames = {}
+        # the gains of graph_calib.model.shared_gyro_noise for the last preintegration and noise (they depend on
+        # nothing else): (weak reference to the preintegration, noise key, gains)
+        self.shared_gyro_gains = None
 
     def encoder_noise_frame(self, encoder_noise):
         """The readings' :class:`~graph_calib.model.encoder_noise.NoiseFrame` for a declared noise (rad), cached."""

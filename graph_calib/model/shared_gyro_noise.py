@@ -45,6 +45,7 @@ through ``W_hat`` with the gain ``K ~ q_g^2 tau / sigma_enc^2`` (about 4e-3 for 
 
 from __future__ import annotations
 
+import weakref
 from dataclasses import replace
 
 import numba
@@ -153,6 +154,37 @@ def _innovations(order, group, H, K, L_inv, Y, out, W, cols):
                 out[i, a, cols[j]] = L_inv[i, a, 0] * e[0, j] + L_inv[i, a, 1] * e[1, j] + L_inv[i, a, 2] * e[2, j]
 
 
+def _cached_gains(record, preint, noise, enc, key):
+    """``(order, group, keys, H, K, L_inv, sigma, Pw, tau_last)`` of the readings, from the record's one-entry cache
+    when its preintegration and noise key are these (the gains depend on nothing else), else computed."""
+    held = getattr(record, "shared_gyro_gains", None)
+    if held is not None and held[0]() is preint and held[1] == key:
+        return held[2]
+    q2, v_enc = key[0], key[1]
+    M = enc.r.shape[0]
+    tau = record.reading_tau
+    D = np.maximum(enc.sigma**2 - (v_enc * q2 * tau)[:, None], MIN_VARIANCE)       # the reading's own noise
+    # the readings interval by interval, each in time (the record's order already, or sorted)
+    k = np.asarray(enc.key, dtype=np.int64)
+    if np.all(np.diff(k) >= 0) and np.all((np.diff(tau) >= 0) | (np.diff(k) > 0)):
+        order = np.arange(M, dtype=np.int64)
+    else:
+        order = np.lexsort((tau, k)).astype(np.int64)
+    new = np.empty(M, dtype=bool)
+    new[0], new[1:] = True, np.diff(k[order]) != 0
+    group = np.empty(M, dtype=np.int64)
+    group[order] = np.cumsum(new) - 1
+    keys = k[order][new]
+    c = np.ascontiguousarray
+    H, K, L_inv, sigma = np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3))
+    Pw, tau_last = np.zeros((keys.size, 3, 3)), np.zeros(keys.size)
+    _gains(order, group, c(tau, dtype=float), c(record.encoder_noise_frame(noise.encoder).U, dtype=float),
+           c(preint.reading_dR, dtype=float), c(D), v_enc * q2, H, K, L_inv, sigma, Pw, tau_last)
+    gains = (order, group, keys, H, K, L_inv, sigma, Pw, tau_last)
+    record.shared_gyro_gains = (weakref.ref(preint), key, gains)
+    return gains
+
+
 def decorrelate(record, preint, noise, rot, enc, *, columns=None, overwrite_input=False):
     """The rotation and encoder factors with their shared gyro noise made independent (module docstring).
 
@@ -185,27 +217,10 @@ def decorrelate(record, preint, noise, rot, enc, *, columns=None, overwrite_inpu
     v_enc = float(noise.variance_factors.get("encoder", 1.0))
     v_rot = float(noise.variance_factors.get("rotation", 1.0))
     q2 = noise.gyro**2
-    tau = record.reading_tau
-    D = np.maximum(enc.sigma**2 - (v_enc * q2 * tau)[:, None], MIN_VARIANCE)       # the reading's own noise
-    # the readings interval by interval, each in time (the record's order already, or sorted)
-    key = np.asarray(enc.key, dtype=np.int64)
-    if np.all(np.diff(key) >= 0) and np.all((np.diff(tau) >= 0) | (np.diff(key) > 0)):
-        order = np.arange(M, dtype=np.int64)
-    else:
-        order = np.lexsort((tau, key)).astype(np.int64)
-    new = np.empty(M, dtype=bool)
-    new[0], new[1:] = True, np.diff(key[order]) != 0
-    group = np.empty(M, dtype=np.int64)
-    group[order] = np.cumsum(new) - 1
-    keys = key[order][new]
-    G = keys.size
-    # the recursion's gains from the data and the noise alone, then the same linear map on the residuals and
-    # every Jacobian (both compiled)
-    c = np.ascontiguousarray
-    H, K, L_inv, sigma = np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3))
-    Pw, tau_last, eye = np.zeros((G, 3, 3)), np.zeros(G), np.eye(3)
-    _gains(order, group, c(tau, dtype=float), c(record.encoder_noise_frame(noise.encoder).U, dtype=float),
-           c(preint.reading_dR, dtype=float), c(D), v_enc * q2, H, K, L_inv, sigma, Pw, tau_last)
+    key = (q2, v_enc, v_rot, float(noise.encoder), float(noise.gyro_quantization), M)
+    gains = _cached_gains(record, preint, noise, enc, key)
+    order, group, keys, H, K, L_inv, sigma, Pw, tau_last = gains
+    G, eye, c = keys.size, np.eye(3), np.ascontiguousarray
     P = enc.H_x.shape[2]
     cols = np.arange(P, dtype=np.int64) if columns is None else np.asarray(columns, dtype=np.int64)
     W_r, W_R, W_xc = np.zeros((G, 3, 1)), np.zeros((G, 3, 3)), np.zeros((G, 3, cols.size))
@@ -217,7 +232,7 @@ def decorrelate(record, preint, noise, rot, enc, *, columns=None, overwrite_inpu
     r, W_r = r[:, :, 0], W_r[:, :, 0]
     W_x = np.zeros((G, 3, P))
     W_x[:, :, cols] = W_xc
-    enc = replace(enc, r=r, H_R=H_R, H_x=H_x, sigma=sigma)
+    enc = replace(enc, r=r, H_R=H_R, H_x=H_x, sigma=sigma.copy())
 
     # each rotation factor less its expectation given its interval's readings
     f = np.flatnonzero(np.isin(rot.key, keys))

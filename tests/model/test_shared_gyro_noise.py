@@ -12,6 +12,10 @@ from graph_calib.navigation.rotations import exp_so3
 Q = 3e-6                                           # gyro angle random walk, rad/sqrt(s)
 
 
+class _Namespace(SimpleNamespace):
+    """A stand-in record or preintegration (weakly referable, as the real ones are)."""
+
+
 def _case(rng):
     """Three keyframe intervals: three readings in the first, one in the second, none in the third."""
     T = np.array([1.0, 0.8, 1.0])
@@ -22,8 +26,8 @@ def _case(rng):
     dR_i = exp_so3(rng.normal(size=(M, 3)))
     dR_T = exp_so3(rng.normal(size=(K, 3)))
     D = rng.uniform(1.0, 4.0, size=(M, 3)) * 1e-12  # each reading's own variance in its noise frame
-    record = SimpleNamespace(reading_tau=tau, T_key=T, encoder_noise_frame=lambda enc: SimpleNamespace(U=U))
-    preint = SimpleNamespace(reading_dR=dR_i, dR=dR_T)
+    record = _Namespace(reading_tau=tau, T_key=T, encoder_noise_frame=lambda enc: SimpleNamespace(U=U))
+    preint = _Namespace(reading_dR=dR_i, dR=dR_T)
     return record, preint, key, tau, T, U, dR_i, dR_T, D
 
 
@@ -110,3 +114,28 @@ def test_without_readings_or_gyro_noise_nothing_changes():
                       H_x=np.zeros((0, 3, 2)), sigma=np.zeros((0, 3)))
     out_rot, out_enc = decorrelate(record, preint, Noise(gyro=Q, accel=1e-5, encoder=1e-5), rot, empty)
     assert out_rot is rot and out_enc is empty
+
+
+def test_the_gains_are_reused_only_for_the_same_preintegration_and_noise():
+    rng = np.random.default_rng(8)
+    record, preint, key, tau, T, U, dR_i, dR_T, D = _case(rng)
+    M, K = key.size, T.size
+    enc = Residuals(r=rng.normal(size=(M, 3)), key=key, H_R=rng.normal(size=(M, 3, 3)), H_R_next=None,
+                    H_x=rng.normal(size=(M, 3, 2)), sigma=np.sqrt(D + Q**2 * tau[:, None]))
+    rot = Residuals(r=rng.normal(size=(K, 3)), key=np.arange(K), H_R=rng.normal(size=(K, 3, 3)),
+                    H_R_next=rng.normal(size=(K, 3, 3)), H_x=rng.normal(size=(K, 3, 2)),
+                    sigma=Q * np.sqrt(T)[:, None] * np.ones(3))
+    noise = Noise(gyro=Q, accel=1e-5, encoder=1e-5)
+    first = decorrelate(record, preint, noise, rot, enc)[1]
+    held = record.shared_gyro_gains
+    assert decorrelate(record, preint, noise, rot, enc)[1].sigma.tolist() == first.sigma.tolist()
+    assert record.shared_gyro_gains is held                                 # reused
+    other = _Namespace(reading_dR=dR_i, dR=dR_T)                            # another preintegration: computed again
+    decorrelate(record, other, noise, rot, enc)
+    assert record.shared_gyro_gains is not held
+    held = record.shared_gyro_gains
+    louder = Noise(gyro=2 * Q, accel=1e-5, encoder=1e-5)
+    enc2 = Residuals(r=enc.r, key=key, H_R=enc.H_R, H_R_next=None, H_x=enc.H_x,
+                     sigma=np.sqrt(D + (2 * Q) ** 2 * tau[:, None]))
+    assert not np.allclose(decorrelate(record, other, louder, rot, enc2)[1].sigma, first.sigma)
+    assert record.shared_gyro_gains is not held
