@@ -41,6 +41,11 @@ their innovations, but the rotation factor, which takes no robust loss, carries 
 through ``W_hat`` with the gain ``K ~ q_g^2 tau / sigma_enc^2`` (about 4e-3 for a navigation-grade gyro and
 2 arcsec readings): a gross reading error of ``e`` moves it by about ``K e``, some 3 of its sigmas for a
 100 arcsec spike (9 at three times the gyro noise), where the readings taken as independent kept it out.
+Kept so: the filter takes no robust loss, and the two solvers must solve one model.
+
+The gains depend on the record, the preintegration and the noise alone; the record holds those of its last
+preintegration and noise (``PreparedRecord.shared_gyro_gains``), so the evaluations of one linearisation point
+and its line search form them once.
 """
 
 from __future__ import annotations
