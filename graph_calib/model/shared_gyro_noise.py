@@ -51,7 +51,7 @@ and its line search form them once.
 from __future__ import annotations
 
 import weakref
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -64,12 +64,33 @@ kernel_cache.install()     # before the first kernel
 MIN_VARIANCE = 1e-30
 
 
-def _ldl_whiten(S):
-    """``(L^-1 as (n, 3, 3), sqrt(D) (n, 3))`` of ``S = L D L^T`` (``L`` unit lower triangular), ``S`` (n, 3, 3)."""
-    C = np.linalg.cholesky(S)
-    d = np.diagonal(C, axis1=1, axis2=2)
-    C_inv = np.linalg.inv(C)
-    return C_inv * d[:, :, None], d.copy()
+@numba.njit(cache=True, inline="always")
+def _ldl3(S, Ci, L_inv, sigma):
+    """``S = L D L^T`` of one symmetric 3 x 3 (``L`` unit lower triangular, its Cholesky factor ``C`` written
+    out): ``Ci = C^-1``, ``L_inv = diag(C) C^-1`` (3, 3) and ``sigma = sqrt(D) = diag(C)`` (3,) written."""
+    c00 = np.sqrt(S[0, 0])
+    c10 = 0.5 * (S[1, 0] + S[0, 1]) / c00
+    c20 = 0.5 * (S[2, 0] + S[0, 2]) / c00
+    c11 = np.sqrt(S[1, 1] - c10 * c10)
+    c21 = (0.5 * (S[2, 1] + S[1, 2]) - c20 * c10) / c11
+    c22 = np.sqrt(S[2, 2] - c20 * c20 - c21 * c21)
+    Ci[:] = 0.0
+    Ci[0, 0], Ci[1, 1], Ci[2, 2] = 1.0 / c00, 1.0 / c11, 1.0 / c22
+    Ci[1, 0] = -c10 * Ci[0, 0] / c11
+    Ci[2, 1] = -c21 * Ci[1, 1] / c22
+    Ci[2, 0] = -(c20 * Ci[0, 0] + c21 * Ci[1, 0]) / c22
+    sigma[0], sigma[1], sigma[2] = c00, c11, c22
+    for a in range(3):
+        for b in range(3):
+            L_inv[a, b] = sigma[a] * Ci[a, b]
+
+
+@numba.njit(cache=True)
+def _ldl_many(S, L_inv, sigma):
+    """:func:`_ldl3` of each of ``S`` (n, 3, 3) into ``L_inv`` (n, 3, 3) and ``sigma`` (n, 3)."""
+    Ci = np.empty((3, 3))
+    for n in range(S.shape[0]):
+        _ldl3(S[n], Ci, L_inv[n], sigma[n])
 
 
 @numba.njit(cache=True)
@@ -78,13 +99,13 @@ def _gains(order, group, tau, U, dR, D, q2, H, K, L_inv, sigma, Pw, tau_last):
     ``sigma`` (M, 3) written; ``Pw`` (G, 3, 3) and ``tau_last`` (G,), zero on entry, end as each interval's
     covariance of its gyro noise given its readings and its last reading's time.
 
-    ``P = Pw_g + q2 (tau_i - tau_last_g) I``, ``S = H_i P H_i^T + diag(D_i) = C C^T`` (Cholesky, written out),
-    ``K_i = P H_i^T S^-1``, ``Pw_g = P - K_i H_i P``, ``L_inv = diag(C) C^-1``, ``sigma = diag(C)``.
+    ``P = Pw_g + q2 (tau_i - tau_last_g) I``, ``S = H_i P H_i^T + diag(D_i) = C C^T`` (:func:`_ldl3`),
+    ``K_i = P H_i^T S^-1``, ``Pw_g = P - K_i H_i P``, ``L_inv`` and ``sigma`` those of :func:`_ldl3`.
     """
     P = np.empty((3, 3))
     PHt = np.empty((3, 3))
     S = np.empty((3, 3))
-    Ci = np.zeros((3, 3))
+    Ci = np.empty((3, 3))
     Si = np.empty((3, 3))
     KH = np.empty((3, 3))
     for n in range(order.size):
@@ -105,16 +126,7 @@ def _gains(order, group, tau, U, dR, D, q2, H, K, L_inv, sigma, Pw, tau_last):
                 S[a, b] = H[i, a, 0] * PHt[0, b] + H[i, a, 1] * PHt[1, b] + H[i, a, 2] * PHt[2, b]
         for a in range(3):
             S[a, a] += D[i, a]
-        c00 = np.sqrt(S[0, 0])
-        c10 = 0.5 * (S[1, 0] + S[0, 1]) / c00
-        c20 = 0.5 * (S[2, 0] + S[0, 2]) / c00
-        c11 = np.sqrt(S[1, 1] - c10 * c10)
-        c21 = (0.5 * (S[2, 1] + S[1, 2]) - c20 * c10) / c11
-        c22 = np.sqrt(S[2, 2] - c20 * c20 - c21 * c21)
-        Ci[0, 0], Ci[1, 1], Ci[2, 2] = 1.0 / c00, 1.0 / c11, 1.0 / c22
-        Ci[1, 0] = -c10 * Ci[0, 0] / c11
-        Ci[2, 1] = -c21 * Ci[1, 1] / c22
-        Ci[2, 0] = -(c20 * Ci[0, 0] + c21 * Ci[1, 0]) / c22
+        _ldl3(S, Ci, L_inv[i], sigma[i])
         for a in range(3):                               # S^-1 = C^-T C^-1
             for b in range(3):
                 Si[a, b] = Ci[0, a] * Ci[0, b] + Ci[1, a] * Ci[1, b] + Ci[2, a] * Ci[2, b]
@@ -127,11 +139,6 @@ def _gains(order, group, tau, U, dR, D, q2, H, K, L_inv, sigma, Pw, tau_last):
         for a in range(3):
             for b in range(3):
                 Pw[g, a, b] = P[a, b] - (KH[a, 0] * P[0, b] + KH[a, 1] * P[1, b] + KH[a, 2] * P[2, b])
-        diag = (c00, c11, c22)
-        for a in range(3):
-            sigma[i, a] = diag[a]
-            for b in range(3):
-                L_inv[i, a, b] = diag[a] * Ci[a, b]
         tau_last[g] = tau[i]
 
 
@@ -159,14 +166,41 @@ def _innovations(order, group, H, K, L_inv, Y, out, W, cols):
                 out[i, a, cols[j]] = L_inv[i, a, 0] * e[0, j] + L_inv[i, a, 1] * e[1, j] + L_inv[i, a, 2] * e[2, j]
 
 
-def _cached_gains(record, preint, noise, enc, key):
-    """``(order, group, keys, H, K, L_inv, sigma, Pw, tau_last)`` of the readings, from the record's one-entry cache
-    when its preintegration and noise key are these (the gains depend on nothing else), else computed."""
+@dataclass(frozen=True)
+class _Gains:
+    """The map of one record, preintegration and noise (its arrays shared by every evaluation there).
+
+    ``order``, ``group`` (M,): the readings interval by interval in time, and each one's interval; ``keys``
+    (G,): each interval's keyframe; ``H``, ``K``, ``L_inv`` (M, 3, 3), ``sigma`` (M, 3): :func:`_gains`; ``f``:
+    the rotation factors whose interval has readings, ``g`` that interval; ``A`` (F, 3, 3): the gyro noise
+    estimate's map into each such factor, ``rot_L_inv`` (F, 3, 3) and ``rot_sigma`` (F, 3): its whitening.
+    """
+
+    order: np.ndarray
+    group: np.ndarray
+    keys: np.ndarray
+    H: np.ndarray
+    K: np.ndarray
+    L_inv: np.ndarray
+    sigma: np.ndarray
+    f: np.ndarray
+    g: np.ndarray
+    A: np.ndarray
+    rot_L_inv: np.ndarray
+    rot_sigma: np.ndarray
+
+
+def _cached_gains(record, preint, noise, rot, enc):
+    """The :class:`_Gains` of ``record``, ``preint`` and ``noise``: the record's one-entry cache when it holds
+    this preintegration and noise (the map depends on nothing else), else formed and held."""
+    v_enc = float(noise.variance_factors.get("encoder", 1.0))
+    v_rot = float(noise.variance_factors.get("rotation", 1.0))
+    q2 = noise.gyro**2
+    key = (q2, v_enc, v_rot, float(noise.encoder), float(noise.gyro_quantization), enc.key.size, rot.key.size)
     held = getattr(record, "shared_gyro_gains", None)
     if held is not None and held[0]() is preint and held[1] == key:
         return held[2]
-    q2, v_enc = key[0], key[1]
-    M = enc.r.shape[0]
+    M = enc.key.size
     tau = record.reading_tau
     D = np.maximum(enc.sigma**2 - (v_enc * q2 * tau)[:, None], MIN_VARIANCE)       # the reading's own noise
     # the readings interval by interval, each in time (the record's order already, or sorted)
@@ -185,7 +219,18 @@ def _cached_gains(record, preint, noise, enc, key):
     Pw, tau_last = np.zeros((keys.size, 3, 3)), np.zeros(keys.size)
     _gains(order, group, c(tau, dtype=float), c(record.encoder_noise_frame(noise.encoder).U, dtype=float),
            c(preint.reading_dR, dtype=float), c(D), v_enc * q2, H, K, L_inv, sigma, Pw, tau_last)
-    gains = (order, group, keys, H, K, L_inv, sigma, Pw, tau_last)
+    # each rotation factor less its expectation given its interval's readings: the map of that expectation and
+    # the remaining covariance's whitening
+    f = np.flatnonzero(np.isin(rot.key, keys))
+    g = np.searchsorted(keys, rot.key[f])
+    dR_T = preint.dR[rot.key[f]]
+    dR_Tt = np.swapaxes(dR_T, 1, 2)
+    rest = (q2 * (record.T_key[rot.key[f]] - tau_last[g]))[:, None, None] * np.eye(3)
+    C = v_rot * dR_Tt @ (Pw[g] / v_enc + rest) @ dR_T
+    rot_L_inv, rot_sigma = np.empty((f.size, 3, 3)), np.empty((f.size, 3))
+    _ldl_many(c(0.5 * (C + np.swapaxes(C, 1, 2))), rot_L_inv, rot_sigma)
+    gains = _Gains(order=order, group=group, keys=keys, H=H, K=K, L_inv=L_inv, sigma=sigma, f=f, g=g,
+                   A=np.sqrt(v_rot / v_enc) * dR_Tt, rot_L_inv=rot_L_inv, rot_sigma=rot_sigma)
     record.shared_gyro_gains = (weakref.ref(preint), key, gains)
     return gains
 
@@ -216,48 +261,33 @@ def decorrelate(record, preint, noise, rot, enc, *, columns=None, overwrite_inpu
         The same factors after the map: same keys and shapes; the readings' and the rotation factors' sigmas
         those of the independent residuals.
     """
-    M = enc.r.shape[0]
-    if M == 0 or noise.gyro <= 0.0:
+    if enc.key.size == 0 or noise.gyro <= 0.0:
         return rot, enc
-    v_enc = float(noise.variance_factors.get("encoder", 1.0))
-    v_rot = float(noise.variance_factors.get("rotation", 1.0))
-    q2 = noise.gyro**2
-    key = (q2, v_enc, v_rot, float(noise.encoder), float(noise.gyro_quantization), M)
-    gains = _cached_gains(record, preint, noise, enc, key)
-    order, group, keys, H, K, L_inv, sigma, Pw, tau_last = gains
-    G, eye, c = keys.size, np.eye(3), np.ascontiguousarray
-    P = enc.H_x.shape[2]
-    cols = np.arange(P, dtype=np.int64) if columns is None else np.asarray(columns, dtype=np.int64)
-    W_r, W_R, W_xc = np.zeros((G, 3, 1)), np.zeros((G, 3, 3)), np.zeros((G, 3, cols.size))
+    m = _cached_gains(record, preint, noise, rot, enc)
+    c = np.ascontiguousarray
+    cols = np.arange(enc.H_x.shape[2], dtype=np.int64) if columns is None else np.asarray(columns, dtype=np.int64)
+    G = m.keys.size
+    W_r, W_R, W_x = np.zeros((G, 3, 1)), np.zeros((G, 3, 3)), np.zeros((G, 3, cols.size))
     ins = [c(enc.r, dtype=float)[:, :, None], c(enc.H_R, dtype=float), c(enc.H_x, dtype=float)]
     r, H_R, H_x = ins if overwrite_input else [np.zeros_like(a) for a in ins]
-    for Y, out, W, cl in zip(ins, (r, H_R, H_x), (W_r, W_R, W_xc),
+    for Y, out, W, cl in zip(ins, (r, H_R, H_x), (W_r, W_R, W_x),
                              (np.arange(1, dtype=np.int64), np.arange(3, dtype=np.int64), cols)):
-        _innovations(order, group, H, K, L_inv, Y, out, W, cl)
-    r, W_r = r[:, :, 0], W_r[:, :, 0]
-    W_x = np.zeros((G, 3, P))
-    W_x[:, :, cols] = W_xc
-    enc = replace(enc, r=r, H_R=H_R, H_x=H_x, sigma=sigma.copy())
-
-    # each rotation factor less its expectation given its interval's readings
-    f = np.flatnonzero(np.isin(rot.key, keys))
-    if f.size == 0:
+        _innovations(m.order, m.group, m.H, m.K, m.L_inv, Y, out, W, cl)
+    enc = replace(enc, r=r[:, :, 0], H_R=H_R, H_x=H_x, sigma=m.sigma.copy())
+    if m.f.size == 0:
         return rot, enc
-    g = np.searchsorted(keys, rot.key[f])
-    dR_T = preint.dR[rot.key[f]]
-    A = np.sqrt(v_rot / v_enc) * np.swapaxes(dR_T, 1, 2)                             # dR_T^T, scaled
-    rest = (q2 * (record.T_key[rot.key[f]] - tau_last[g]))[:, None, None] * eye
-    C = v_rot * np.swapaxes(dR_T, 1, 2) @ (Pw[g] / v_enc + rest) @ dR_T
-    L_inv, s = _ldl_whiten(0.5 * (C + np.swapaxes(C, 1, 2)))
     if overwrite_input:
         rr, rR, rx, rN, rs = rot.r, rot.H_R, rot.H_x, rot.H_R_next, rot.sigma
     else:
         rr, rR, rx, rN, rs = rot.r.copy(), rot.H_R.copy(), rot.H_x.copy(), rot.H_R_next.copy(), rot.sigma.copy()
-    rr[f] = np.einsum("nab,nb->na", L_inv, rr[f] + np.einsum("nab,nb->na", A, W_r[g]))
-    rR[f] = L_inv @ (rR[f] + A @ W_R[g])
-    rx[f] = L_inv @ (rx[f] + A @ W_x[g])
-    rN[f] = L_inv @ rN[f]
-    rs[f] = s
+    f, g, A, L = m.f, m.g, m.A, m.rot_L_inv
+    rr[f] = np.einsum("nab,nb->na", L, rr[f] + np.einsum("nab,nb->na", A, W_r[g, :, 0]))
+    rR[f] = L @ (rR[f] + A @ W_R[g])
+    x_f = rx[f]
+    x_f[:, :, cols] += A @ W_x[g]
+    rx[f] = L @ x_f
+    rN[f] = L @ rN[f]
+    rs[f] = m.rot_sigma
     return replace(rot, r=rr, H_R=rR, H_R_next=rN, H_x=rx, sigma=rs), enc
 
 
