@@ -4,7 +4,8 @@ Each seed simulates ``nav-subrange-short`` for 0.4 h with exactly linear tempera
 should find), the true noise ``--noise-factor`` times the navigation grade's, table readings at
 ``--encoder-rate-hz`` with ``--encoder-noise-arcsec`` of noise, and runs the loop's first round as ``graph-calib
 diagnose`` does (the grade chosen from the rests, the factor graph); it writes every candidate's statistic and
-degrees of freedom to ``OUT/seed-NNNN.json`` (a file that exists is not run again). Under the null each statistic
+degrees of freedom to ``OUT/CASE/seed-NNNN.json``, ``CASE`` named by the options (``noise-3x_readings-10hz-2arcsec``;
+a file that exists is not run again: ``_seed_study.run_resumable``). Under the null each statistic
 is chi-square with its degrees of freedom: mean statistic over dof 1, a share 0.01 with p below 0.01.
 
 ``--summary OUT [OUT2]`` prints per candidate the mean statistic over dof with its standard error, the shares with
@@ -13,9 +14,10 @@ the paired difference of the means, which is far more precise than either mean.
 
 Usage::
 
-    python scripts/candidate_statistics.py --out /tmp/cs-3x --seeds 0:130 --noise-factor 3
-    python scripts/candidate_statistics.py --out /tmp/cs-1x-05 --seeds 0:130 --encoder-noise-arcsec 0.5
-    python scripts/candidate_statistics.py --summary /tmp/cs-3x-old /tmp/cs-3x
+    python scripts/candidate_statistics.py --out /tmp/cs --seeds 0:130 --noise-factor 3
+    python scripts/candidate_statistics.py --out /tmp/cs --seeds 0:130 --encoder-noise-arcsec 0.5
+    python scripts/candidate_statistics.py --summary /tmp/cs-old/noise-3x_readings-10hz-2arcsec \
+        /tmp/cs/noise-3x_readings-10hz-2arcsec
 
 The random generator of a seed is ``numpy.random.default_rng(90_000 + seed)`` whatever the options, so two
 folders of different options hold the same draws scaled.
@@ -35,6 +37,8 @@ from graph_calib.options import CalibrationOptions
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.simulation import simulate
 
+from _seed_study import run_resumable, seed_range  # scripts/: run as a script, its folder on sys.path
+
 SEED_BASE = 90_000
 
 
@@ -51,6 +55,12 @@ def run_one(seed, *, noise_factor, encoder_rate_hz, encoder_noise_arcsec):
     return {"seed": seed, "grade": choice.grade,
             "stats": {t.name: [float(t.statistic), int(t.dof)] for t in first.candidates if not t.skipped},
             "seconds": time.perf_counter() - t0}
+
+
+def case_name(*, noise_factor, encoder_rate_hz, encoder_noise_arcsec):
+    """The folder of a set of options: ``noise-3x_readings-10hz-2arcsec`` (``grade`` for the grade's noise)."""
+    noise = "grade" if encoder_noise_arcsec is None else f"{encoder_noise_arcsec:g}"
+    return f"noise-{noise_factor:g}x_readings-{encoder_rate_hz:g}hz-{noise}arcsec"
 
 
 def _load(folder):
@@ -85,7 +95,7 @@ def summarise(folders):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path)
-    ap.add_argument("--seeds", default="0:20", help="A:B, the seeds A..B-1")
+    ap.add_argument("--seeds", type=seed_range, default=range(0, 20), help="A:B, the seeds A..B-1")
     ap.add_argument("--noise-factor", type=float, default=1.0)
     ap.add_argument("--encoder-rate-hz", type=float, default=10.0)
     ap.add_argument("--encoder-noise-arcsec", type=float, default=None)
@@ -96,18 +106,11 @@ def main(argv=None):
         return 0
     if args.out is None:
         ap.error("--out is needed to run seeds")
-    args.out.mkdir(parents=True, exist_ok=True)
-    a, b = (int(v) for v in args.seeds.split(":"))
-    for seed in range(a, b):
-        f = args.out / f"seed-{seed:04d}.json"
-        if f.exists():
-            continue
-        out = run_one(seed, noise_factor=args.noise_factor, encoder_rate_hz=args.encoder_rate_hz,
-                      encoder_noise_arcsec=args.encoder_noise_arcsec)
-        tmp = f.with_suffix(".tmp")
-        tmp.write_text(json.dumps(out))
-        tmp.replace(f)
-        print(f"seed {seed}: {out['seconds']:.1f} s", flush=True)
+    options = dict(noise_factor=args.noise_factor, encoder_rate_hz=args.encoder_rate_hz,
+                   encoder_noise_arcsec=args.encoder_noise_arcsec)
+    case = case_name(**options)
+    run_resumable(args.out, [(case, seed) for seed in args.seeds], lambda _, seed: run_one(seed, **options),
+                  lambda _, seed, out: f"{case} seed {seed}: {out['seconds']:.1f} s")
     return 0
 
 
