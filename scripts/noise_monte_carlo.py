@@ -39,7 +39,7 @@ from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.simulation import simulate
-from graph_calib.simulation.truth import TRUTH_RANGES
+from graph_calib.simulation.truth import draw_rms
 from graph_calib.solvers.registry import DEFAULT_SOLVERS
 
 from _seed_study import cases_of, run_resumable, seed_range  # scripts/: run as a script, its folder on sys.path
@@ -61,16 +61,9 @@ SEED_BASE = 50_000
 
 
 def truth_spread_priors(grade="navigation"):
-    """``{parameter: sigma}``: the RMS of the simulator's draw ``sign * U(low, high)`` of each declared parameter.
-
-    ``sqrt((high^3 - low^3) / (3 (high - low)))`` from :data:`graph_calib.simulation.truth.TRUTH_RANGES`: with
-    these as the priors the truth has the prior's second moments, so a linear estimator's error has exactly
-    its reported covariance when the noise model is right (``--priors truth``).
-    """
-    out = {}
-    for name, (lo, hi) in TRUTH_RANGES[grade].items():
-        out[name] = math.sqrt((hi**3 - lo**3) / (3.0 * (hi - lo)))
-    return out
+    """``{parameter: sigma}``: the RMS of the simulator's draw of each declared parameter
+    (:func:`graph_calib.simulation.truth.draw_rms`), the priors of ``--priors truth``."""
+    return draw_rms(grade)
 
 
 def run_one(case, seed, *, hours, priors="grade"):

@@ -374,9 +374,9 @@ class CalibrationModel:
             sway_sigma=self.options.sway_sigma))
 
     def encoder_factors(self, R, preint, x):
-        """:func:`graph_calib.model.factors.encoder_factors` of this model."""
-        return self.noise.scaled("encoder", factors.encoder_factors(self.record, R, preint, x, layout=self.layout,
-                                                                     noise=self.noise))
+        """:func:`graph_calib.model.factors.encoder_factors` of this model (it applies the variance factors: its
+        gyro term takes the rotation kind's)."""
+        return factors.encoder_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise)
 
 
 __all__ = ["CalibrationModel", "reusing_preintegrations", "REUSED_PREINTEGRATIONS", "gyrocompass_attitude_sigma",

@@ -57,6 +57,14 @@ MIN_DWELL_READINGS = 20
 #: Each principal sigma of a scatter or axes covariance is at least this fraction of the declared noise.
 FLOOR_FRACTION = 0.25
 
+#: The variance-factor key (``Noise.variance_factors``) of the floored components alone: it multiplies the floor
+#: ``(FLOOR_FRACTION * encoder_noise)^2`` of every component whose variance is the floor (where the ``encoder``
+#: factor does not), not the gyro term nor the components a dwell's scatter shows.  Estimated with the other kinds' factors
+#: (:mod:`graph_calib.solvers.variance`), so that the direction a table does not read gets the weight its
+#: residuals ask for, and the readings' other components and the rotation factors are not rescaled to make up
+#: for it (docs/model.md, "The table's unread direction").
+FLOORED = "encoder.floored"
+
 _PERMS = np.array(list(permutations(range(3))))
 
 
@@ -229,4 +237,4 @@ def noise_frame(scatter, axes_b, *, encoder_noise, floor_fraction=FLOOR_FRACTION
     return NoiseFrame(U=U, var=var, rotated=rotated, floored=floored, source=source)
 
 
-__all__ = ["MIN_DWELL_READINGS", "FLOOR_FRACTION", "DwellScatter", "NoiseFrame", "dwell_scatter", "noise_frame"]
+__all__ = ["MIN_DWELL_READINGS", "FLOOR_FRACTION", "FLOORED", "DwellScatter", "NoiseFrame", "dwell_scatter", "noise_frame"]

@@ -80,6 +80,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from graph_calib.model.encoder_kernel import encoder_rows
+from graph_calib.model.encoder_noise import FLOORED
 from graph_calib.navigation.rotations import exp_so3, log_so3, right_jacobian, right_jacobian_inv, skew
 
 
@@ -97,7 +98,10 @@ class Noise:
         Declared table reading noise, rad (one sigma per axis): the readings' noise where no static
         dwell shows it, and the scale of the floor where one does (:mod:`graph_calib.model.encoder_noise`).
     variance_factors : dict
-        ``{kind: factor}`` multiplying each kind's covariance (variance components; 1 where absent).
+        ``{kind: factor}`` multiplying each kind's covariance (variance components; 1 where absent).  The
+        table readings' gyro term is the gyro's noise and takes the ``rotation`` factor; ``encoder`` multiplies
+        the readings' own noise but the floor of their floored components, which takes
+        :data:`graph_calib.model.encoder_noise.FLOORED` instead.
     gyro_quantization : float
         White error of the gyros' integrated angle at each sample end, rad (a ring-laser gyro's
         quantization, IEEE ``Q``; 0: none).  The keyframe attitudes are the gyros' *indicated* ones,
@@ -289,10 +293,17 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
     H_R = np.empty((M, 3, 3))
     H_x = np.zeros((M, 3, P))
     _encoder_rows(record, R, preint, x, layout, frame, r, H_R, H_x)
-    var_gyro = noise.gyro**2 * record.reading_tau
+    # three variance components: the reading's own noise (the table's, a ring-laser gyro's quantization at the
+    # reading) times the encoder kind's factor; the floor of a floored component times its own factor instead;
+    # the gyro's noise from the keyframe times the rotation kind's factor, which is the gyro's (the same noise as
+    # the rotation factor's: graph_calib.model.shared_gyro_noise)
+    vf = noise.variance_factors
+    v_enc = float(vf.get("encoder", 1.0))
+    own = np.where(frame.floored, float(vf.get(FLOORED, 1.0)), v_enc) * frame.var
     if noise.gyro_quantization:
-        var_gyro = var_gyro + noise.gyro_quantization**2 * record.reading_quantization_gain
-    sigma = np.sqrt(frame.var + var_gyro[:, None])
+        own = own + (v_enc * noise.gyro_quantization**2 * record.reading_quantization_gain)[:, None]
+    var_gyro = float(vf.get("rotation", 1.0)) * noise.gyro**2 * record.reading_tau
+    sigma = np.sqrt(own + var_gyro[:, None])
     return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
 
 

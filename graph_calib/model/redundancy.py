@@ -34,6 +34,7 @@ import numba
 import numpy as np
 from scipy.linalg import lapack
 
+from graph_calib.model.encoder_noise import FLOORED
 from graph_calib.model.normal_equations import linearise
 from graph_calib import kernel_cache
 
@@ -51,11 +52,17 @@ class KindFit:
         Sum of their squared whitened residuals.
     redundancy : float
         Sum of their components' redundancy numbers ``1 - h_ii``.
+    share_redundancy : float or None
+        The redundancy numbers weighted by the share of each component's variance that the kind's own variance
+        factor scales (:data:`FLOORED`: the floor's share, the gyro term being the rest); None: all of it.
+        Förstner's estimate of that factor, the rest of the variance held, is
+        ``factor (chi2 - (redundancy - share_redundancy)) / share_redundancy``.
     """
 
     count: int
     chi2: float
     redundancy: float
+    share_redundancy: float = None
 
     @property
     def chi2_per_redundancy(self):
@@ -76,6 +83,12 @@ class FitStatistics:
     ----------
     kinds : dict of str to KindFit
         ``rotation``, ``gravity``, ``encoder`` (when the record has valid readings) and ``prior``.
+    components : dict of str to KindFit
+        The variance components' own figures (:mod:`graph_calib.solvers.variance`): each component's chi-square
+        and redundancy summed with the share of every residual component's variance that it makes (Förstner's
+        estimate of its factor is ``chi2 / redundancy`` of these).  ``rotation``: the gyro's noise, all of a
+        rotation factor and a table reading's gyro term; ``encoder``: the readings' own noise; ``gravity``: all
+        of a gravity factor.  Their ``count`` is of the residual components that carry a share.
     n_unknowns : int
         ``3 (K+1) + P``.
     trace : float
@@ -86,6 +99,7 @@ class FitStatistics:
     kinds: dict
     n_unknowns: int
     trace: float
+    components: dict = None
 
 
 @numba.njit(cache=True)
@@ -132,7 +146,8 @@ def fit_statistics(model, attitudes, x):
     -------
     FitStatistics
         With, for a record whose moving keyframes have their own gravity sigma (``moving_sigma``), the
-        pseudo-kind :data:`MOVING`: those keyframes' gravity factors again, on their own.
+        pseudo-kind :data:`MOVING`: those keyframes' gravity factors again, on their own; and for a record whose
+        readings have floored components, the pseudo-kind :data:`FLOORED`: those components again, on their own.
     """
     R = np.asarray(attitudes, dtype=float)
     x = np.asarray(x, dtype=float)
@@ -141,14 +156,44 @@ def fit_statistics(model, attitudes, x):
     rows = {}
 
     moving = ~np.asarray(model.record.static_key, dtype=bool) if model.options.moving_sigma is not None else None
+    frame = model.record.encoder_noise_frame(model.noise.encoder) if model.record.has_valid_readings else None
+    floored = frame.floored if frame is not None else None
+    vf = model.noise.variance_factors
+    if frame is not None:
+        # each reading component's own variance (factors.encoder_factors; the floor's part apart): after the
+        # decorrelation a component's variance is that and the gyro's noise the earlier readings left
+        floor_var = float(vf.get(FLOORED, 1.0)) * np.where(floored, frame.var, 0.0)
+        own_var = float(vf.get("encoder", 1.0)) * np.where(floored, 0.0, frame.var) + floor_var
+        if model.noise.gyro_quantization:
+            own_var = own_var + (float(vf.get("encoder", 1.0)) * model.noise.gyro_quantization**2
+                                 * model.record.reading_quantization_gain)[:, None]
+
+    def shares_of(kind, res, sl):
+        """``{component: (F, 3) share of each residual component's variance}`` of a block of ``kind``."""
+        if kind.name != "encoder":
+            return {kind.name: 1.0}
+        s2 = res.sigma[sl] ** 2
+        own = np.clip(own_var[sl] / s2, 0.0, 1.0)
+        fl = np.clip(floor_var[sl] / s2, 0.0, own)
+        return {"rotation": 1.0 - own, "encoder": own - fl}
 
     def keep_rows(kind, res, sl, r, A, B, X, cols, ne):
-        rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X))
+        rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X, None, shares_of(kind, res, sl)))
         if kind.name == "gravity" and moving is not None:
             # the moving keyframes' gravity factors again, on their own (their sigma is moving_sigma's)
             m = moving[res.key[sl]]
             if np.any(m):
-                rows.setdefault(MOVING, []).append((r[m], res.key[sl][m], A[m], None if B is None else B[m], X[m]))
+                rows.setdefault(MOVING, []).append((r[m], res.key[sl][m], A[m], None if B is None else B[m], X[m],
+                                                    None, None))
+        if kind.name == "encoder" and floored is not None:
+            # the readings' floored components again, on their own (the decorrelation's unit-lower-triangular
+            # whitening keeps each component's place: component j stays the reading's principal axis j)
+            m = floored[sl]
+            f = np.any(m, axis=1)
+            if np.any(f):
+                share = np.clip(floor_var[sl][f] / res.sigma[sl][f] ** 2, 0.0, 1.0)
+                rows.setdefault(FLOORED, []).append((r[f], res.key[sl][f], A[f], None, X[f], m[f],
+                                                     {FLOORED: share}))
 
     prior = model.calibration_prior(x)
     system = linearise(model, model.preintegrate(x), R, x, R_prior=R[np.asarray(model.segment_keys, dtype=np.int64)],
@@ -166,11 +211,12 @@ def fit_statistics(model, attitudes, x):
     w, U = np.linalg.eigh(S)
     L = U * np.sqrt(np.maximum(w, 0.0))          # S = L L^T
     kinds = {}
+    components = {}
     trace = 0.0
     for name, blocks in rows.items():
-        chi2 = redundancy = 0.0
+        chi2 = redundancy = share_redundancy = 0.0
         count = 0
-        for r, key, A, B, X in blocks:
+        for r, key, A, B, X, mask, shares in blocks:
             V = A @ W[key] - X
             h = np.einsum("fij,fjl,fil->fi", A, Zd[key], A)
             if B is not None:
@@ -178,23 +224,38 @@ def fit_statistics(model, attitudes, x):
                 h += 2.0 * np.einsum("fij,fjl,fil->fi", A, Zo[key], B)
                 h += np.einsum("fij,fjl,fil->fi", B, Zd[key + 1], B)
             h += np.sum((V @ L) ** 2, axis=2)
-            if name != MOVING:                    # counted once, in "gravity"
+            if name not in PSEUDO_KINDS:          # counted once, in their kind
                 trace += float(h.sum())
+            if mask is not None:                  # only the components of the pseudo-kind
+                r, h = np.where(mask, r, 0.0), np.where(mask, h, 1.0)
             chi2 += float(np.sum(r**2))
             redundancy += float(np.sum(1.0 - h))
-            count += int(r.shape[0])
-        kinds[name] = KindFit(count=count, chi2=chi2, redundancy=redundancy)
+            count += int(r.shape[0] if mask is None else np.count_nonzero(mask))
+            if name == FLOORED:
+                share_redundancy += float(np.sum((1.0 - h) * shares[FLOORED]))
+            elif name not in PSEUDO_KINDS:
+                for comp, c in shares.items():
+                    c = np.broadcast_to(c, r.shape)
+                    got = components.get(comp, (0, 0.0, 0.0))
+                    components[comp] = (got[0] + int(np.count_nonzero(c)), got[1] + float(np.sum(c * r**2)),
+                                        got[2] + float(np.sum(c * (1.0 - h))))
+        kinds[name] = KindFit(count=count, chi2=chi2, redundancy=redundancy,
+                              share_redundancy=share_redundancy if name == FLOORED else None)
     h_prior = np.diag(S) * np.diag(prior.H) ** 2
     trace += float(h_prior.sum())
     s_att = float(model.initial_attitude_sigma)
     for k in model.segment_keys:
         trace += float(np.trace(Zd[int(k)] + W[int(k)] @ S @ W[int(k)].T)) / s_att**2
     kinds["prior"] = KindFit(count=P, chi2=float(prior.r @ prior.r), redundancy=float(np.sum(1.0 - h_prior)))
-    return FitStatistics(kinds=kinds, n_unknowns=3 * n_keys + P, trace=trace)
+    return FitStatistics(kinds=kinds, n_unknowns=3 * n_keys + P, trace=trace,
+                         components={k: KindFit(count=n, chi2=c, redundancy=v) for k, (n, c, v) in components.items()})
 
 
-#: The pseudo-kind of :func:`fit_statistics`: the gravity factors of the moving keyframes (also counted in
+#: A pseudo-kind of :func:`fit_statistics`: the gravity factors of the moving keyframes (also counted in
 #: ``"gravity"``), whose sigma is ``ModelOptions.moving_sigma`` (:mod:`graph_calib.solvers.variance`).
 MOVING = "gravity.moving"
+#: The other pseudo-kinds: the table readings' floored components (also counted in ``"encoder"``; their count
+#: is of components, not of readings), whose floor has its own variance factor.
+PSEUDO_KINDS = (MOVING, FLOORED)
 
-__all__ = ["KindFit", "FitStatistics", "fit_statistics", "MOVING"]
+__all__ = ["KindFit", "FitStatistics", "fit_statistics", "MOVING", "FLOORED", "PSEUDO_KINDS"]

@@ -31,10 +31,14 @@ the noise, never on the attitudes or the calibration), so the Jacobians stay tho
 chi-square of the interval is unchanged in form: the Mahalanobis norm of the original residuals under the
 covariance above.  An interval without readings keeps its rotation factor as it was.
 
-The variance factors (:class:`graph_calib.model.factors.Noise`): each kind keeps its own marginal
-covariance: a reading's ``D_i + v_enc q_g^2 tau_i``, the rotation factor's ``v_rot q_g^2 T``, and the shared
-part is scaled by ``sqrt(v_enc v_rot)`` between them.  The keyframe attitudes are the gyros' indicated ones,
-so a quantization error at the keyframe is in neither and nothing else is shared.
+The variance factors (:class:`graph_calib.model.factors.Noise`): the rotation kind's factor ``v_rot`` is the
+gyro's, on every term of its noise: the rotation factor's ``v_rot q_g^2 T`` and the readings' ``v_rot q_g^2
+tau_i``, so the shared noise stays one noise; the encoder kind's ``v_enc`` scales the readings' own ``D_i``
+alone.  (Scaling a reading's gyro term by ``v_enc`` made the two kinds claim different sizes of one noise: with the
+floor of the table's unread direction estimated small, that direction's readings know the interval's gyro noise,
+and a rotation factor above 1 then added ``(sqrt(v_rot / v_enc) - 1)`` of it back, so that its ``chi2 /
+redundancy`` grew with its factor and the variance components diverged.)  The keyframe attitudes are the gyros'
+indicated ones, so a quantization error at the keyframe is in neither and nothing else is shared.
 
 Under a robust loss (``GraphOptions.robust``) the map is the same: the readings' robust groups are judged on
 their innovations, but the rotation factor, which takes no robust loss, carries the interval's readings
@@ -57,6 +61,7 @@ import numba
 import numpy as np
 
 from graph_calib import kernel_cache
+from graph_calib.model.encoder_noise import FLOORED
 
 kernel_cache.install()     # before the first kernel
 
@@ -196,13 +201,15 @@ def _cached_gains(record, preint, noise, rot, enc):
     v_enc = float(noise.variance_factors.get("encoder", 1.0))
     v_rot = float(noise.variance_factors.get("rotation", 1.0))
     q2 = noise.gyro**2
-    key = (q2, v_enc, v_rot, float(noise.encoder), float(noise.gyro_quantization), enc.key.size, rot.key.size)
+    key = (q2, v_enc, v_rot, float(noise.variance_factors.get(FLOORED, 1.0)), float(noise.encoder),
+           float(noise.gyro_quantization), enc.key.size, rot.key.size)
     held = getattr(record, "shared_gyro_gains", None)
     if held is not None and held[0]() is preint and held[1] == key:
         return held[2]
     M = enc.key.size
     tau = record.reading_tau
-    D = np.maximum(enc.sigma**2 - (v_enc * q2 * tau)[:, None], MIN_VARIANCE)       # the reading's own noise
+    q2v = v_rot * q2                    # the gyro's noise, the rotation kind's factor applied (factors.encoder_factors)
+    D = np.maximum(enc.sigma**2 - (q2v * tau)[:, None], MIN_VARIANCE)       # the reading's own noise
     # the readings interval by interval, each in time (the record's order already, or sorted)
     k = np.asarray(enc.key, dtype=np.int64)
     if np.all(np.diff(k) >= 0) and np.all((np.diff(tau) >= 0) | (np.diff(k) > 0)):
@@ -218,19 +225,19 @@ def _cached_gains(record, preint, noise, rot, enc):
     H, K, L_inv, sigma = np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3, 3)), np.empty((M, 3))
     Pw, tau_last = np.zeros((keys.size, 3, 3)), np.zeros(keys.size)
     _gains(order, group, c(tau, dtype=float), c(record.encoder_noise_frame(noise.encoder).U, dtype=float),
-           c(preint.reading_dR, dtype=float), c(D), v_enc * q2, H, K, L_inv, sigma, Pw, tau_last)
+           c(preint.reading_dR, dtype=float), c(D), q2v, H, K, L_inv, sigma, Pw, tau_last)
     # each rotation factor less its expectation given its interval's readings: the map of that expectation and
     # the remaining covariance's whitening
     f = np.flatnonzero(np.isin(rot.key, keys))
     g = np.searchsorted(keys, rot.key[f])
     dR_T = preint.dR[rot.key[f]]
     dR_Tt = np.swapaxes(dR_T, 1, 2)
-    rest = (q2 * (record.T_key[rot.key[f]] - tau_last[g]))[:, None, None] * np.eye(3)
-    C = v_rot * dR_Tt @ (Pw[g] / v_enc + rest) @ dR_T
+    rest = (q2v * (record.T_key[rot.key[f]] - tau_last[g]))[:, None, None] * np.eye(3)
+    C = dR_Tt @ (Pw[g] + rest) @ dR_T
     rot_L_inv, rot_sigma = np.empty((f.size, 3, 3)), np.empty((f.size, 3))
     _ldl_many(c(0.5 * (C + np.swapaxes(C, 1, 2))), rot_L_inv, rot_sigma)
     gains = _Gains(order=order, group=group, keys=keys, H=H, K=K, L_inv=L_inv, sigma=sigma, f=f, g=g,
-                   A=np.sqrt(v_rot / v_enc) * dR_Tt, rot_L_inv=rot_L_inv, rot_sigma=rot_sigma)
+                   A=dR_Tt, rot_L_inv=rot_L_inv, rot_sigma=rot_sigma)
     record.shared_gyro_gains = (weakref.ref(preint), key, gains)
     return gains
 

@@ -161,6 +161,19 @@ def _draw(rng, lo, hi, size, positive=False):
     return mag * np.where(rng.uniform(size=size) < 0.5, -1.0, 1.0)
 
 
+def draw_rms(grade):
+    """``{parameter: sigma}``: the RMS of the simulator's draw ``sign * U(low, high)`` of each parameter of ``grade``.
+
+    ``sqrt((high^3 - low^3) / (3 (high - low)))`` from :data:`TRUTH_RANGES`.  As a calibration's prior sigmas
+    (``ModelOptions(prior_sigma=draw_rms(grade))``) they give the simulated truth its prior's second moments, so
+    that a linear estimator's error has exactly its reported covariance when the noise model is right: the
+    Monte Carlo check of the sigmas (the grade's own priors are 2 to 38 times wider than these draws, so that an
+    element tied to a direction the record does not determine looks pessimistic whatever the noise model;
+    docs/model.md, "Noise from the record").
+    """
+    return {name: float(np.sqrt((hi**3 - lo**3) / (3.0 * (hi - lo)))) for name, (lo, hi) in TRUTH_RANGES[grade].items()}
+
+
 @dataclass(frozen=True)
 class ImuTruth:
     """One simulated IMU: every truth parameter, temperature curves included.
@@ -389,4 +402,4 @@ def curvature_fit_offsets(imu, sensor_dT, *, t_ref=None):
 
 
 __all__ = ["TRUTH_RANGES", "EFFECT_SIZES", "T_CENTER_DEGC", "TEMPERATURE_TRIPLES", "ImuTruth", "draw_imu",
-           "curvature_fit_offsets"]
+           "curvature_fit_offsets", "draw_rms"]

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
-from graph_calib.model.redundancy import MOVING, fit_statistics
+from graph_calib.model.redundancy import FLOORED, MOVING, PSEUDO_KINDS, fit_statistics
 from graph_calib.records.experiment import Result
 
 
@@ -47,11 +47,13 @@ def residual_block(output, *, statistics=None):
             measured.append(v.ravel())
     if statistics is not None:
         for kind, fit in statistics.kinds.items():
-            if kind == MOVING:                  # the moving keyframes' part of "gravity": inside it
+            if kind in PSEUDO_KINDS:            # a part of a kind: inside it (below)
                 continue
             kinds[kind] = {**kinds.get(kind, {}), **fit.to_json()}
         if MOVING in statistics.kinds and "gravity" in kinds:
             kinds["gravity"]["moving"] = statistics.kinds[MOVING].to_json()
+        if FLOORED in statistics.kinds and "encoder" in kinds:
+            kinds["encoder"]["floored"] = statistics.kinds[FLOORED].to_json()
     all_measured = np.concatenate(measured) if measured else np.zeros(0)
     block = {
         "quantity": output.residual_quantity,
@@ -155,6 +157,8 @@ def to_result(model, output, *, extra=None):
     for kind, entry in residuals["kinds"].items():
         if kind in statistics.kinds:
             entry["variance_factor"] = float(factors.get(kind, 1.0))
+    if "floored" in residuals["kinds"].get("encoder", {}):
+        residuals["kinds"]["encoder"]["floored"]["variance_factor"] = float(factors.get(FLOORED, 1.0))
     residuals["variance_components"] = bool(factors)
     if model.options.moving_sigma is not None and "gravity" in residuals["kinds"]:
         residuals["kinds"]["gravity"]["moving_sigma_mps2"] = float(model.options.moving_sigma)

@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel
-from graph_calib.model.redundancy import MOVING, fit_statistics
+from graph_calib.model.redundancy import FLOORED, MOVING, fit_statistics
 from graph_calib.records.problem import MOVING_ESTIMATED
 from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
 
@@ -55,6 +55,12 @@ MAX_SOLVES = 5
 FACTOR_MIN = 1e-2
 #: No factor above this (100 times the identified sigma): a swaying hand's gravity factors need about 190.
 FACTOR_MAX = 1e4
+#: The floor's factor (:data:`graph_calib.model.encoder_noise.FLOORED`) goes no lower than this: the floor's sigma a
+#: hundredth of what it was, a quarter of a percent of the declared reading noise, where the readings' gyro term from
+#: the keyframe dominates every floored component (a table whose unread direction has no noise of its own).
+FLOOR_FACTOR_MIN = 1e-4
+#: Below this share of the floored components' variance (redundancy-weighted) the floor is negligible there.
+FLOOR_SHARE_SETTLED = 0.05
 #: Smallest exponent of a kind's response to its factor used for the step (module doc of the iteration).
 MIN_EXPONENT = 0.25
 #: Bounds of the moving keyframes' gravity sigma, m/s^2 (module doc).
@@ -134,6 +140,8 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
     estimate_moving = (moving is not None and MOVING not in fixed
                        and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED)
     factors.pop(MOVING, None)          # a fixed moving sigma is the options' own, not a factor
+    # the floor of the readings' unread components: a factor of its own when the record has such components
+    estimate_floor = FLOORED not in fixed
     if estimate_moving:
         # estimated as a factor on the moving rows' effective variance (moving_sigma^2 times the gravity
         # kind's factor, which scales every gravity row), turned back into a sigma below
@@ -152,13 +160,26 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         st = fit_statistics(problem.model, out.attitudes, out.x)
         if estimate_moving:                # the moving rows have a factor of their own: the gravity kind's is the static's
             st = _static_gravity(st)
-        ratios = {k: f.chi2_per_redundancy for k, f in st.kinds.items()
+        if estimate_floor and FLOORED in st.kinds and st.kinds[FLOORED].redundancy >= MIN_REDUNDANCY:
+            factors.setdefault(FLOORED, 1.0)
+        ratios = {k: _component(st, k).chi2_per_redundancy for k, f in st.kinds.items()
                   if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY
-                  and f.chi2 > 0}
+                  and _component(st, k).chi2 > 0}
         history.append(dict(ratios))
-        converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance) for k, v in ratios.items())
+        converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
+                        or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])) for k, v in ratios.items())
+        hold = ()
+        if FLOORED in ratios and np.isfinite(ratios[FLOORED]):
+            f0 = factors[FLOORED]
+            factors[FLOORED] = _floor_step(f0, st.kinds[FLOORED])
+            if abs(np.log(factors[FLOORED] / f0)) > np.log(2.0):
+                # the readings' components share the floor with the gyro's and their own noise, whose figures
+                # are the floor's share off while the floor is: those two wait for the next solve (and a secant
+                # across this step would not hold)
+                hold = ("rotation", "encoder")
+                previous.clear()
         for k, v in ratios.items():
-            if not np.isfinite(v):
+            if not np.isfinite(v) or k == FLOORED or k in hold:
                 continue
             lf, lr = np.log(factors.get(k, 1.0)), np.log(v)
             if k == MOVING:
@@ -182,11 +203,14 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             moving = float(np.clip(moving0 * np.sqrt(factors[MOVING] / factors.get("gravity", 1.0)),
                                    *MOVING_SIGMA_BOUNDS))
             factors[MOVING] = factors.get("gravity", 1.0) * (moving / moving0) ** 2
-        problem = with_variance_factors(problem, {k: v for k, v in factors.items() if k in KINDS},
+        problem = with_variance_factors(problem, {k: v for k, v in factors.items() if k in KINDS + (FLOORED,)},
                                         moving_sigma=moving)
         if converged:
             break
-    return VarianceComponents(problem=problem, factors={k: factors.get(k, 1.0) for k in KINDS}, moving_sigma=moving,
+    out_factors = {k: factors.get(k, 1.0) for k in KINDS}
+    if FLOORED in factors:
+        out_factors[FLOORED] = factors[FLOORED]
+    return VarianceComponents(problem=problem, factors=out_factors, moving_sigma=moving,
                               solves=n, converged=converged, history=tuple(history), initial=initial)
 
 
@@ -258,9 +282,49 @@ def _static_gravity(st):
     return replace(st, kinds={**st.kinds, "gravity": static})
 
 
+def _component(st, kind):
+    """The figures a kind's factor is estimated from: the variance component's (the gyro's noise for ``rotation``,
+    the readings' own for ``encoder``: :attr:`graph_calib.model.redundancy.FitStatistics.components`), else the
+    kind's own."""
+    if kind in ("rotation", "encoder") and kind in (st.components or {}):
+        return st.components[kind]
+    return st.kinds[kind]
+
+
+def _floor_step(factor, fit):
+    """The floor's next factor: Förstner's estimate with the gyro term's share of the variance held.
+
+    Each floored component's variance is ``factor F + G`` (``F`` the floor, ``G`` the gyro term from the
+    keyframe or the previous reading, right as identified): ``chi2 ~ sum r_i (factor* F_i + G_i) / (factor F_i +
+    G_i)``, linear in the factor sought, so one step takes it where the residuals put it (a plain Helmert step
+    would need many when the gyro term dominates), within :data:`FLOOR_FACTOR_MIN` .. :data:`FACTOR_MAX`.  Once
+    the floor is a negligible share of those components' variance (:func:`_floor_settled`) the data cannot tell
+    its size, and it is kept.
+    """
+    share = float(fit.share_redundancy or 0.0)
+    if not share > 0.0 or _floor_settled(factor, fit):
+        return factor
+    new = factor * (fit.chi2 - (fit.redundancy - share)) / share
+    return float(np.clip(new, FLOOR_FACTOR_MIN, FACTOR_MAX))
+
+
+def _floor_settled(factor, fit):
+    """Whether the floor's factor has settled: its components' ``chi2 / redundancy`` within :data:`TOLERANCE` of 1
+    while the floor is a negligible share of their variance (below :data:`FLOOR_SHARE_SETTLED`; a table whose
+    unread direction has no noise of its own, a simulated one), or the factor at a bound that the residuals ask it
+    to pass."""
+    ratio = fit.chi2_per_redundancy
+    share = float(fit.share_redundancy or 0.0) / fit.redundancy if fit.redundancy > 0 else 0.0
+    if share < FLOOR_SHARE_SETTLED and abs(ratio - 1.0) <= TOLERANCE:
+        return True
+    return (factor <= FLOOR_FACTOR_MIN * (1.0 + 1e-9) and ratio < 1.0) or (factor >= FACTOR_MAX * (1.0 - 1e-9)
+                                                                            and ratio > 1.0)
+
+
 def factors_estimated(factors):
-    """The kinds whose factor the loop estimates: :data:`KINDS` and, when the record has moving keyframes, MOVING."""
-    return KINDS + ((MOVING,) if MOVING in factors else ())
+    """The kinds whose factor the loop estimates: :data:`KINDS` and, when the record has them, MOVING (moving
+    keyframes whose sigma is estimated) and FLOORED (readings with floored components)."""
+    return KINDS + tuple(k for k in (MOVING, FLOORED) if k in factors)
 
 
 __all__ = ["VarianceComponents", "estimate_variance_components", "weighted_problem", "with_variance_factors", "tested_problem", "KINDS",

@@ -35,9 +35,10 @@ def _full_covariance(key, tau, T, U, dR_i, dR_T, D, v_enc, v_rot):
     """The covariance of [readings..., rotation factors...] from W(tau), cov q^2 tau I, per interval."""
     M, K = key.size, T.size
     n = 3 * (M + K)
-    # each factor's noise as a linear map of the interval's W at its time: reading U^T dR_i^T sqrt(v_enc) W(tau),
-    # rotation -sqrt(v_rot) dR_T^T W(T)
-    maps = [(key[i], tau[i], np.sqrt(v_enc) * U[i].T @ dR_i[i].T) for i in range(M)]
+    # each factor's noise as a linear map of the interval's W at its time: reading U^T dR_i^T sqrt(v_rot) W(tau),
+    # rotation -sqrt(v_rot) dR_T^T W(T): the rotation kind's factor is the gyro's, on both (the readings' own noise
+    # takes the encoder kind's)
+    maps = [(key[i], tau[i], np.sqrt(v_rot) * U[i].T @ dR_i[i].T) for i in range(M)]
     maps += [(k, T[k], -np.sqrt(v_rot) * dR_T[k].T) for k in range(K)]
     S = np.zeros((n, n))
     for a, (ka, ta, Ma) in enumerate(maps):
@@ -62,7 +63,7 @@ def test_the_whitened_factors_are_independent_with_unit_variance():
     S = _full_covariance(key, tau, T, U, dR_i, dR_T, D, v_enc, v_rot)
     L = np.linalg.cholesky(S)
     # the probe: H_x of every factor its rows of L, so that H_x = noise with identity covariance mapped through L
-    enc = _residuals(key, L[:3 * M].reshape(M, 3, -1), np.sqrt(v_enc * (D + Q**2 * tau[:, None])), rng, False)
+    enc = _residuals(key, L[:3 * M].reshape(M, 3, -1), np.sqrt(v_enc * D + v_rot * Q**2 * tau[:, None]), rng, False)
     rot = _residuals(np.arange(K), L[3 * M:].reshape(K, 3, -1), np.sqrt(v_rot * Q**2 * T)[:, None] * np.ones(3),
                      rng, True)
     # the marginal sigmas the model gives each kind are the covariance's own diagonal
