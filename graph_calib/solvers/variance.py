@@ -1,15 +1,22 @@
 r"""Variance components: one variance factor per measurement kind, estimated with the solve.
 
 The noise the solvers use is identified from the record (:mod:`graph_calib.noise`), but each kind of
-factor approximates what that noise does to it (the rotation and encoder factors both carry the gyro's
-noise between a keyframe and a reading, and are treated as independent; a static dwell's scatter floors
-the table's best-read direction; a hand's sway reaches the gravity factors).  Helmert's and Forstner's
-variance component estimation rescales each kind's covariance by its ``chi2 / redundancy``
+factor approximates what that noise does to it (a hand's sway reaches the gravity factors; a dwell's
+scatter cannot show the table's unread direction, whose variance is a floor).  Helmert's and Förstner's
+variance component estimation rescales each component's covariance by its ``chi2 / redundancy``
 (:func:`graph_calib.model.redundancy.fit_statistics`) and solves again, until every factor has settled:
-each kind's ``chi2 / redundancy`` is then 1 and the sigmas follow from the data, neither optimistic nor
+each component's ``chi2 / redundancy`` is then 1 and the sigmas follow from the data, neither optimistic nor
 pessimistic.  A kind whose residuals the free attitudes partly absorb answers a factor ``f`` as
-``c / f^a`` with ``a < 1`` (the rotation kind): after the first Helmert step ``a`` is taken from the last
+``c / f^a`` with ``a < 1``: after the first Helmert step ``a`` is taken from the last
 two solves (a secant in logarithms, ``a`` in ``[MIN_EXPONENT, 1]``), so that two or three solves do.
+
+The components are not the kinds one for one.  A table reading's variance has three parts: its own noise
+(factor ``encoder``), the floor of a floored component (factor :data:`FLOORED`, from its own Förstner step,
+:func:`_floor_step`) and the gyro's noise from the keyframe, which is the rotation factors' noise and takes
+their factor (``rotation``: the gyro's).  Each factor is estimated from the share of every residual
+component's variance that its part makes (:attr:`graph_calib.model.redundancy.FitStatistics.components`), so
+the rotation kind's own ``chi2 / redundancy`` scatters about 1 as a chi-square of its redundancy does instead of
+being forced to it (docs/model.md, "The noise of a table reading").
 
 This is an outer iteration around any registered solver (solve, rescale, re-solve from the previous
 solution), so that it does not depend on a solver's internals; the factors live in the model's
@@ -162,9 +169,9 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             st = _static_gravity(st)
         if estimate_floor and FLOORED in st.kinds and st.kinds[FLOORED].redundancy >= MIN_REDUNDANCY:
             factors.setdefault(FLOORED, 1.0)
-        ratios = {k: _component(st, k).chi2_per_redundancy for k, f in st.kinds.items()
+        ratios = {k: _component(st, k, factors).chi2_per_redundancy for k, f in st.kinds.items()
                   if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY
-                  and _component(st, k).chi2 > 0}
+                  and _component(st, k, factors).chi2 > 0}
         history.append(dict(ratios))
         converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
                         or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])) for k, v in ratios.items())
@@ -282,13 +289,24 @@ def _static_gravity(st):
     return replace(st, kinds={**st.kinds, "gravity": static})
 
 
-def _component(st, kind):
+def _component(st, kind, factors):
     """The figures a kind's factor is estimated from: the variance component's (the gyro's noise for ``rotation``,
     the readings' own for ``encoder``: :attr:`graph_calib.model.redundancy.FitStatistics.components`), else the
-    kind's own."""
-    if kind in ("rotation", "encoder") and kind in (st.components or {}):
-        return st.components[kind]
-    return st.kinds[kind]
+    kind's own.
+
+    The gyro's factor takes the rotation kind's own figures when the readings' own factor sits at
+    :data:`FACTOR_MIN` with their residuals asking for less (readings that do not scatter: their noise is the
+    grade's, no measurement, and the verdict fails them in words): the readings' misfit would otherwise pass into
+    the gyro's share of them and pull the gyro's factor down with it.
+    """
+    comps = st.components or {}
+    if kind not in ("rotation", "encoder") or kind not in comps:
+        return st.kinds[kind]
+    enc = comps.get("encoder")
+    if (kind == "rotation" and enc is not None and factors.get("encoder", 1.0) <= FACTOR_MIN * (1.0 + 1e-9)
+            and enc.chi2_per_redundancy < 1.0):
+        return st.kinds[kind]
+    return comps[kind]
 
 
 def _floor_step(factor, fit):

@@ -13,8 +13,9 @@ above, the kind's residuals are larger than its noise (the model lacks an effect
 larger than identified; the sigmas are optimistic); below, the noise model overstates them (the sigmas
 are pessimistic).  The limits narrow as the redundancy grows (about ``1 +- 3.3 sqrt(2 / nu)``).
 
-With variance components (:mod:`graph_calib.solvers.variance`) each kind's ``chi2 / redundancy`` is
-brought to 1 by a variance factor; the factor itself is then the test: a kind whose factor lies
+With variance components (:mod:`graph_calib.solvers.variance`) each component's ``chi2 / redundancy`` is
+brought to 1 by a variance factor (the rotation kind shares the gyro's with the table readings' gyro term, so its
+own scatters about 1 within the limits above); the factor itself is then the test: a kind whose factor lies
 outside ``1 / VARIANCE_FACTOR_LIMIT .. VARIANCE_FACTOR_LIMIT`` of the noise identified from the record
 fails, naming the kind and the factor (its residuals are that many times, in variance, what the
 identified noise explains).  A kind whose sensor's noise was the grade's (nothing identified) is not
