@@ -85,7 +85,7 @@ def run(args):
             rng=np.random.default_rng(args.seed) if program is not None else None)
         print("variance factors (" + ("one simulated realisation of the program" if program is not None else
                                       "estimated on the record") + "): "
-              + ", ".join(f"{k} {v:.3f}" for k, v in factors.items()), file=sys.stderr)
+              + ", ".join(f"{k} {v:.3g}" for k, v in factors.items()), file=sys.stderr)
     prediction = predict(problem, variance_factors=factors)
     extra = {"grade_choice": choice.to_json()} if choice is not None else None
     result = prediction_result(problem, prediction, extra=extra)

@@ -8,7 +8,9 @@ import pytest
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.solvers.registry import PRIMARY_SOLVER
-from graph_calib.solvers.variance import KINDS, estimate_variance_components, weighted_problem
+from graph_calib.model.encoder_noise import FLOORED
+from graph_calib.simulation import simulate
+from graph_calib.solvers.variance import FLOOR_FACTOR_MIN, KINDS, estimate_variance_components, weighted_problem
 
 from _shared import make_experiment
 
@@ -36,3 +38,29 @@ def test_with_them_the_factors_problem_and_the_solvers_last_solution(problem):
     (R, x), (R_vc, x_vc) = initial[PRIMARY_SOLVER], vc.initial
     np.testing.assert_array_equal(x, x_vc)
     np.testing.assert_array_equal(np.asarray(R), np.asarray(R_vc))
+
+
+@pytest.fixture(scope="module")
+def table_problem():
+    """A 6-min navigation-grade table record simulated with the noise it is calibrated with (its table's unread
+    direction noiseless, as the simulator's two encoders make it)."""
+    se = simulate("nav-subrange-short", rng=np.random.default_rng(2), hours=0.1).run()[0]
+    options = CalibrationOptions(t_ref_degC=se.truth.t_ref_degC)
+    return build_problem(se.experiment, options=options), options
+
+
+def test_the_floor_of_the_unread_direction_is_estimated_and_the_gyro_factor_is_then_right(table_problem):
+    problem, options = table_problem
+    assert problem.model.record.encoder_noise_frame(problem.model.noise.encoder).floored.any()
+    vc = estimate_variance_components(problem, options=options)
+    assert vc.converged and vc.solves <= 3
+    # the simulated table has none of the axis errors the floor stands for: its factor goes to its bound, where
+    # the readings' gyro term explains those components
+    assert vc.factors[FLOORED] == pytest.approx(FLOOR_FACTOR_MIN)
+    # the noise is the simulated one: the gyro's factor (rotation factors and the readings' gyro term) and the
+    # readings' own are 1 within their scatter (the gyro's is informed by some 3000 floored components)
+    assert 0.9 < vc.factors["rotation"] < 1.1 and 0.95 < vc.factors["encoder"] < 1.05, vc.factors
+    # the control: the floor held where it was, the variance components make up for it on the gyro's factor, whose
+    # sigmas then come out optimistic (this was calibrate's rotation factor of 0.56-0.85)
+    held = estimate_variance_components(problem, options=options, fixed=(FLOORED,))
+    assert FLOORED not in held.factors and held.factors["rotation"] < 0.7, held.factors
