@@ -178,13 +178,13 @@ def fit_statistics(model, attitudes, x):
         return {"rotation": 1.0 - own, "encoder": own - fl}
 
     def keep_rows(kind, res, sl, r, A, B, X, cols, ne):
-        rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X, None, shares_of(kind, res, sl), sl))
+        rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X, None, shares_of(kind, res, sl)))
         if kind.name == "gravity" and moving is not None:
             # the moving keyframes' gravity factors again, on their own (their sigma is moving_sigma's)
             m = moving[res.key[sl]]
             if np.any(m):
                 rows.setdefault(MOVING, []).append((r[m], res.key[sl][m], A[m], None if B is None else B[m], X[m],
-                                                    None, None, None))
+                                                    None, None))
         if kind.name == "encoder" and floored is not None:
             # the readings' floored components again, on their own (the decorrelation's unit-lower-triangular
             # whitening keeps each component's place: component j stays the reading's principal axis j)
@@ -193,7 +193,7 @@ def fit_statistics(model, attitudes, x):
             if np.any(f):
                 share = np.clip(floor_var[sl][f] / res.sigma[sl][f] ** 2, 0.0, 1.0)
                 rows.setdefault(FLOORED, []).append((r[f], res.key[sl][f], A[f], None, X[f], m[f],
-                                                     {FLOORED: share}, None))
+                                                     {FLOORED: share}))
 
     prior = model.calibration_prior(x)
     system = linearise(model, model.preintegrate(x), R, x, R_prior=R[np.asarray(model.segment_keys, dtype=np.int64)],
@@ -216,7 +216,7 @@ def fit_statistics(model, attitudes, x):
     for name, blocks in rows.items():
         chi2 = redundancy = share_redundancy = 0.0
         count = 0
-        for r, key, A, B, X, mask, shares, blk in blocks:
+        for r, key, A, B, X, mask, shares in blocks:
             V = A @ W[key] - X
             h = np.einsum("fij,fjl,fil->fi", A, Zd[key], A)
             if B is not None:
@@ -239,13 +239,6 @@ def fit_statistics(model, attitudes, x):
                     got = components.get(comp, (0, 0.0, 0.0))
                     components[comp] = (got[0] + int(np.count_nonzero(c)), got[1] + float(np.sum(c * r**2)),
                                         got[2] + float(np.sum(c * (1.0 - h))))
-                    if name == "encoder" and comp == "rotation" and floored is not None:
-                        # the gyro's share of the floored components on its own too (GYRO_FLOORED)
-                        c = np.where(floored[blk], c, 0.0)
-                        got = components.get(GYRO_FLOORED, (0, 0.0, 0.0))
-                        components[GYRO_FLOORED] = (got[0] + int(np.count_nonzero(c)),
-                                                    got[1] + float(np.sum(c * r**2)),
-                                                    got[2] + float(np.sum(c * (1.0 - h))))
         kinds[name] = KindFit(count=count, chi2=chi2, redundancy=redundancy,
                               share_redundancy=share_redundancy if name == FLOORED else None)
     h_prior = np.diag(S) * np.diag(prior.H) ** 2
@@ -264,7 +257,5 @@ MOVING = "gravity.moving"
 #: The other pseudo-kinds: the table readings' floored components (also counted in ``"encoder"``; their count
 #: is of components, not of readings), whose floor has its own variance factor.
 PSEUDO_KINDS = (MOVING, FLOORED)
-#: The part of the component ``"rotation"`` (the gyro's) that the floored components make (also counted in it).
-GYRO_FLOORED = "rotation.floored"
 
-__all__ = ["KindFit", "FitStatistics", "fit_statistics", "MOVING", "FLOORED", "PSEUDO_KINDS", "GYRO_FLOORED"]
+__all__ = ["KindFit", "FitStatistics", "fit_statistics", "MOVING", "FLOORED", "PSEUDO_KINDS"]

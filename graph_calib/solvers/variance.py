@@ -45,7 +45,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel
-from graph_calib.model.redundancy import FLOORED, GYRO_FLOORED, MOVING, fit_statistics
+from graph_calib.model.redundancy import FLOORED, MOVING, fit_statistics
 from graph_calib.records.problem import MOVING_ESTIMATED
 from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
 
@@ -306,14 +306,6 @@ def _component(st, kind, factors):
     if (kind == "rotation" and enc is not None and factors.get("encoder", 1.0) <= FACTOR_MIN * (1.0 + 1e-9)
             and enc.chi2_per_redundancy < 1.0):
         return st.kinds[kind]
-    floor, part = st.kinds.get(FLOORED), comps.get(GYRO_FLOORED)
-    if (kind == "rotation" and floor is not None and part is not None
-            and factors.get(FLOORED, 1.0) <= FLOOR_FACTOR_MIN * (1.0 + 1e-9)
-            and floor.chi2_per_redundancy < 1.0 - TOLERANCE):
-        # the same for the floor at its bound with the floored components asking for less (a gyro whose noise is
-        # small against even that bound): the gyro's share of them out
-        g = comps[kind]
-        return replace(g, count=g.count - part.count, chi2=g.chi2 - part.chi2, redundancy=g.redundancy - part.redundancy)
     return comps[kind]
 
 
