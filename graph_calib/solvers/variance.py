@@ -63,9 +63,9 @@ FACTOR_MIN = 1e-2
 #: No factor above this (100 times the identified sigma): a swaying hand's gravity factors need about 190.
 FACTOR_MAX = 1e4
 #: The floor's factor (:data:`graph_calib.model.encoder_noise.FLOORED`) goes no lower than this: the floor's sigma a
-#: hundredth of what it was, a quarter of a percent of the declared reading noise, where the readings' gyro term from
-#: the keyframe dominates every floored component (a table whose unread direction has no noise of its own).
-FLOOR_FACTOR_MIN = 1e-4
+#: thousandth of what it was, where the gyro's noise between two readings dominates every floored component even at
+#: a third of a navigation-grade gyro's (a table whose unread direction has no noise of its own).
+FLOOR_FACTOR_MIN = 1e-6
 #: Below this share of the floored components' variance (redundancy-weighted) the floor is negligible there.
 FLOOR_SHARE_SETTLED = 0.05
 #: Smallest exponent of a kind's response to its factor used for the step (module doc of the iteration).
@@ -157,6 +157,7 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
     history = []
     converged = False
     previous = {}                      # kind -> (log factor, log ratio) of the previous solve
+    stepped = set()                    # the kinds whose factor has taken a step
     bracket = [None, None]             # log factors of MOVING known too small (ratio > 1) and too large
     if estimate_moving and max_solves == MAX_SOLVES:
         max_solves += MOVING_EXTRA_SOLVES
@@ -178,7 +179,8 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         hold = ()
         if FLOORED in ratios and np.isfinite(ratios[FLOORED]):
             f0 = factors[FLOORED]
-            factors[FLOORED] = _floor_step(f0, st.kinds[FLOORED])
+            factors[FLOORED] = _floor_step(f0, st.kinds[FLOORED], first=FLOORED not in stepped)
+            stepped.add(FLOORED)
             if abs(np.log(factors[FLOORED] / f0)) > np.log(2.0):
                 # the readings' components share the floor with the gyro's and their own noise, whose figures
                 # are the floor's share off while the floor is: those two wait for the next solve (and a secant
@@ -309,7 +311,7 @@ def _component(st, kind, factors):
     return comps[kind]
 
 
-def _floor_step(factor, fit):
+def _floor_step(factor, fit, *, first=True):
     """The floor's next factor: Förstner's estimate with the gyro term's share of the variance held.
 
     Each floored component's variance is ``factor F + G`` (``F`` the floor, ``G`` the gyro term from the
@@ -322,8 +324,12 @@ def _floor_step(factor, fit):
     share = float(fit.share_redundancy or 0.0)
     if not share > 0.0 or _floor_settled(factor, fit):
         return factor
-    new = factor * (fit.chi2 - (fit.redundancy - share)) / share
-    return float(np.clip(new, FLOOR_FACTOR_MIN, FACTOR_MAX))
+    new = float(np.clip(factor * (fit.chi2 - (fit.redundancy - share)) / share, FLOOR_FACTOR_MIN, FACTOR_MAX))
+    if first:
+        return new
+    # later steps half way in logarithms: the gyro term's share is not quite held (the readings' gains change with
+    # the floor), and a full step overshoots once the floor is a minor part
+    return float(np.sqrt(factor * new))
 
 
 def _floor_settled(factor, fit):
