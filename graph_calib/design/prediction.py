@@ -32,15 +32,15 @@ linear over the subrange) is not part of it.
 
 **Variance components.**  ``calibrate`` rescales each part of the noise by a variance factor estimated from the
 residuals (:mod:`graph_calib.solvers.variance`).  On the project's simulated table records with the noise
-identified correctly the gyro's, the gravity's and the readings' own factors are near 1 (0.97, 0.98, 0.985 on the
+identified correctly the gyro's, the gravity's and the readings' own factors are near 1 (1.00, 0.98, 0.985 on the
 15 min navigation subrange), but the floor of the table's unread direction is not: the simulated table has none of
-the axis errors the floor stands for, and its factor goes to its bound of 1e-4.  A prediction with the identified
-noise alone keeps the floor, and is up to 10 % above calibrate's sigmas (``gyro.misalignment.yz``).  The factors
+the axis errors the floor stands for, and its factor goes to its bound of 1e-6.  A prediction with the identified
+noise alone keeps the floor, and is up to 9 % above calibrate's sigmas (``gyro.misalignment.yz``).  The factors
 are a property of the design and the noise, not of one realisation (their relative scatter is about
 ``sqrt(2 / redundancy)``, a few per cent), so :func:`expected_variance_factors` estimates them as calibrate does,
 on the record itself or on one simulated noise realisation of a bench program, and
 ``predict(problem, variance_factors=...)`` then gives calibrate's sigmas (tests/design/test_prediction.py:
-within 10 % of both solvers'; measured 0.983-0.999).  Without factors the prediction is that of the identified
+within 10 % of both solvers'; measured 0.983-1.000).  Without factors the prediction is that of the identified
 noise alone.
 """
 
