@@ -293,18 +293,45 @@ def encoder_factors(record, R, preint, x, *, layout, noise):
     H_R = np.empty((M, 3, 3))
     H_x = np.zeros((M, 3, P))
     _encoder_rows(record, R, preint, x, layout, frame, r, H_R, H_x)
-    # three variance components: the reading's own noise (the table's, a ring-laser gyro's quantization at the
-    # reading) times the encoder kind's factor; the floor of a floored component times its own factor instead;
-    # the gyro's noise from the keyframe times the rotation kind's factor, which is the gyro's (the same noise as
-    # the rotation factor's: graph_calib.model.shared_gyro_noise)
+    parts = encoder_variance(record, noise)
+    sigma = np.sqrt(parts.own + parts.floor + parts.gyro[:, None])
+    return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+
+
+@dataclass(frozen=True)
+class EncoderVariance:
+    """The three parts of each table reading's variance, rad^2, each with its own variance factor.
+
+    Attributes
+    ----------
+    own : ndarray, shape (M, 3)
+        The reading's own noise along its noise frame (a dwell's scatter or the declared noise, and a ring-laser
+        gyro's quantization at the reading) times the ``encoder`` factor; of a floored component only the
+        quantization (its floor is apart).
+    floor : ndarray, shape (M, 3)
+        The floor of each floored component times the :data:`graph_calib.model.encoder_noise.FLOORED` factor,
+        zero elsewhere.
+    gyro : ndarray, shape (M,)
+        The gyro's noise from the keyframe to the reading, ``q_g^2 tau``, times the ``rotation`` factor: the
+        gyro's, the same noise as the rotation factor's (:mod:`graph_calib.model.shared_gyro_noise`).
+    """
+
+    own: np.ndarray
+    floor: np.ndarray
+    gyro: np.ndarray
+
+
+def encoder_variance(record, noise):
+    """The :class:`EncoderVariance` of every valid reading of ``record`` under ``noise`` (its factors applied)."""
+    frame = record.encoder_noise_frame(noise.encoder)
     vf = noise.variance_factors
     v_enc = float(vf.get("encoder", 1.0))
-    own = np.where(frame.floored, float(vf.get(FLOORED, 1.0)), v_enc) * frame.var
+    own = v_enc * np.where(frame.floored, 0.0, frame.var)
     if noise.gyro_quantization:
         own = own + (v_enc * noise.gyro_quantization**2 * record.reading_quantization_gain)[:, None]
-    var_gyro = float(vf.get("rotation", 1.0)) * noise.gyro**2 * record.reading_tau
-    sigma = np.sqrt(own + var_gyro[:, None])
-    return Residuals(r=r, key=record.reading_key.copy(), H_R=H_R, H_R_next=None, H_x=H_x, sigma=sigma)
+    floor = float(vf.get(FLOORED, 1.0)) * np.where(frame.floored, frame.var, 0.0)
+    gyro = float(vf.get("rotation", 1.0)) * noise.gyro**2 * record.reading_tau
+    return EncoderVariance(own=own, floor=floor, gyro=gyro)
 
 
 def _column(layout, name):
@@ -415,4 +442,4 @@ def sum_by_key(target, key, vals):
 
 
 __all__ = ["Noise", "Residuals", "PriorResidual", "rotation_factors", "gravity_factors", "encoder_factors",
-           "attitude_prior", "calibration_prior", "sum_by_key"]
+           "EncoderVariance", "encoder_variance", "encoder_columns", "attitude_prior", "calibration_prior", "sum_by_key"]

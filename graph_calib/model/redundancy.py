@@ -35,6 +35,7 @@ import numpy as np
 from scipy.linalg import lapack
 
 from graph_calib.model.encoder_noise import FLOORED
+from graph_calib.model.factors import encoder_variance
 from graph_calib.model.normal_equations import linearise
 from graph_calib import kernel_cache
 
@@ -156,17 +157,13 @@ def fit_statistics(model, attitudes, x):
     rows = {}
 
     moving = ~np.asarray(model.record.static_key, dtype=bool) if model.options.moving_sigma is not None else None
-    frame = model.record.encoder_noise_frame(model.noise.encoder) if model.record.has_valid_readings else None
-    floored = frame.floored if frame is not None else None
-    vf = model.noise.variance_factors
-    if frame is not None:
-        # each reading component's own variance (factors.encoder_factors; the floor's part apart): after the
-        # decorrelation a component's variance is that and the gyro's noise the earlier readings left
-        floor_var = float(vf.get(FLOORED, 1.0)) * np.where(floored, frame.var, 0.0)
-        own_var = float(vf.get("encoder", 1.0)) * np.where(floored, 0.0, frame.var) + floor_var
-        if model.noise.gyro_quantization:
-            own_var = own_var + (float(vf.get("encoder", 1.0)) * model.noise.gyro_quantization**2
-                                 * model.record.reading_quantization_gain)[:, None]
+    floored = None
+    if model.record.has_valid_readings:
+        # each reading component's own variance and its floor (graph_calib.model.factors.encoder_variance): after
+        # the decorrelation a component's variance is those and the gyro's noise the earlier readings left
+        floored = model.record.encoder_noise_frame(model.noise.encoder).floored
+        parts = encoder_variance(model.record, model.noise)
+        floor_var, own_var = parts.floor, parts.own + parts.floor
 
     def shares_of(kind, res, sl):
         """``{component: (F, 3) share of each residual component's variance}`` of a block of ``kind``."""

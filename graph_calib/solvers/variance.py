@@ -157,7 +157,7 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
     history = []
     converged = False
     previous = {}                      # kind -> (log factor, log ratio) of the previous solve
-    stepped = set()                    # the kinds whose factor has taken a step
+    floor_stepped = False              # whether the floor's factor has taken its first (full) step
     bracket = [None, None]             # log factors of MOVING known too small (ratio > 1) and too large
     if estimate_moving and max_solves == MAX_SOLVES:
         max_solves += MOVING_EXTRA_SOLVES
@@ -170,17 +170,17 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             st = _static_gravity(st)
         if estimate_floor and FLOORED in st.kinds and st.kinds[FLOORED].redundancy >= MIN_REDUNDANCY:
             factors.setdefault(FLOORED, 1.0)
-        ratios = {k: _component(st, k, factors).chi2_per_redundancy for k, f in st.kinds.items()
-                  if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY
-                  and _component(st, k, factors).chi2 > 0}
+        figures = {k: _component(st, k, factors) for k, f in st.kinds.items()
+                   if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY}
+        ratios = {k: f.chi2_per_redundancy for k, f in figures.items() if f.chi2 > 0}
         history.append(dict(ratios))
         converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
                         or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])) for k, v in ratios.items())
         hold = ()
         if FLOORED in ratios and np.isfinite(ratios[FLOORED]):
             f0 = factors[FLOORED]
-            factors[FLOORED] = _floor_step(f0, st.kinds[FLOORED], first=FLOORED not in stepped)
-            stepped.add(FLOORED)
+            factors[FLOORED] = _floor_step(f0, st.kinds[FLOORED], first=not floor_stepped)
+            floor_stepped = True
             if abs(np.log(factors[FLOORED] / f0)) > np.log(2.0):
                 # the readings' components share the floor with the gyro's and their own noise, whose figures
                 # are the floor's share off while the floor is: those two wait for the next solve (and a secant
