@@ -55,7 +55,8 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
         # one variance factor per measurement kind when asked, estimated with the primary solver; the primary
         # solver's final solve starts from its last solution, every other solver from its own start
         identified = problem
-        problem, initial = weighted_problem(problem, options=options, solver=primary_of(solvers), progress=progress)
+        weighted = weighted_problem(problem, options=options, solver=primary_of(solvers), progress=progress)
+        problem, initial = weighted.problem, weighted.initial
         # a table-less record whose gyro model does not fit: the accelerometer from gravity alone when the gyro's
         # misfit pulls it, every solver then solving the same pinned problem (graph_calib.solvers.staged)
         staging = stage(problem, options=options, solver=primary_of(solvers),
@@ -78,17 +79,20 @@ def solve_problem(problem, *, options=CalibrationOptions(), solvers=DEFAULT_SOLV
         run = run_solvers(staging.problem if staged else problem, options=options, solvers=solvers,
                           progress=progress, concurrent=concurrent,
                           initial={primary_of(solvers): staging.initial} if staged else initial,
-                          on_output=structure_of, stamp=not (options.structure_tests or staged))
+                          on_output=structure_of, stamp=False)
         if staged:
             # each output with the honest covariance, its result with the record's own priors and the staging said
             outputs = {n: staging.finish(o) for n, o in run.outputs.items()}
             problem = staging.result_problem
             results = {n: to_result(problem.model, o, extra={"staged": staging.to_json()}) for n, o in outputs.items()}
             run = replace(run, problem=problem, outputs=outputs, results=results)
-    if not (options.structure_tests or staged):
-        return run
+    results = run.results
+    iteration = weighted.iteration()
+    if iteration is not None:
+        # how the variance components ended, which the verdict notes when they did not settle
+        results = {n: replace(r, residuals={**r.residuals, "variance_iteration": iteration}) for n, r in results.items()}
     structure = tests[primary_of(solvers)] if options.structure_tests else ()
-    results, comparison, verdict = judge(run.results, order=solvers, structure=structure)
+    results, comparison, verdict = judge(results, order=solvers, structure=structure)
     return replace(run, results=results, comparison=comparison, verdict=verdict)
 
 

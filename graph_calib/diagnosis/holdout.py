@@ -98,8 +98,9 @@ def held_out_check(experiment, *, options, grown, solver, folds=2):
 def _fit(train, *, options, solver):
     """A fold's calibration as ``calibrate`` makes it with one solver and no structure tests (the layers below
     ``graph_calib.calibrate``, which imports this package: the variance components, then the solve)."""
-    problem, initial = weighted_problem(build_problem(train, options=options), options=options, solver=solver)
-    run = run_solvers(problem, options=replace(options, structure_tests=False), solvers=(solver,), initial=initial)
+    weighted = weighted_problem(build_problem(train, options=options), options=options, solver=solver)
+    run = run_solvers(weighted.problem, options=replace(options, structure_tests=False), solvers=(solver,),
+                      initial=weighted.initial)
     return Calibration.from_result(run.results[solver])
 
 

@@ -99,6 +99,10 @@ class VarianceComponents:
         ``{kind: chi2 / redundancy}`` at each solve.
     initial : tuple (R, x)
         The last solution, to warm-start the solvers that follow.
+    at_bound : tuple of str
+        The kinds that had not settled when the iteration ended because their factor sat at :data:`FACTOR_MIN`
+        or :data:`FACTOR_MAX` with the residuals asking for more (the iteration stops once every kind that has not
+        settled is such).
     """
 
     problem: object
@@ -108,6 +112,7 @@ class VarianceComponents:
     converged: bool
     history: tuple
     initial: tuple
+    at_bound: tuple = ()
 
 
 def with_variance_factors(problem, factors, *, moving_sigma=None):
@@ -176,6 +181,12 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         history.append(dict(ratios))
         converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
                         or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])) for k, v in ratios.items())
+        # a kind whose factor sits at a bound its residuals ask it to pass moves no further: once every kind that has
+        # not settled is such, a further solve changes nothing (the verdict fails a factor that far from 1)
+        bounded = tuple(k for k, v in ratios.items() if k in KINDS and abs(v - 1.0) > tolerance
+                        and _at_bound(factors.get(k, 1.0), v))
+        unsettled = [k for k, v in ratios.items() if abs(v - 1.0) > (MOVING_TOLERANCE if k == MOVING else tolerance)
+                     and not (k == FLOORED and _floor_settled(factors[k], st.kinds[k]))]
         hold = ()
         if FLOORED in ratios and np.isfinite(ratios[FLOORED]):
             f0 = factors[FLOORED]
@@ -214,13 +225,53 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             factors[MOVING] = factors.get("gravity", 1.0) * (moving / moving0) ** 2
         problem = with_variance_factors(problem, {k: v for k, v in factors.items() if k in KINDS + (FLOORED,)},
                                         moving_sigma=moving)
-        if converged:
+        if converged or (unsettled and set(unsettled) <= set(bounded)):
             break
     out_factors = {k: factors.get(k, 1.0) for k in KINDS}
     if FLOORED in factors:
         out_factors[FLOORED] = factors[FLOORED]
-    return VarianceComponents(problem=problem, factors=out_factors, moving_sigma=moving,
-                              solves=n, converged=converged, history=tuple(history), initial=initial)
+    return VarianceComponents(problem=problem, factors=out_factors, moving_sigma=moving, solves=n,
+                              converged=converged, history=tuple(history), initial=initial,
+                              at_bound=() if converged else bounded)
+
+
+def _at_bound(factor, ratio):
+    """Whether a kind's ``factor`` sits at :data:`FACTOR_MIN` or :data:`FACTOR_MAX` with its ``chi2 / redundancy``
+    asking it to pass that bound."""
+    return ((factor >= FACTOR_MAX * (1.0 - 1e-9) and ratio > 1.0)
+            or (factor <= FACTOR_MIN * (1.0 + 1e-9) and ratio < 1.0))
+
+
+@dataclass(frozen=True)
+class Weighted:
+    """The problem a final solve takes, where it starts, and how the variance components that weighted it ended.
+
+    Attributes
+    ----------
+    problem : graph_calib.records.problem.Problem
+        The problem itself without the variance components, else the problem that carries the factors.
+    initial : dict or None
+        None without the variance components, else ``{solver: (R, x)}``, the iteration's last solution, as the
+        ``initial`` of :func:`graph_calib.solvers.orchestration.run_solvers`.
+    components : VarianceComponents or None
+        The iteration (None without the variance components).
+    """
+
+    problem: object
+    initial: object = None
+    components: object = None
+
+    def iteration(self):
+        """The result's ``residuals.variance_iteration`` (data-format.md; None without the variance components):
+        ``solves``, ``converged``, ``last``, each estimated kind's ``chi2 / redundancy`` at the last solve of
+        the iteration (before its last rescale), and ``at_bound``, the kinds that had not settled because their
+        factor sat at a bound (:attr:`VarianceComponents.at_bound`)."""
+        vc = self.components
+        if vc is None:
+            return None
+        last = vc.history[-1] if vc.history else {}
+        return {"solves": int(vc.solves), "converged": bool(vc.converged),
+                "last": {k: float(v) for k, v in last.items()}, "at_bound": list(vc.at_bound)}
 
 
 def weighted_problem(problem, *, options, solver, progress=None):
@@ -242,17 +293,13 @@ def weighted_problem(problem, *, options, solver, progress=None):
 
     Returns
     -------
-    problem : graph_calib.records.problem.Problem
-        ``problem`` itself without the variance components, else the problem that carries the factors.
-    initial : dict or None
-        None without the variance components, else ``{solver: (R, x)}``, the iteration's last solution, as the
-        ``initial`` of :func:`graph_calib.solvers.orchestration.run_solvers`.
+    Weighted
     """
     if not options.variance_components:
-        return problem, None
+        return Weighted(problem=problem)
     vc = estimate_variance_components(problem, options=options, solver=solver,
                                       fixed=tuple(problem.model.options.variance_factors or ()), progress=progress)
-    return vc.problem, {solver: vc.initial}
+    return Weighted(problem=vc.problem, initial={solver: vc.initial}, components=vc)
 
 
 def tested_problem(identified, weighted):
@@ -351,5 +398,5 @@ def factors_estimated(factors):
     return KINDS + tuple(k for k in (MOVING, FLOORED) if k in factors)
 
 
-__all__ = ["VarianceComponents", "estimate_variance_components", "weighted_problem", "with_variance_factors", "tested_problem", "KINDS",
+__all__ = ["VarianceComponents", "Weighted", "estimate_variance_components", "weighted_problem", "with_variance_factors", "tested_problem", "KINDS",
            "MOVING_SIGMA_BOUNDS", "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]

@@ -26,6 +26,9 @@ correlated from reading to reading, which the encoder factors take as independen
 makes that right (docs/model.md measures the sigmas 1.4 times optimistic at the factor the residuals
 ask for), and the verdict says so in words.
 
+Variance components that did not settle within their solves (``residuals.variance_iteration.converged`` false) get
+a note with each kind's last ``chi2 / redundancy``: the final solve's per-kind test still judges the result.
+
 A record without a table whose rests scatter beyond white noise while no sway term models it (the result's
 ``noise.identified.sway_seen_mps2``) gets a note naming the sway and ``--sway-sigma estimate``: a short record's
 residual test does not see it (docs/model.md, "A hand").
@@ -117,6 +120,9 @@ def judge_kinds(result):
             elif vf < 1.0 / VARIANCE_FACTOR_LIMIT:
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} < 1/{VARIANCE_FACTOR_LIMIT:g} on "
                                 f"the {source.get(sensor, 'assumed')} {sensor} noise: that noise is overstated")
+    unsettled = _unsettled_text((result.residuals or {}).get("variance_iteration"))
+    if unsettled:
+        notes.append(unsettled)
     seen = (noise.get("identified") or {}).get(SWAY_SEEN_KEY)
     if seen and not noise.get("sway_mps2"):
         notes.append(_sway_text(seen))
@@ -124,6 +130,20 @@ def judge_kinds(result):
     if staged:
         problems.append(staged)
     return figures, problems, notes
+
+
+def _unsettled_text(iteration):
+    """The verdict's note on variance components that did not settle (``residuals.variance_iteration``; None when
+    they did or were not estimated)."""
+    if not iteration or iteration.get("converged", True):
+        return None
+    last = ", ".join(f"{k} {float(v):.3g}" for k, v in (iteration.get("last") or {}).items())
+    bound = list(iteration.get("at_bound") or ())
+    why = (f" ({', '.join(bound)} at the bound of {'its' if len(bound) == 1 else 'their'} variance factor, the "
+           f"residuals asking for more)" if bound else "")
+    return (f"the variance components did not settle in {iteration.get('solves')} solves{why} (chi2/redundancy at the "
+            f"last: {last}): the factors are the last rescale's, and the sigmas follow them only as far as the "
+            f"residual test of the final solve above shows")
 
 
 def _staged_text(block):

@@ -123,8 +123,8 @@ def test_screen_gives_the_solved_statistic_to_first_order(monkeypatch):
     train = training_record(exp, make_folds(exp, folds=2, by="pairs", rests=rests)[1], rests=rests)
     options = CalibrationOptions(model=ModelOptions(grade="consumer"))
     with reusing_preintegrations():
-        problem, initial = weighted_problem(build_problem(train, options=options), options=options,
-                                            solver="factor-graph")
+        weighted = weighted_problem(build_problem(train, options=options), options=options, solver="factor-graph")
+        problem, initial = weighted.problem, weighted.initial
         factors = problem.model.options.variance_factors
         assert gyro_misfit_gate(problem) and factors["gravity"] <= VARIANCE_FACTOR_LIMIT
         start = initial["factor-graph"]

@@ -10,7 +10,8 @@ from graph_calib.records.problem import build_problem
 from graph_calib.solvers.registry import PRIMARY_SOLVER
 from graph_calib.model.encoder_noise import FLOORED
 from graph_calib.simulation import simulate
-from graph_calib.solvers.variance import FLOOR_FACTOR_MIN, KINDS, estimate_variance_components, weighted_problem
+from graph_calib.calibrate import solve_problem
+from graph_calib.solvers.variance import FACTOR_MAX, FLOOR_FACTOR_MIN, KINDS, estimate_variance_components, weighted_problem
 
 from _shared import make_experiment
 
@@ -23,14 +24,18 @@ def problem():
 
 
 def test_without_variance_components_the_problem_is_unchanged_and_no_start(problem):
-    got, initial = weighted_problem(problem, options=replace(OPTIONS, variance_components=False),
-                                    solver=PRIMARY_SOLVER)
-    assert got is problem and initial is None
+    weighted = weighted_problem(problem, options=replace(OPTIONS, variance_components=False), solver=PRIMARY_SOLVER)
+    assert weighted.problem is problem and weighted.initial is None and weighted.components is None
+    assert weighted.iteration() is None
 
 
 def test_with_them_the_factors_problem_and_the_solvers_last_solution(problem):
-    got, initial = weighted_problem(problem, options=OPTIONS, solver=PRIMARY_SOLVER)
+    weighted = weighted_problem(problem, options=OPTIONS, solver=PRIMARY_SOLVER)
+    got, initial = weighted.problem, weighted.initial
     vc = estimate_variance_components(problem, options=OPTIONS, solver=PRIMARY_SOLVER)
+    assert weighted.iteration() == {"solves": vc.solves, "converged": vc.converged,
+                                    "last": {k: float(v) for k, v in vc.history[-1].items()},
+                                    "at_bound": list(vc.at_bound)}
     assert not problem.model.options.variance_factors
     assert got.model.options.variance_factors == vc.problem.model.options.variance_factors
     assert set(got.model.options.variance_factors) <= set(KINDS) and got.model.options.variance_factors
@@ -64,3 +69,25 @@ def test_the_floor_of_the_unread_direction_is_estimated_and_the_gyro_factor_is_t
     # sigmas then come out optimistic (this was calibrate's rotation factor of 0.56-0.85)
     held = estimate_variance_components(problem, options=options, fixed=(FLOORED,))
     assert FLOORED not in held.factors and held.factors["rotation"] < 0.7, held.factors
+
+
+def test_calibrate_writes_how_the_iteration_ended(table_problem):
+    """The result carries the iteration's end (``residuals.variance_iteration``), the same as the weighting's, and a
+    settled one adds no note to the verdict."""
+    problem, options = table_problem
+    run = solve_problem(problem, options=options, solvers=(PRIMARY_SOLVER,))
+    got = run.results[PRIMARY_SOLVER].residuals["variance_iteration"]
+    assert got == weighted_problem(problem, options=options, solver=PRIMARY_SOLVER).iteration()
+    assert got["converged"] and got["at_bound"] == [] and 1 <= got["solves"] <= 3
+    assert all(abs(v - 1.0) <= 0.05 for v in got["last"].values()), got
+    assert not any("did not settle" in n for n in run.verdict.notes)
+
+
+def test_a_factor_at_its_bound_ends_the_iteration_and_is_named(problem):
+    """The made-up record's table readings contradict its gravity (its mounting is not the one the readings say):
+    the gravity kind's factor runs to its bound with the residuals asking for more, and the iteration stops there
+    instead of spending its solves, not converged, naming the kind."""
+    vc = estimate_variance_components(problem, options=OPTIONS, max_solves=10)
+    assert not vc.converged and vc.solves < 10
+    assert vc.at_bound == ("gravity",) and vc.factors["gravity"] == FACTOR_MAX
+    assert vc.history[-1]["gravity"] > 1.05

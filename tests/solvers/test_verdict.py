@@ -153,3 +153,21 @@ def test_disagreeing_solvers_are_told_which_stopped_at_the_lower_cost():
     v = verdict_of({"factor-graph": with_cost("factor-graph", 761.0), "sqrt-kf": with_cost("sqrt-kf", 761.0)},
                    comparison)
     assert "lower batch cost" not in v.problems[0]
+
+
+def test_variance_components_that_did_not_settle_are_a_note_with_their_figures():
+    """The variance components' iteration (``residuals.variance_iteration``) that ended at its solve limit is said,
+    with each kind's last ``chi2 / redundancy``; one that settled, or none run, adds nothing."""
+    kinds = {"rotation": (1.0, 60.0, 1.0), "gravity": (1.0, 900.0, 1.0)}
+    res = _result(kinds)
+    unsettled = {"solves": 5, "converged": False, "last": {"rotation": 1.31, "gravity": 0.998}}
+    v = verdict_of({"factor-graph": replace(res, residuals={**res.residuals, "variance_iteration": unsettled})})
+    assert v.passed
+    (note,) = v.notes
+    assert "the variance components did not settle in 5 solves" in note and "rotation 1.31, gravity 0.998" in note
+    bounded = {**unsettled, "at_bound": ["rotation"]}
+    (note,) = verdict_of({"factor-graph": replace(res, residuals={**res.residuals, "variance_iteration": bounded})}).notes
+    assert "did not settle in 5 solves (rotation at the bound of its variance factor, the residuals asking for more)" in note
+    settled = {**unsettled, "converged": True}
+    assert verdict_of({"factor-graph": replace(res, residuals={**res.residuals, "variance_iteration": settled})}).notes == ()
+    assert verdict_of({"factor-graph": res}).notes == ()
