@@ -235,6 +235,7 @@ def _terms_json(sn):
                      "sigma": float(np.sqrt(np.mean([c.sigmas[name] ** 2 for c in sn.channels]))),
                      "supported": [ax for ax, c in zip("xyz", sn.channels) if name in c.supported],
                      "channels": [c.values[name] for c in sn.channels]}
+    out["estimator"] = [c.estimator for c in sn.channels]
     out["allan"] = {"tau_s": sn.allan.tau.tolist(), "adev": sn.allan.adev.tolist(),
                     "rel_sigma": sn.allan.rel_sigma.tolist()}
     return out

@@ -103,5 +103,9 @@ def test_simulated_turntable_densities_within_ten_percent(options, gyro_q):
     ni = identify_noise(se.experiment, keyframe_s=1.0)
     assert abs(ni.gyro.density / np.sqrt(nz["gyro_noise"] ** 2 + 2 * gyro_q**2) - 1) < 0.1
     assert abs(ni.accel.density / nz["accel_noise"] - 1) < 0.1
+    # the white rate noise the rotation factors use, also where the quantization dominates each sample (from the
+    # rests' spectra there: graph_calib.noise.spectral)
+    assert abs(ni.gyro.term("white") / nz["gyro_noise"] - 1) < 0.1
+    assert {c.estimator for c in ni.gyro.channels} == ({"whittle"} if gyro_q else {"allan"})
     if options.get("start_in_motion"):
         assert se.experiment.n_samples < 0.15 * 3600 * 100
