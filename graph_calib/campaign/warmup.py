@@ -154,6 +154,7 @@ def _tiny_experiment(folder):
 
 def _run_everything(exp):
     from graph_calib.compensation.calibration import correct_record, prepare, triad_errors
+    from graph_calib.model.options import ModelOptions
     from graph_calib.options import CalibrationOptions
     from graph_calib.records.problem import build_problem
     from graph_calib.sensors.sensor_model import correct, correct_with_jacobian, measure
@@ -161,7 +162,7 @@ def _run_everything(exp):
     from graph_calib.solvers.results import to_result
     from graph_calib.navigation.strapdown import integrate_attitude
 
-    options = CalibrationOptions()
+    options = CalibrationOptions(model=ModelOptions(grade="navigation"))
     problem = build_problem(exp, options=options)       # static detector, alignment (strapdown), preintegration
     for solver in DEFAULT_SOLVERS:                      # the model's kernels and the filter's
         to_result(problem.model, solve(solver, problem, options=options))

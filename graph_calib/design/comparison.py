@@ -43,6 +43,7 @@ from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.simulation.program import nominal_experiment
+from graph_calib.sensors.params import DEFAULT_GRADE
 from graph_calib.stitching import stitch
 from graph_calib.stitching.pieces import sensor_of
 
@@ -163,7 +164,7 @@ class Comparison:
     ratios: dict
     seconds: float
     cpu_seconds: float = float("nan")
-    model: ModelOptions = ModelOptions()
+    model: ModelOptions = ModelOptions(grade=DEFAULT_GRADE)
 
     def durations(self, name, *, soak_s=None):
         proc = next(p for p in self.procedures if p.name == name)
@@ -302,7 +303,7 @@ def _model_errors(results, temps, names, ranges, truths, grid_degC, center_degC,
 
 
 def campaign_point(procedure, length_s, *, grid_degC, truths, center_degC, noise_draws=20, rng,
-                   rate_hz=PREDICTION_RATE_HZ, model=ModelOptions(), progress=None):
+                   rate_hz=PREDICTION_RATE_HZ, model=ModelOptions(grade=DEFAULT_GRADE), progress=None):
     """The predicted stitched accuracy of one campaign of ``procedure`` (:class:`CampaignPoint`).
 
     ``model``: the grade and noise of the compared IMU (:class:`ModelOptions`; ``exclude`` is the procedure's).
@@ -426,7 +427,7 @@ def equal_accuracy(procedures, points, *, soaks_s, metrics=("largest_sigma", "rm
 
 
 def compare(procedures, *, soaks_s=None, range_degC=(-10.0, 50.0), truth=None, draws=40, seed=1, grid_points=121,
-            rate_hz=PREDICTION_RATE_HZ, model=ModelOptions(), progress=None):
+            rate_hz=PREDICTION_RATE_HZ, model=ModelOptions(grade=DEFAULT_GRADE), progress=None):
     """Compare ``procedures`` (the first is the reference) on predicted accuracy against duration.
 
     Parameters

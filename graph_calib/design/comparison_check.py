@@ -49,6 +49,7 @@ from graph_calib import io
 from graph_calib.calibrate import solve_problem
 from graph_calib.design.comparison import AXES, FAMILIES, check_nodes, equal_accuracy_duration
 from graph_calib.model import ModelOptions
+from graph_calib.sensors.params import DEFAULT_GRADE
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
 from graph_calib.simulation.program import nominal_experiment, program_simulation
@@ -79,7 +80,7 @@ def calibrate_realisation(procedure, length_s, r, *, work, seed=1, progress=None
     T = nominal_experiment(base).sensor_temperatures().mean(axis=1)
     exps = procedure.experiments(0.5 * (float(T.min()) + float(T.max())))
     # the structure tests judge a calibration and change no estimate: left out of the check's many calibrations
-    opts = CalibrationOptions(model=ModelOptions(exclude=procedure.exclude), structure_tests=False)
+    opts = CalibrationOptions(model=ModelOptions(grade=DEFAULT_GRADE, exclude=procedure.exclude), structure_tests=False)
     results, ranges, labels = [], [], []
     for k, e in enumerate(exps):
         path = Path(work) / procedure.name / f"L{length_s:g}" / f"r{r}_{e.label}.json"

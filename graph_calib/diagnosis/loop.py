@@ -291,7 +291,10 @@ def diagnose(experiment, *, options=None, diagnosis=DiagnosisOptions(), truth=No
     options = CalibrationOptions() if options is None else options
     with reusing_preintegrations(), threadpool_limits(limits=1, user_api="blas"):    # module docstring
         problem = build_problem(experiment, options=options)
-        options = replace(options, t_ref_degC=problem.model.t_ref_degC)   # one T_ref for every model
+        # one T_ref and one grade for every model (the grade the record's rests chose, when none was named)
+        chosen = problem.model.options
+        options = replace(options, t_ref_degC=problem.model.t_ref_degC,
+                          model=replace(options.model, grade=chosen.grade, grade_choice=dict(chosen.grade_choice)))
         if options.variance_components and problem.model.options.noise_source.get("moving") == MOVING_ESTIMATED:
             # the moving keyframes' gravity sigma as calibrate estimates it (moving_sigma="estimate"); the kinds'
             # factors stay the identified noise's: the rounds' tests measure a misfit against it, which factors

@@ -17,8 +17,11 @@ class ModelOptions:
     ----------
     keyframe_s : float
         Keyframe interval, s.
-    grade : str
-        IMU grade for default priors and noise (``params.GRADES``).
+    grade : str or None
+        IMU grade for the priors (``params.GRADES``).  None: chosen from the record's rests by
+        :func:`graph_calib.records.problem.build_problem` (:func:`graph_calib.records.grade_choice.choose_grade`, as
+        the commands do; its reason in ``grade_choice``); a model made without a record (a design's prediction)
+        takes :data:`graph_calib.sensors.params.DEFAULT_GRADE`.
     extra_effects : tuple of str
         Further effects of ``model.md`` added to the declared model.
     exclude : tuple of str
@@ -56,6 +59,9 @@ class ModelOptions:
     noise_identified : dict
         What the record showed of its noise (JSON-ready figures for the result's ``noise`` block); under
         :data:`SWAY_SEEN_KEY` the sway its rests show when ``sway_sigma`` is None (m/s^2; absent when none is seen).
+    grade_choice : dict
+        How ``build_problem`` chose the grade when none was given
+        (:meth:`graph_calib.records.grade_choice.GradeChoice.to_json`; empty: given).
     variance_factors : dict
         ``{kind: factor}``: each measurement kind's (``rotation``, ``gravity``, ``encoder``) covariance
         multiplied by its factor (variance components, :mod:`graph_calib.solvers.variance`); a kind not
@@ -63,7 +69,7 @@ class ModelOptions:
     """
 
     keyframe_s: float = 1.0
-    grade: str = "navigation"
+    grade: str | None = None
     extra_effects: tuple = ()
     exclude: tuple = ()
     prior_sigma: dict | None = None
@@ -79,3 +85,4 @@ class ModelOptions:
     noise_source: dict = field(default_factory=dict)
     noise_identified: dict = field(default_factory=dict)
     variance_factors: dict = field(default_factory=dict)
+    grade_choice: dict = field(default_factory=dict)

@@ -16,10 +16,11 @@ from graph_calib.noise import find_rests, identify_noise, table_noise
 from graph_calib.noise.identify import ENCODER_NOISE_FLOOR, MIN_DWELL_DOF, TERMS
 from graph_calib.noise.rests import segment_static_parts, segment_thresholds
 from graph_calib.options import CalibrationOptions
-from graph_calib.sensors.params import grade
+from graph_calib.sensors.params import DEFAULT_GRADE, grade
 from graph_calib.navigation.alignment import Alignment, alignment
 from graph_calib.errors import InputError
 from graph_calib.records.plausibility import check_record
+from graph_calib.records.grade_choice import MIN_STATIC_S, choose_grade
 from graph_calib.navigation.static_detection import detect_static
 
 
@@ -103,6 +104,8 @@ def build_problem(experiment, *, options=CalibrationOptions(), check=True):
         if model_options.moving_sigma is None:
             model_options = replace(model_options, moving_sigma=1.0)
     identified = identify_noise(experiment, keyframe_s=model_options.keyframe_s, rests=find_rests(experiment))
+    if model_options.grade is None:
+        model_options = _with_grade_chosen(experiment, identified, model_options)
     model_options = noise_options(identified, model_options)
     if isinstance(model_options.moving_sigma, str):
         if model_options.moving_sigma != "estimate":
@@ -239,6 +242,22 @@ def _terms_json(sn):
     out["allan"] = {"tau_s": sn.allan.tau.tolist(), "adev": sn.allan.adev.tolist(),
                     "rel_sigma": sn.allan.rel_sigma.tolist()}
     return out
+
+
+def _with_grade_chosen(experiment, identified, model_options):
+    """``model_options`` with the grade the record's rests choose (no grade given: the Python API's default), and how
+    it was chosen in ``grade_choice``.
+
+    As the commands choose it (:func:`graph_calib.records.grade_choice.choose_grade`), except that a record whose
+    rests cannot tell (none of 2 s, or noise-free simulated data) takes :data:`graph_calib.sensors.params.DEFAULT_GRADE`
+    with that said in ``grade_choice`` (the result's), where the commands refuse it naming ``--grade``.
+    """
+    try:
+        choice = choose_grade(experiment, identification=identified, keyframe_s=model_options.keyframe_s).to_json()
+    except InputError:
+        choice = {"grade": DEFAULT_GRADE, "reason": f"{DEFAULT_GRADE}, the default: the record has no rest of "
+                  f"{MIN_STATIC_S:g} s with its noise to choose the grade from (ModelOptions(grade=...) names it)"}
+    return replace(model_options, grade=choice["grade"], grade_choice=choice)
 
 
 def noise_options(identified, model_options):

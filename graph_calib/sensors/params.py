@@ -219,9 +219,13 @@ GRADES = {
 }
 
 
+#: The grade of a model made without a record to choose one from (a design's prediction).
+DEFAULT_GRADE = "navigation"
+
+
 def grade(name):
-    """The :class:`Grade` called ``name``; ``KeyError`` listing the known ones."""
+    """The :class:`Grade` called ``name`` (None: :data:`DEFAULT_GRADE`); ``KeyError`` listing the known ones."""
     try:
-        return GRADES[name]
+        return GRADES[DEFAULT_GRADE if name is None else name]
     except KeyError:
         raise KeyError(f"unknown IMU grade {name!r}; known: {', '.join(GRADES)}") from None

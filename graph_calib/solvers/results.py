@@ -143,6 +143,8 @@ def to_result(model, output, *, extra=None):
     ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
           "prior_dominated": prior_dominated(model, output),
           "noise": noise_block(model)}
+    if model.options.grade_choice:     # chosen from the record's rests (no grade given)
+        ex["grade_choice"] = dict(model.options.grade_choice)
     if model.options.prior_mean:    # only then (a prior mean other than zero: the campaign's joint curvature)
         ex["prior_means"] = {n: np.atleast_1d(np.asarray(v, dtype=float)).tolist()
                              for n, v in model.options.prior_mean.items() if n in model.layout}

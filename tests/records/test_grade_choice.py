@@ -100,3 +100,36 @@ def test_hand_held_record_without_a_rest_is_refused_not_crashed(tmp_path, capsys
     assert "--grade" in err and "no rest" in err
     assert not (tmp_path / "cal").exists()
 
+
+
+def test_the_python_api_chooses_the_grade_as_the_commands_do():
+    """No grade named in ``ModelOptions`` (the API's default): ``build_problem`` lets the rests choose the priors'
+    grade, with its reason in the result (``grade_choice``), instead of giving a MEMS unit navigation priors (on the
+    measured Xsens session those ran both variance factors to their bound of 1e4)."""
+    from graph_calib.calibrate import CalibrationOptions, build_problem
+    from graph_calib.model import ModelOptions
+    from graph_calib.solvers.results import to_result
+    from graph_calib.solvers.registry import solve
+
+    xs = require_real(REAL_DATA / "imu_tk_xsens")
+    exp = import_xsens(xs / "xsens_acc.mat", xs / "xsens_gyro.mat")
+    problem = build_problem(exp, options=CalibrationOptions())
+    assert problem.model.options.grade == "consumer"
+    assert problem.model.options.grade_choice == choose_grade(exp).to_json()
+    result = to_result(problem.model, solve("factor-graph", problem, options=CalibrationOptions()))
+    assert result.extra["grade"] == "consumer" and result.extra["grade_choice"]["grade"] == "consumer"
+    # a grade named is used as given, and no choice is recorded
+    named = build_problem(exp, options=CalibrationOptions(model=ModelOptions(grade="tactical")))
+    assert named.model.options.grade == "tactical" and named.model.options.grade_choice == {}
+
+
+def test_the_python_api_says_so_where_the_rests_cannot_tell():
+    """A noise-free simulated record shows no rest with its noise: the API takes the default grade and says so in
+    the choice (the commands refuse it, exit 2 naming --grade)."""
+    from graph_calib.calibrate import CalibrationOptions, build_problem
+    exp = simulate("nav-subrange-short", rng=np.random.default_rng(1), hours=0.05, noise=False).run()[0].experiment
+    with pytest.raises(Exception, match="no rest"):
+        choose_grade(exp)
+    options = build_problem(exp, options=CalibrationOptions()).model.options
+    assert options.grade == "navigation"
+    assert options.grade_choice["reason"].startswith("navigation, the default: the record has no rest of 2 s")
