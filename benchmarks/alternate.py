@@ -9,14 +9,20 @@ account of the reaped child and its descendants (``resource.RUSAGE_CHILDREN``: a
 process included once it has been waited for). Output is discarded; a command that needs a pipe or a redirection is
 given as ``sh -c '...'``. The figures in docs/performance.md that compare two checkouts were taken this way, each
 command run with ``env PYTHONPATH=CHECKOUT``.
+
+Run it from outside any checkout (``cd /tmp``): ``python -m graph_calib.cli`` puts the working folder first on the
+module path, ahead of ``PYTHONPATH``, so from a checkout's own folder both commands run that checkout's code and the
+ratio compares it with itself.  The script refuses to start there when a command sets ``PYTHONPATH``.
 """
 
 import argparse
+import os
 import resource
 import shlex
 import statistics
 import subprocess
 import time
+from pathlib import Path
 
 
 def _run(argv):
@@ -41,6 +47,9 @@ def main(argv=None):
     ap.add_argument("--warmup", type=int, default=1, help="pairs run first and not counted (default 1)")
     args = ap.parse_args(argv)
     a, b = shlex.split(args.a), shlex.split(args.b)
+    if (Path(os.getcwd()) / "graph_calib").is_dir() and "PYTHONPATH=" in f"{args.a} {args.b}":
+        ap.error("run from outside the checkout (cd /tmp): here `python -m` imports this folder's graph_calib "
+                 "whatever PYTHONPATH names, and both commands would run the same code")
     for _ in range(args.warmup):
         _run(a), _run(b)
     rows = {"A": [], "B": []}
