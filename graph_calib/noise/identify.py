@@ -17,8 +17,8 @@ coefficient is at least :data:`SUPPORT_SIGMAS` of its own standard deviations (t
 as upper bounds: value plus two sigma).  The standard deviations treat the ``tau`` points as
 independent, which the overlapping estimator's neighbours are not: read them as indicative.
 
-Where a channel's Allan fit supports a quantization (a ring-laser gyro's per-sample scatter) and no slower term,
-``Q`` and ``N`` are taken instead from the Whittle likelihood of the rests' spectra (:mod:`graph_calib.noise.spectral`): the Allan
+Where a channel's Allan fit supports a quantization that makes most of its per-sample scatter (``2 Q^2 > N^2 tau0``:
+a ring-laser gyro's) and no slower term, ``Q`` and ``N`` are taken instead from the Whittle likelihood of the rests' spectra (:mod:`graph_calib.noise.spectral`): the Allan
 variance shows ``N`` only beyond ``sqrt(3) Q / N``, longer than most rests, where the fit reads it from the
 curvature of a quantization-dominated curve and came out 7 % low on average.
 
@@ -256,9 +256,11 @@ def sensor_noise(increments, rests, *, tau0, keyframe_s, sensor):
     T = float(keyframe_s)
     for ch in range(allan.adev.shape[1]):
         terms, cov, c = fit_terms(allan, ch)
-        if "quantization" in terms.supported and not set(terms.supported) & set(SLOW_TERMS):
-            # the per-sample scatter is quantization: the white noise from the rests' spectra instead of the
-            # Allan curve's curvature (graph_calib.noise.spectral), whose model has no slower term
+        if ("quantization" in terms.supported and not set(terms.supported) & set(SLOW_TERMS)
+                and 2.0 * c[0] > tau0 * c[1]):
+            # the per-sample scatter is mostly quantization (2 Q^2 > N^2 tau0): the white noise from the rests'
+            # spectra instead of the Allan curve's curvature (graph_calib.noise.spectral, whose model has no slower
+            # term)
             terms, cov, c = _with_spectral_white(terms, cov, c, increments[:, ch], rests, tau0=tau0)
         channels.append(terms)
         g = np.zeros(len(TERMS))
