@@ -239,8 +239,11 @@ def allan_figure(noise):
         tau = np.asarray(d["allan"]["tau_s"])
         adev = np.asarray(d["allan"]["adev"])
         tt = np.geomspace(tau.min(), tau.max(), 100)
+        estimators = d.get("estimator") or ["allan"] * 3
         for c, (name, color) in enumerate(zip("xyz", ("#c0392b", "#27ae60", "#1f5fa8"))):
-            ax.loglog(tau, adev[:, c], "o", ms=3, color=color, label=f"{name}")
+            # a channel whose Q and N came from the rests' spectra (graph_calib.noise.spectral) says so
+            spectral = " (Q, N from the spectra)" if estimators[c] == "whittle" else ""
+            ax.loglog(tau, adev[:, c], "o", ms=3, color=color, label=f"{name}{spectral}")
             var = sum(k * d[t]["channels"][c] ** 2 * tt**p for t, p, k in _ALLAN_TERMS)
             ax.loglog(tt, np.sqrt(var), "-", lw=1, color=color)
         for t, p, k in _ALLAN_TERMS:
@@ -273,7 +276,10 @@ def _noise_section(diag, fig):
     f = allan_figure(noise)
     if f is not None:
         items.append(fig(f, "Overlapping Allan deviation of each channel over every rest (points), the fitted "
-                            "IEEE 952/1293 terms per channel (lines) and each term the data support (dashed).",
+                            "IEEE 952/1293 terms per channel (lines) and each term the data support (dashed); a "
+                            "channel marked 'Q, N from the spectra' has its quantization and white noise from the "
+                            "Whittle likelihood of the rests' spectra, where the quantization makes most of its "
+                            "per-sample scatter (docs/model.md, \"Noise from the record\").",
                          "allan"))
     return html.section("Noise identified from the record", *items, anchor="noise")
 

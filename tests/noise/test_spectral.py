@@ -84,3 +84,25 @@ def test_a_rest_that_is_not_at_rest_is_left_out():
     pooled = spectral._fit(*(lambda p: (p.I, p.v, p.u))(rest_periodograms(x, rests)), inflation=1.0, tau0=TAU0,
                            start=None)
     assert pooled.white_var > 2 * N**2
+
+
+def test_the_report_s_allan_plot_marks_the_channels_from_the_spectra():
+    """The diagnosis report's Allan plot (graph_calib.reports.diagnosis_report.allan_figure) labels each channel whose
+    Q and N came from the spectra, and draws the model of the terms the result holds."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from graph_calib.noise import identify_noise
+    from graph_calib.records.problem import noise_options
+    from graph_calib.model import ModelOptions
+    from graph_calib.reports.diagnosis_report import allan_figure
+    from graph_calib.simulation import simulate
+
+    exp = simulate("nav-subrange-short", rng=np.random.default_rng(2), hours=0.1,
+                   gyro_quantization_arcsec=0.5).run()[0].experiment
+    figures = noise_options(identify_noise(exp, keyframe_s=1.0), ModelOptions(grade="navigation")).noise_identified
+    assert figures["gyro"]["estimator"] == ["whittle"] * 3 and figures["accel"]["estimator"] == ["allan"] * 3
+    f = allan_figure({"identified": figures})
+    gyro_ax, accel_ax = f.axes
+    assert all("Q, N from the spectra" in t.get_text() for t in gyro_ax.get_legend().get_texts())
+    assert not any("spectra" in t.get_text() for t in accel_ax.get_legend().get_texts())
