@@ -232,6 +232,11 @@ def fit_terms(allan, channel):
         except np.linalg.LinAlgError:
             ca = np.zeros((int(active.sum()),) * 2)
         cov[np.ix_(active, active)] = ca
+    return _channel_terms(c, cov), cov, c
+
+
+def _channel_terms(c, cov, *, estimator="allan"):
+    """The :class:`ChannelTerms` of squared coefficients ``c`` (``Q^2, N^2, ...``) with covariance ``cov``."""
     sd2 = np.sqrt(np.diag(cov))
     values, sigmas, supported = {}, {}, []
     for i, (name, _, _) in enumerate(TERMS):
@@ -241,7 +246,7 @@ def fit_terms(allan, channel):
         sigmas[name] = float(sd2[i] / (2.0 * v)) if v > 0 else float(np.sqrt(2.0 * sd2[i]))
         if c[i] > 0 and c[i] >= SUPPORT_SIGMAS * sd2[i]:
             supported.append(name)
-    return ChannelTerms(values=values, sigmas=sigmas, supported=tuple(supported)), cov, c
+    return ChannelTerms(values=values, sigmas=sigmas, supported=tuple(supported), estimator=estimator)
 
 
 def sensor_noise(increments, rests, *, tau0, keyframe_s, sensor):
@@ -287,17 +292,7 @@ def _with_spectral_white(terms, cov, c, increments, rests, *, tau0):
     cov[:, :2] = 0.0
     cov[0, 0], cov[1, 1] = w.cov[1, 1], w.cov[0, 0]
     cov[0, 1] = cov[1, 0] = w.cov[0, 1]
-    values, sigmas = dict(terms.values), dict(terms.sigmas)
-    supported = [t for t in terms.supported if t not in ("quantization", "white")]
-    for i, name in enumerate(("quantization", "white")):
-        v = float(np.sqrt(c[i]))
-        sd = float(np.sqrt(cov[i, i]))
-        values[name], sigmas[name] = v, (sd / (2.0 * v) if v > 0 else float(np.sqrt(2.0 * sd)))
-        if c[i] >= SUPPORT_SIGMAS * sd:
-            supported.append(name)
-    order = [name for name, _, _ in TERMS]
-    return (ChannelTerms(values=values, sigmas=sigmas, supported=tuple(sorted(supported, key=order.index)),
-                         estimator="whittle"), cov, c)
+    return _channel_terms(c, cov, estimator="whittle"), cov, c
 
 
 def table_noise(scatter):

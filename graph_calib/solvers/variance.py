@@ -179,14 +179,12 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
                    if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY}
         ratios = {k: f.chi2_per_redundancy for k, f in figures.items() if f.chi2 > 0}
         history.append(dict(ratios))
-        converged = all(abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
-                        or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])) for k, v in ratios.items())
+        unsettled = [k for k, v in ratios.items() if not (abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
+                                                          or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])))]
+        converged = not unsettled
         # a kind whose factor sits at a bound its residuals ask it to pass moves no further: once every kind that has
         # not settled is such, a further solve changes nothing (the verdict fails a factor that far from 1)
-        bounded = tuple(k for k, v in ratios.items() if k in KINDS and abs(v - 1.0) > tolerance
-                        and _at_bound(factors.get(k, 1.0), v))
-        unsettled = [k for k, v in ratios.items() if abs(v - 1.0) > (MOVING_TOLERANCE if k == MOVING else tolerance)
-                     and not (k == FLOORED and _floor_settled(factors[k], st.kinds[k]))]
+        bounded = tuple(k for k in unsettled if k in KINDS and _at_bound(factors.get(k, 1.0), ratios[k]))
         hold = ()
         if FLOORED in ratios and np.isfinite(ratios[FLOORED]):
             f0 = factors[FLOORED]
@@ -235,11 +233,11 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
                               at_bound=() if converged else bounded)
 
 
-def _at_bound(factor, ratio):
-    """Whether a kind's ``factor`` sits at :data:`FACTOR_MIN` or :data:`FACTOR_MAX` with its ``chi2 / redundancy``
-    asking it to pass that bound."""
+def _at_bound(factor, ratio, *, low=FACTOR_MIN):
+    """Whether a kind's ``factor`` sits at its lower bound ``low`` or at :data:`FACTOR_MAX` with its
+    ``chi2 / redundancy`` asking it to pass that bound."""
     return ((factor >= FACTOR_MAX * (1.0 - 1e-9) and ratio > 1.0)
-            or (factor <= FACTOR_MIN * (1.0 + 1e-9) and ratio < 1.0))
+            or (factor <= low * (1.0 + 1e-9) and ratio < 1.0))
 
 
 @dataclass(frozen=True)
@@ -388,8 +386,7 @@ def _floor_settled(factor, fit):
     share = float(fit.share_redundancy or 0.0) / fit.redundancy if fit.redundancy > 0 else 0.0
     if share < FLOOR_SHARE_SETTLED and abs(ratio - 1.0) <= TOLERANCE:
         return True
-    return (factor <= FLOOR_FACTOR_MIN * (1.0 + 1e-9) and ratio < 1.0) or (factor >= FACTOR_MAX * (1.0 - 1e-9)
-                                                                            and ratio > 1.0)
+    return _at_bound(factor, ratio, low=FLOOR_FACTOR_MIN)
 
 
 def factors_estimated(factors):
