@@ -11,6 +11,7 @@ it).  Prints per seed and pooled the held-out transition rms and |f| spread of r
 (``--diagnose``: the loop's calibration).
 
     PYTHONPATH=$PWD python scripts/handheld_vs_imucal.py --seeds 1 2 3 [--diagnose] [--guess] [--sway-sigma none]
+        [--still-rests] [--by faces]
 """
 
 from __future__ import annotations
@@ -38,10 +39,11 @@ from graph_calib.simulation.scenarios import SHORT_REST_FERRARIS, simulate  # no
 CONSUMER = CalibrationOptions(model=ModelOptions(grade="consumer", moving_sigma="estimate", sway_sigma="estimate"))
 
 
-def product_options(*, guess=False, sway="estimate"):
+def product_options(*, guess=False, sway="estimate", still=False):
     """The product's options: :data:`CONSUMER`, the moving sigma left at its guess (``guess``), ``sway`` (a sigma in
-    m/s^2, ``"estimate"`` or None: no sway term)."""
-    model = ModelOptions(grade="consumer", moving_sigma=None if guess else "estimate", sway_sigma=sway)
+    m/s^2, ``"estimate"`` or None: no sway term), the rests still (``still``: ``--still-rests``)."""
+    model = ModelOptions(grade="consumer", moving_sigma=None if guess else "estimate", sway_sigma=sway,
+                         still_at_rest=still)
     return CalibrationOptions(model=model)
 
 
@@ -119,12 +121,13 @@ def main(argv=None):
     p.add_argument("--guess", action="store_true", help="the moving keyframes' gravity sigma left at its 1 m/s^2 guess")
     p.add_argument("--sway-sigma", type=sway_option, default="estimate",
                    help="the product's sway sigma: 'estimate' (default), 'none' or m/s^2")
+    p.add_argument("--still-rests", action="store_true", help="the product's rests still (ModelOptions.still_at_rest)")
     args = p.parse_args(argv)
     every = {name: [] for name in NAMES}
     print(f"{'seed':>4} {'fold':>4} {'transitions rms [deg]':>44} {'|f| spread [m/s^2]':>52}")
     print(f"{'':>4} {'':>4} " + " ".join(f"{n:>10}" for n in NAMES) + " " + " ".join(f"{n:>12}" for n in NAMES))
     for seed in args.seeds:
-        options = product_options(guess=args.guess, sway=args.sway_sigma)
+        options = product_options(guess=args.guess, sway=args.sway_sigma, still=args.still_rests)
         fit = diagnose_fit if args.diagnose else product_fit
         res = compare(seed, by=args.by, fit=lambda train: fit(train, options=options))
         for j in range(len(res["raw"])):

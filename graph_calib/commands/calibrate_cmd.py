@@ -10,7 +10,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
-from graph_calib.commands.model_options import add_moving, add_sway, moving_of, sway_of
+from graph_calib.commands.model_options import add_moving, add_still, add_sway, moving_of, still_of, sway_of
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
@@ -35,6 +35,7 @@ def add_arguments(p):
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
     add_sway(p)
     add_moving(p)
+    add_still(p)
     p.add_argument("--residuals", action="store_true",
                    help="also write each solver's residual time series, SOLVER.residuals.h5 (docs/data-format.md)")
 
@@ -57,7 +58,7 @@ def options_from_args(args, *, grade=None):
         raise InputError("must be positive", dataset="--keyframe")
     model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade or "navigation",
                          extra_effects=tuple(args.effect), sway_sigma=sway_of(args),
-                         moving_sigma=moving_of(args))
+                         moving_sigma=moving_of(args), still_at_rest=still_of(args))
     return CalibrationOptions(model=model, graph=GraphOptions(robust=args.robust), t_ref_degC=args.t_ref)
 
 

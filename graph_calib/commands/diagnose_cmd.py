@@ -14,7 +14,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from graph_calib.commands.model_options import add_moving, add_sway, moving_of, sway_of
+from graph_calib.commands.model_options import add_moving, add_still, add_sway, moving_of, still_of, sway_of
 from graph_calib.commands.paths import make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
@@ -27,6 +27,7 @@ def add_arguments(p):
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_sway(p)
     add_moving(p)
+    add_still(p)
     p.add_argument("--holdout", action="store_true",
                    help="without a table, adopt an effect only when it does not make the held-out figures (two "
                         "folds of the rests) worse (docs/diagnosis.md)")
@@ -73,7 +74,8 @@ def _options(args, *, grade="navigation"):
         graph = GraphOptions(max_iterations=args.max_iterations)
     calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade,
                                                  extra_effects=tuple(args.effect), sway_sigma=sway_of(args),
-                                                 moving_sigma=moving_of(args)),
+                                                 moving_sigma=moving_of(args),
+                                                 still_at_rest=still_of(args)),
                                              graph=graph, t_ref_degC=args.t_ref)
     solvers = registry.primary_first(registry.parse_choice(args.solver)[0])
     diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers,

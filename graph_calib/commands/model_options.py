@@ -19,6 +19,19 @@ def sway_of(args):
     return _estimate_or_mps2(getattr(args, "sway_sigma", None), "--sway-sigma")
 
 
+def add_still(parser):
+    """``--still-rests``: a unit at rest does not turn, ``ModelOptions.still_at_rest``."""
+    parser.add_argument("--still-rests", action="store_true",
+                        help="the unit does not turn while it rests (it sits on a surface): each rest's gyro "
+                             "integral then measures the gyro biases against the Earth's turn, as a Ferraris "
+                             "calibration's rests do (default: the rests constrain the attitudes through gravity only)")
+
+
+def still_of(args):
+    """``ModelOptions.still_at_rest`` from ``--still-rests``."""
+    return bool(getattr(args, "still_rests", False))
+
+
 def add_moving(parser):
     """``--moving-sigma estimate|MPS2``: the gravity sigma of keyframes in motion, ``ModelOptions.moving_sigma``."""
     parser.add_argument("--moving-sigma", default=None, metavar="estimate|MPS2",
@@ -75,4 +88,4 @@ def noise_of(args):
     return out
 
 
-__all__ = ["add_sway", "sway_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise", "noise_of"]
+__all__ = ["add_sway", "sway_of", "add_still", "still_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise", "noise_of"]

@@ -48,6 +48,8 @@ def factor_residuals(model, R, x, *, pre=None, factors=None):
     out = {}
     for k in FACTOR_KINDS:
         kind, res, t = k.name, factors[k.name], k.times(model)
+        if res.key.size == 0 and k.optional:
+            continue                     # a kind this model does not have (no still factors asked for)
         w = res.whitened()
         d = {"t": np.asarray(t, dtype=float), "key": res.key.copy(), "r": res.r.copy(), "w": w}
         if kind == "gravity":
@@ -160,7 +162,8 @@ def regression_tests(series, ctx, *, key, static=None):
 #: reading's noise (graph_calib.model.encoder_noise): body x, y, z where the declared isotropic noise holds
 #: (readings in motion), the scatter's axes ordered and signed nearest them in a static dwell.
 _COMPONENTS = {"rotation": "xyz (body)", "gravity": "ENU", "gravity_body": "xyz (body)",
-               "encoder": "noise axes nearest body xyz"}
+               "encoder": "noise axes nearest body xyz",
+               "still": "xyz (body), the rest's gyro integral against the Earth's turn"}
 
 
 def residual_statistics(stage, *, top=5, lags=10, context=None):

@@ -2,7 +2,7 @@
 
 :class:`CalibrationModel` is a thin object over :class:`graph_calib.model.record.PreparedRecord`
 (the data), the sensor terms of its layout, the preintegration and the factors: every solver sees
-the problem only through :meth:`CalibrationModel.preintegrate`, the three factor methods and the
+the problem only through :meth:`CalibrationModel.preintegrate`, the factor methods (rotation, gravity, encoder and, on request, still) and the
 two prior residuals, so that the equations are written once.
 """
 
@@ -26,6 +26,11 @@ from graph_calib.navigation.rotations import quat_to_dcm
 #: Prior sigma of the first attitude when valid table readings give it (faceplate
 #: attitude through the nominal mounting; the mounting error is estimated), rad.
 TABLE_ALIGNMENT_SIGMA = 0.05
+
+#: A ``still`` factor's sigma over its keyframe, as a fraction of the gyro's noise over it
+#: (:meth:`CalibrationModel.still_factors`): small enough that the rest's gyro integral is judged by the gyro's
+#: noise alone (one per cent of the pair's variance), large enough to keep the fused rows well conditioned.
+STILL_FRACTION = 0.1
 
 #: Gyrocompass heading sigma (rad, :func:`gyrocompass_attitude_sigma`) from which on the Earth rate is
 #: taken not to resolve the heading: the linearised covariance is then not trusted along a heading
@@ -137,6 +142,7 @@ class CalibrationModel:
         self.layout = Layout.declared(extra=with_lower_orders(options.extra_effects), exclude=exclude)
         self.initial_attitude_sigma = self._initial_attitude_sigma(record.experiment)
         self.terms = SensorTerms.of(self.layout)
+        self.still_keys = self._still_keys()
 
     # -- the record's figures every caller needs ----------------------------
 
@@ -363,6 +369,27 @@ class CalibrationModel:
 
     # -- factors --------------------------------------------------------------
 
+    def _still_keys(self):
+        """The keyframes with a ``still`` factor (:attr:`ModelOptions.still_at_rest`): static ones with a rotation
+        factor, where the rests are known."""
+        rec = self.record
+        if not self.options.still_at_rest or not rec.static_known:
+            return np.zeros(0, dtype=np.int64)
+        k = np.asarray(rec.rotation_keys, dtype=np.int64)
+        return k[rec.static_key[k]]
+
+    def still_factors(self, R, preint, x):
+        """:func:`graph_calib.model.factors.still_factors` of this model's rests.
+
+        Each factor's sigma is :data:`STILL_FRACTION` of the gyro's own noise over the keyframe (a unit at rest
+        turns by less than its gyros can tell), with a ring-laser gyro's quantization at the keyframe's two ends
+        added (the keyframe attitudes are the indicated ones); the kind's variance factor (``still``) scales it.
+        """
+        k = self.still_keys
+        T = self.record.T_key[k]
+        sigma = np.sqrt((STILL_FRACTION * self.noise.gyro) ** 2 * T + 2.0 * self.noise.gyro_quantization ** 2)
+        return self.noise.scaled("still", factors.still_factors(self.record, R, preint, x, keys=k, sigma=sigma))
+
     def rotation_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.rotation_factors` of this model."""
         return self.noise.scaled("rotation", factors.rotation_factors(self.record, R, preint, x, noise=self.noise))
@@ -379,5 +406,5 @@ class CalibrationModel:
         return factors.encoder_factors(self.record, R, preint, x, layout=self.layout, noise=self.noise)
 
 
-__all__ = ["CalibrationModel", "reusing_preintegrations", "REUSED_PREINTEGRATIONS", "gyrocompass_attitude_sigma",
+__all__ = ["CalibrationModel", "STILL_FRACTION", "reusing_preintegrations", "REUSED_PREINTEGRATIONS", "gyrocompass_attitude_sigma",
            "TABLE_ALIGNMENT_SIGMA", "HEADING_UNRESOLVED_SIGMA"]

@@ -57,6 +57,14 @@ Encoder measurement
     :mod:`graph_calib.model.shared_gyro_noise` makes independent in the residual list (each function here
     gives its kind on its own).
 
+Still measurement (a rest; records without a table by default, ``ModelOptions.still_at_rest``)
+    Over a static keyframe the unit does not turn in the level frame: ``R_{k+1} = R_k``, residual
+    ``Log(R_k^T R_{k+1})``, sigma a tenth of the gyro's noise over the keyframe (a unit at rest turns by less
+    than its gyros can tell; the kind's variance factor scales it).  With the keyframe's rotation factor it
+    makes the rest's gyro integral a measurement of the gyro biases against the Earth's turn (a zero-rate
+    update); :mod:`graph_calib.model.still_fusion` gives the pair to the solvers as one process factor and one
+    measurement of ``R_k``.
+
 Jacobians are with respect to the right perturbation of ``R_k``
 (``R_k Exp(delta)``) and the calibration vector; the preintegration carries its
 first-order Jacobian in ``x``, so a small change ``dx`` from the linearisation
@@ -183,6 +191,46 @@ def rotation_factors(record, R, preint, x, *, noise):
     H_x = -Jl_inv @ preint.J_dR[k]
     sigma = noise.gyro * np.sqrt(record.T_key[k])[:, None] * np.ones(3)
     return Residuals(r=r, key=k.copy(), H_R=H_prev, H_R_next=H_next, H_x=H_x, sigma=sigma)
+
+def still_factors(record, R, preint, x, *, keys, sigma):
+    """A body at rest does not turn in the level frame: ``R_{k+1} = R_k`` over a static keyframe.
+
+    Over keyframe ``k`` of a rest the unit sits on a surface (or in a hand) fixed to the Earth, as the level
+    frame is, so its attitude at the keyframe's end is the one at its start.  Residual ``Log(R_k^T R_{k+1})``,
+    rad, with one sigma ``sigma`` per axis: how far a unit at rest may turn over the keyframe (a hand's tremor;
+    the keyframe attitudes are the gyros' indicated ones, so a ring-laser gyro's quantization at the two ends is
+    in it too, :meth:`graph_calib.model.CalibrationModel.still_factors`).  Beside the keyframe's rotation factor
+    it says that the gyros' integral over the rest is the Earth's turn seen in the body: what a zero-rate update
+    does in a filter, and what a Ferraris calibration's rests give its gyro biases.
+
+    Parameters
+    ----------
+    record : graph_calib.model.record.PreparedRecord
+        Unused (the factor reads the attitudes alone); in the signature every factor has.
+    R : ndarray, shape (K+1, 3, 3)
+        Keyframe attitudes ``C_nb``.
+    preint : graph_calib.model.preintegration.Preintegrated
+        Unused, as ``record``.
+    x : ndarray, shape (P,)
+        The calibration (its size only: the factor does not depend on it).
+    keys : ndarray of int, shape (F,)
+        The static keyframes with a rotation factor (``record.rotation_keys``).
+    sigma : ndarray, shape (F,)
+        One sigma per factor, rad.
+
+    Returns
+    -------
+    Residuals
+        ``H_x`` zero; ``H_R_next`` the Jacobian in ``R_{k+1}``.
+    """
+    k = np.asarray(keys, dtype=np.int64)
+    r = log_so3(np.swapaxes(R[k], 1, 2) @ R[k + 1])
+    H_next = right_jacobian_inv(r)
+    H_prev = -right_jacobian_inv(-r)
+    H_x = np.zeros((k.size, 3, np.asarray(x).size))
+    return Residuals(r=r, key=k.copy(), H_R=H_prev, H_R_next=H_next, H_x=H_x,
+                     sigma=np.asarray(sigma, dtype=float)[:, None] * np.ones(3))
+
 
 def gravity_factors(record, R, preint, x, *, layout, noise, moving_sigma=None, sway_sigma=None):
     """Gravity (reaction-force) mismatch of every keyframe, m/s^2; ``R`` (K+1 or K, 3, 3).
@@ -441,5 +489,5 @@ def sum_by_key(target, key, vals):
     target[key[starts]] += np.add.reduceat(vals, starts, axis=0)
 
 
-__all__ = ["Noise", "Residuals", "PriorResidual", "rotation_factors", "gravity_factors", "encoder_factors",
+__all__ = ["Noise", "Residuals", "PriorResidual", "rotation_factors", "still_factors", "gravity_factors", "encoder_factors",
            "EncoderVariance", "encoder_variance", "encoder_columns", "attitude_prior", "calibration_prior", "sum_by_key"]

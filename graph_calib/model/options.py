@@ -51,6 +51,11 @@ class ModelOptions:
         keyframe: one sigma (m/s^2) added in quadrature to every gravity measurement.  None: zero;
         ``"estimate"``: :func:`graph_calib.records.problem.build_problem` estimates it from the static
         intervals (:func:`graph_calib.records.problem.sway_from_static`, docs/model.md).
+    still_at_rest : bool
+        Whether a static keyframe's attitude at its end is its start's (the ``still`` factors,
+        :func:`graph_calib.model.factors.still_factors`: the rests' gyro integrals then inform the gyro biases, as a
+        Ferraris calibration's rests do).  Where the rests are known (a static mask); off by default (docs/model.md,
+        "A unit at rest does not turn").
     n_newton : int
         Newton steps of the sensor-model inversion.
     noise_source : dict
@@ -81,6 +86,7 @@ class ModelOptions:
     initial_attitude_sigma: float | None = None
     moving_sigma: float | str | None = None
     sway_sigma: float | str | None = None
+    still_at_rest: bool = False
     n_newton: int = 2
     noise_source: dict = field(default_factory=dict)
     noise_identified: dict = field(default_factory=dict)

@@ -165,7 +165,8 @@ class PreparedRecord:
         ``reading_scatter`` the static dwells' scatter and ``reading_axes_b`` the table's axes when known
         (:mod:`graph_calib.model.encoder_noise`, :meth:`encoder_noise_frame`).
     static_key : ndarray of bool, shape (K,)
-        Whether each keyframe is static.
+        Whether each keyframe is static; ``static_known`` whether a static mask said so (without one every
+        keyframe counts as static).
     segment_bounds : ndarray of int, shape (S, 2)
         ``(start, stop)`` samples of each segment (``/imu/segment``; one for a record without it);
         ``segment_keys`` (S,) the first keyframe of each (keyframes never span a boundary, and the last
@@ -394,6 +395,7 @@ class PreparedRecord:
         return self._noise_frames[key]
 
     def _static_keyframes(self, static_mask):
+        self.static_known = static_mask is not None
         if static_mask is None:
             self.static_key = np.ones(self.n_keyframes, dtype=bool)
         else:

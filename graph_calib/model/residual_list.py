@@ -8,7 +8,8 @@ from here; a new kind is one entry (its residual function in ``factors`` and a m
 The residual list (:func:`residual_list`) gives every kind as the solvers use it: the rotation and encoder
 factors of a keyframe interval share gyro noise, which :mod:`graph_calib.model.shared_gyro_noise` makes
 independent (one linear map of their residuals and Jacobians), so that every component is then independent
-of every other.
+of every other; a rest's rotation and still factors, which tie the same two attitudes, become one process
+factor and one measurement of the rest's first keyframe (:mod:`graph_calib.model.still_fusion`).
 
 Whitening (:func:`whiten`): a factor's rows divided by its one-sigma noise (the model's
 :class:`graph_calib.model.factors.Noise` gives each kind's sigma), then, under a robust loss, scaled by the
@@ -27,6 +28,7 @@ import numpy as np
 
 from graph_calib.model.factors import encoder_columns
 from graph_calib.model.shared_gyro_noise import decorrelate
+from graph_calib.model.still_fusion import fuse_still
 
 
 @dataclass(frozen=True)
@@ -43,12 +45,16 @@ class FactorKind:
         Whether a requested robust loss applies to it (a measurement; the rotation factors are the process).
     per_keyframe : bool
         Whether one robust loss covers every factor of a keyframe (the encoder readings), else one per factor.
+    optional : bool
+        Whether a model has the kind only on request (the still factors): a model without any leaves it out of its
+        residual series and statistics, where every other kind is listed, empty or not.
     """
 
     name: str
     method: str
     robust: bool
     per_keyframe: bool = False
+    optional: bool = False
 
     def evaluate(self, model, R, preint, x):
         """The kind's :class:`graph_calib.model.factors.Residuals` at ``(R, x)``, on its own: the rotation and
@@ -62,6 +68,8 @@ class FactorKind:
             return model.t_key[model.record.rotation_keys + 1]
         if self.name == "encoder":
             return model.record.reading_t
+        if self.name == "still":
+            return model.t_key[model.still_keys]
         return model.t_key[:-1]
 
     def robust_groups(self, res, *, robust, robust_k):
@@ -79,6 +87,7 @@ FACTOR_KINDS = (
     FactorKind("rotation", "rotation_factors", robust=False),
     FactorKind("gravity", "gravity_factors", robust=True),
     FactorKind("encoder", "encoder_factors", robust=True, per_keyframe=True),
+    FactorKind("still", "still_factors", robust=True, optional=True),
 )
 #: Their names.
 KIND_NAMES = tuple(k.name for k in FACTOR_KINDS)
@@ -138,12 +147,15 @@ def residual_list(model, R, preint, x):
 
     The rotation and encoder factors come out with the gyro noise they share made independent
     (:func:`graph_calib.model.shared_gyro_noise.decorrelate`), so that every whitened component is
-    independent of every other: evaluate the kinds through this list, not one by one.
+    independent of every other, and a rest's rotation and still factors as one process factor and one
+    measurement of a keyframe (:func:`graph_calib.model.still_fusion.fuse_still`): evaluate the kinds through
+    this list, not one by one.
     """
     factors = {kind.name: kind.evaluate(model, R, preint, x) for kind in FACTOR_KINDS}
     factors["rotation"], factors["encoder"] = decorrelate(
         model.record, preint, model.noise, factors["rotation"], factors["encoder"],
         columns=encoder_columns(model.layout, preint), overwrite_input=True)
+    factors["rotation"], factors["still"] = fuse_still(factors["rotation"], factors["still"])
     return factors
 
 

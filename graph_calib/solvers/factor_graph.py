@@ -114,7 +114,7 @@ def solve(model, *, q_nb0, options=GraphOptions(), progress=None, initial=None):
     with threadpool_limits(limits=1, user_api="blas"):
         sol = lsq.solve(x, prefit=initial is None, progress=progress)
     residuals = {kind.name: (kind.times(model), sol.whitened[0][kind.name])
-                 for kind in FACTOR_KINDS}
+                 for kind in FACTOR_KINDS if kind.name in sol.whitened[0]}
     return GraphResult(x=sol.theta, covariance=sol.covariance, layout=model.layout, attitudes=exp.R.copy(),
                        residuals=residuals, iterations=sol.iterations, cost_history=sol.cost_history,
                        seconds=time.perf_counter() - t0, converged=sol.converged)

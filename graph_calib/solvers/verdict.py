@@ -61,7 +61,12 @@ VARIANCE_FACTOR_LIMIT = 4.0
 #: The words of a staged solve's problem (:mod:`graph_calib.solvers.staged`), which the verdict line repeats.
 STAGED_WORDS = "the gyro model does not fit"
 #: The measurement kinds the verdict judges, and the sensor whose noise each is weighted by.
-JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder"}
+JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder", "still": "gyro"}
+#: What a kind's residuals measure, where its name does not say (the verdict's words).
+KIND_WORDS = {"still": "still (the rests' gyro integrals against the Earth's turn)"}
+#: What beside a lacking effect makes a kind's residuals too large, where the sensor's noise is not all of it.
+KIND_CAUSES = {"still": "the unit turned while it rested (declare the rests still only where it sits on a surface), "
+                        "or the gyro noise is larger than assumed"}
 
 
 def kind_limits(redundancy, *, alpha=RESIDUAL_ALPHA):
@@ -101,9 +106,10 @@ def judge_kinds(result):
             problems.append(_quiet_readings_text(what, quiet))
             continue
         if v > hi:
-            problems.append(f"{what} > {hi:.3g}: the {kind} residuals are larger than their noise model; the "
-                            f"model lacks an effect or the {sensor} noise is larger than assumed; sigmas "
-                            f"optimistic by about {v ** 0.5:.2g}x")
+            cause = KIND_CAUSES.get(kind, f"the {sensor} noise is larger than assumed")
+            problems.append(f"{what} > {hi:.3g}: the {KIND_WORDS.get(kind, kind)} residuals are larger than their "
+                            f"noise model; the model lacks an effect or {cause}; sigmas optimistic by about "
+                            f"{v ** 0.5:.2g}x")
         elif v < lo:
             text = (f"{what} < {lo:.3g}: the {kind} residuals are smaller than their noise model; the "
                     f"{sensor} noise is overstated; " + (f"sigmas pessimistic by about {v ** -0.5:.2g}x" if v > 0 else

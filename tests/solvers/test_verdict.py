@@ -27,13 +27,14 @@ def test_limits_follow_the_redundancy():
     assert abs(hi2 - (1 + 3.29 * np.sqrt(2 / 5000))) < 0.01       # the normal approximation at large nu
 
 
-@pytest.mark.parametrize("kind", ["rotation", "gravity", "encoder"])
+@pytest.mark.parametrize("kind", ["rotation", "gravity", "encoder", "still"])
 @pytest.mark.parametrize("side", ["high", "low"])
 def test_each_kind_either_side_of_each_limit(kind, side):
     nu = 800.0
     lo, hi = kind_limits(nu)
     edge = hi if side == "high" else lo
-    inside = {"rotation": (1.0, 60.0, 1.0), "gravity": (1.0, 900.0, 1.0), "encoder": (1.0, 3000.0, 1.0)}
+    inside = {"rotation": (1.0, 60.0, 1.0), "gravity": (1.0, 900.0, 1.0), "encoder": (1.0, 3000.0, 1.0),
+              "still": (1.0, 300.0, 1.0)}
     ok = dict(inside, **{kind: (edge * (0.99 if side == "high" else 1.01), nu, 1.0)})
     bad = dict(inside, **{kind: (edge * (1.01 if side == "high" else 0.99), nu, 1.0)})
     assert verdict_of({"factor-graph": _result(ok)}).passed
@@ -171,3 +172,13 @@ def test_variance_components_that_did_not_settle_are_a_note_with_their_figures()
     settled = {**unsettled, "converged": True}
     assert verdict_of({"factor-graph": replace(res, residuals={**res.residuals, "variance_iteration": settled})}).notes == ()
     assert verdict_of({"factor-graph": res}).notes == ()
+
+
+def test_rests_that_turn_fail_the_still_kind_in_words():
+    """The still factors (--still-rests) judged as a kind: rests whose gyro integrals scatter beyond the gyro's noise
+    say that the unit turned while it rested, not merely that a noise is larger."""
+    lo, hi = kind_limits(120.0)
+    v = verdict_of({"factor-graph": _result({"gravity": (1.0, 900.0, 1.0), "still": (1.05 * hi, 120.0, 1.0)})})
+    (problem,) = v.problems
+    assert "the still (the rests' gyro integrals against the Earth's turn) residuals are larger" in problem
+    assert "the unit turned while it rested" in problem and "--still-rests" not in problem

@@ -273,7 +273,7 @@ def _solve_joint(problems, *, options, progress, initial, degrees):
     sol = lsq.solve(u0, prefit=not have_attitudes and not all(s is not None for s in starts), progress=progress)
     it, converged, cost = sol.iterations, sol.converged, sol.cost_history[-1]
     whitened = sol.whitened
-    n_meas = int(sum(3 * w[k].shape[0] for w in whitened for k in MEASUREMENT_KINDS))
+    n_meas = int(sum(3 * w[k].shape[0] for w in whitened for k in MEASUREMENT_KINDS if k in w))
     cov = sol.covariance * np.outer(sig_theta, sig_theta)
     theta = sol.theta * sig_theta
     if fixed is None:
@@ -297,7 +297,7 @@ def _solve_joint(problems, *, options, progress, initial, degrees):
             solver=JOINT, layout=m.layout, x=x_e, covariance=0.5 * (cov_e + cov_e.T), t_key=m.t_key.copy(),
             attitudes=c.R,
             residuals={k.name: ResidualSeries(t=np.array(k.times(m), dtype=float), values=whitened[e][k.name])
-                       for k in FACTOR_KINDS},
+                       for k in FACTOR_KINDS if k.name in whitened[e]},
             residual_quantity=WHITENED_RESIDUAL, iterations=it, converged=bool(converged),
             final_cost=float(cost), seconds=seconds))
     names = reduced.z_names + tuple(f"{e}/{n}" for e, s in enumerate(reduced.setup_names) for n in s)
