@@ -2,8 +2,8 @@
 
 :class:`CalibrationModel` is a thin object over :class:`graph_calib.model.record.PreparedRecord`
 (the data), the sensor terms of its layout, the preintegration and the factors: every solver sees
-the problem only through :meth:`CalibrationModel.preintegrate`, the factor methods (rotation, gravity, encoder and, on request, still) and the
-two prior residuals, so that the equations are written once.
+the problem only through :meth:`CalibrationModel.preintegrate`, the factor methods (rotation, gravity,
+encoder and, on request, still) and the two prior residuals, so that the equations are written once.
 """
 
 from __future__ import annotations
