@@ -60,8 +60,9 @@ def main(argv=None):
     p.add_argument("--poses", type=int, default=30)
     p.add_argument("--diagnose", action="store_true", help="also fit with diagnose (the loop)")
     p.add_argument("--holdout", action="store_true", help="the loop of --diagnose with its held-out guard")
+    p.add_argument("--still-rests", action="store_true", help="the product's rests still (ModelOptions.still_at_rest)")
     args = p.parse_args(argv)
-    product = CalibrationOptions(model=ModelOptions(grade="consumer"))
+    product = CalibrationOptions(model=ModelOptions(grade="consumer", still_at_rest=args.still_rests))
     gravity_only = CalibrationOptions(model=ModelOptions(grade="consumer",
                                                          variance_factors={"rotation": GRAVITY_ONLY_FACTOR}))
     rows = []

@@ -378,6 +378,19 @@ class CalibrationModel:
         k = np.asarray(rec.rotation_keys, dtype=np.int64)
         return k[rec.static_key[k]]
 
+    def still_share(self):
+        """The still factor's share of the variance of each rest's measurement row after
+        :func:`graph_calib.model.still_fusion.fuse_still`, (F,); the rest is the gyro's noise over the keyframe
+        (the rotation kind's), whose variance component is estimated from those rows too
+        (:mod:`graph_calib.model.redundancy`, :mod:`graph_calib.solvers.variance`)."""
+        k = self.still_keys
+        T = self.record.T_key[k]
+        vf = self.noise.variance_factors
+        gyro = float(vf.get("rotation", 1.0)) * self.noise.gyro ** 2 * T
+        still = float(vf.get("still", 1.0)) * ((STILL_FRACTION * self.noise.gyro) ** 2 * T
+                                              + 2.0 * self.noise.gyro_quantization ** 2)
+        return still / (gyro + still)
+
     def still_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.still_factors` of this model's rests.
 

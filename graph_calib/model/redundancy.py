@@ -165,8 +165,15 @@ def fit_statistics(model, attitudes, x):
         parts = encoder_variance(model.record, model.noise)
         floor_var, own_var = parts.floor, parts.own + parts.floor
 
+    still_share = model.still_share() if model.still_keys.size else None
+
     def shares_of(kind, res, sl):
         """``{component: (F, 3) share of each residual component's variance}`` of a block of ``kind``."""
+        if kind.name == "still":
+            # a rest's measurement row (graph_calib.model.still_fusion): the gyro's noise over the keyframe, and the
+            # still factor's own small part
+            c = np.broadcast_to(still_share[sl][:, None], res.r[sl].shape)
+            return {"rotation": 1.0 - c, "still": c}
         if kind.name != "encoder":
             return {kind.name: 1.0}
         s2 = res.sigma[sl] ** 2

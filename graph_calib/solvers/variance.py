@@ -175,8 +175,10 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             st = _static_gravity(st)
         if estimate_floor and FLOORED in st.kinds and st.kinds[FLOORED].redundancy >= MIN_REDUNDANCY:
             factors.setdefault(FLOORED, 1.0)
-        figures = {k: _component(st, k, factors) for k, f in st.kinds.items()
-                   if k in factors_estimated(factors) and k not in fixed and f.redundancy >= MIN_REDUNDANCY}
+        # a kind's redundancy gate on the figures its factor is estimated from (the gyro's component takes the
+        # rests' measurement rows of the still factors as well as the rotation kind's own)
+        figures = {k: fig for k, fig in ((k, _component(st, k, factors)) for k in st.kinds)
+                   if k in factors_estimated(factors) and k not in fixed and fig.redundancy >= MIN_REDUNDANCY}
         ratios = {k: f.chi2_per_redundancy for k, f in figures.items() if f.chi2 > 0}
         history.append(dict(ratios))
         unsettled = [k for k, v in ratios.items() if not (abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
