@@ -120,3 +120,18 @@ def assert_calibration_jacobian_matches_fd(model, factors, R, x, *, H_x, eps, rt
         fd = (factors(R, model.preintegrate(xp), xp).r - factors(R, model.preintegrate(xm), xm).r) / (2 * eps)
         scale = np.abs(fd).max() + np.abs(H_x[:, :, c]).max() + 1e-12
         assert np.abs(fd - H_x[:, :, c]).max() < rtol * scale + atol, model.layout.element_names()[c]
+
+
+def assert_pair_jacobians_match_fd(factors, R, *, index, key, H_R, H_R_next, eps, atol):
+    """The Jacobians of factor ``index`` of ``factors(R)`` (a factor on keyframes ``key`` and ``key + 1``: its rows
+    ``H_R`` and ``H_R_next``, (3, 3) each) against central differences of step ``eps`` in the right perturbation of
+    each attitude."""
+    for a in range(3):
+        d = np.zeros(3)
+        d[a] = eps
+        for which, H in ((key, H_R), (key + 1, H_R_next)):
+            Rp, Rm = R.copy(), R.copy()
+            Rp[which] = R[which] @ exp_so3(d)
+            Rm[which] = R[which] @ exp_so3(-d)
+            fd = (factors(Rp).r[index] - factors(Rm).r[index]) / (2 * eps)
+            np.testing.assert_allclose(H[:, a], fd, atol=atol)

@@ -12,7 +12,7 @@ from graph_calib.model.residual_list import FACTOR_KINDS, residual_list
 from graph_calib.model.still_fusion import fuse_still
 from graph_calib.navigation.rotations import exp_so3, log_so3
 
-from _synthetic import wobbly_experiment
+from _synthetic import assert_pair_jacobians_match_fd, wobbly_experiment
 
 EPS = 1e-6
 
@@ -39,15 +39,8 @@ def test_still_factor_jacobians_in_both_attitudes_match_fd(problem):
     res = model.still_factors(R, preint, x)
     assert res.key.size >= 3 and not np.any(res.H_x)
     for j, k in enumerate(res.key[:4]):
-        for a in range(3):
-            d = np.zeros(3)
-            d[a] = EPS
-            for which, H in ((k, res.H_R[j]), (k + 1, res.H_R_next[j])):
-                Rp, Rm = R.copy(), R.copy()
-                Rp[which] = R[which] @ exp_so3(d)
-                Rm[which] = R[which] @ exp_so3(-d)
-                fd = (model.still_factors(Rp, preint, x).r[j] - model.still_factors(Rm, preint, x).r[j]) / (2 * EPS)
-                np.testing.assert_allclose(H[:, a], fd, atol=1e-8)
+        assert_pair_jacobians_match_fd(lambda R_: model.still_factors(R_, preint, x), R, index=j, key=k,
+                                       H_R=res.H_R[j], H_R_next=res.H_R_next[j], eps=EPS, atol=1e-8)
 
 
 def test_still_factor_sigma_is_a_tenth_of_the_gyro_noise_over_the_keyframe(problem):

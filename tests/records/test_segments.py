@@ -18,6 +18,8 @@ from graph_calib.model import ModelOptions
 from graph_calib.records.plausibility import JUMP_WINDOW_S, attitude_jumps, check_continuity
 from graph_calib.simulation import simulate
 
+from _synthetic import assert_pair_jacobians_match_fd
+
 
 @pytest.fixture(scope="module")
 def cut_session():
@@ -150,15 +152,8 @@ def test_factor_jacobians_of_a_segmented_record_match_fd():
         assert (i is None) == (k in last)
         if i is None:
             continue
-        for a in range(3):
-            d = np.zeros(3)
-            d[a] = eps
-            for which, H in ((k, res.H_R[i]), (k + 1, res.H_R_next[i])):
-                Rp, Rm = R.copy(), R.copy()
-                Rp[which] = R[which] @ exp_so3(d)
-                Rm[which] = R[which] @ exp_so3(-d)
-                fd = (model.rotation_factors(Rp, preint, x).r[i] - model.rotation_factors(Rm, preint, x).r[i]) / (2 * eps)
-                np.testing.assert_allclose(H[:, a], fd, atol=1e-8)
+        assert_pair_jacobians_match_fd(lambda R_: model.rotation_factors(R_, preint, x), R, index=i, key=k,
+                                       H_R=res.H_R[i], H_R_next=res.H_R_next[i], eps=eps, atol=1e-8)
 
 
 def test_the_diagnosis_linearises_a_segmented_fit_at_its_optimum(cut_run):
