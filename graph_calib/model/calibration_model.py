@@ -376,7 +376,14 @@ class CalibrationModel:
         if not self.options.still_at_rest or not rec.static_known:
             return np.zeros(0, dtype=np.int64)
         k = np.asarray(rec.rotation_keys, dtype=np.int64)
-        return k[rec.static_key[k]]
+        s = np.asarray(rec.static_key, dtype=bool)
+        # a rest's first and last keyframes are left out where the rest has keyframes inside: the static detector's
+        # window smears a rest's edges, and an edge keyframe may hold the start or end of a turn; a rest of one
+        # keyframe (a short rest on its own grid, cut at the detector's short windows) is kept
+        before = np.concatenate([[False], s[:-1]])
+        after = np.concatenate([s[1:], [False]])
+        keep = s & ((before & after) | (~before & ~after))
+        return k[keep[k]]
 
     def still_share(self):
         """The still factor's share of the variance of each rest's measurement row after

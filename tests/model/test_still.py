@@ -18,8 +18,8 @@ EPS = 1e-6
 
 
 def _static_mask(exp):
-    """Every other 1.2 s of the record taken as a rest (each holds a whole keyframe of 0.5 s)."""
-    return np.floor(exp.t / 1.2) % 2 == 0
+    """Every other 2.2 s of the record taken as a rest (each holds whole keyframes of 0.5 s inside its edges)."""
+    return np.floor(exp.t / 2.2) % 2 == 0
 
 
 @pytest.fixture(scope="module")
@@ -111,3 +111,28 @@ def test_which_records_have_still_factors():
     assert np.all(np.isin(on.still_keys, on.record.rotation_keys))
     unknown = CalibrationModel(exp, options=ModelOptions(keyframe_s=0.5, still_at_rest=True))
     assert unknown.still_keys.size == 0                                             # no rests known: none
+
+
+def test_a_rests_edge_keyframes_have_no_still_factor_a_lone_one_has():
+    """The static detector's window smears a rest's edges (an edge keyframe may hold the start of a turn): the first
+    and last keyframes of a rest of several keyframes get no still factor; a rest of one keyframe (a short rest on its
+    own grid) keeps its own."""
+    rng = np.random.default_rng(6)
+    exp = wobbly_experiment(rng=rng)
+    model = CalibrationModel(exp, options=ModelOptions(keyframe_s=0.5, still_at_rest=True),
+                             static_mask=_static_mask(exp))
+    s = model.record.static_key
+    k = model.still_keys
+    assert k.size > 0
+    for j in k:
+        lone = (j == 0 or not s[j - 1]) and (j + 1 == s.size or not s[j + 1])
+        assert lone or (s[j - 1] and s[j + 1]), j
+    starts = np.flatnonzero(s & ~np.concatenate([[False], s[:-1]]))
+    long_starts = [j for j in starts if j + 1 < s.size and s[j + 1]]
+    assert long_starts and not np.isin(long_starts, k).any()
+    lone = np.zeros_like(s)
+    lone[5] = True
+    mask = np.zeros(exp.t.size, dtype=bool)
+    mask[model.record.k0[5]:model.record.k0[6]] = True
+    single = CalibrationModel(exp, options=ModelOptions(keyframe_s=0.5, still_at_rest=True), static_mask=mask)
+    assert list(single.still_keys) == [5]
