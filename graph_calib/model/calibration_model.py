@@ -385,17 +385,21 @@ class CalibrationModel:
         keep = s & ((before & after) | (~before & ~after))
         return k[keep[k]]
 
+    def _still_variance(self):
+        """Each still factor's variance per axis before the kind's variance factor, rad^2 (F,):
+        :data:`STILL_FRACTION` of the gyro's noise over the keyframe, and a ring-laser gyro's quantization at its two
+        ends (the keyframe attitudes are the indicated ones)."""
+        T = self.record.T_key[self.still_keys]
+        return (STILL_FRACTION * self.noise.gyro) ** 2 * T + 2.0 * self.noise.gyro_quantization ** 2
+
     def still_share(self):
         """The still factor's share of the variance of each rest's measurement row after
         :func:`graph_calib.model.still_fusion.fuse_still`, (F,); the rest is the gyro's noise over the keyframe
         (the rotation kind's), whose variance component is estimated from those rows too
         (:mod:`graph_calib.model.redundancy`, :mod:`graph_calib.solvers.variance`)."""
-        k = self.still_keys
-        T = self.record.T_key[k]
         vf = self.noise.variance_factors
-        gyro = float(vf.get("rotation", 1.0)) * self.noise.gyro ** 2 * T
-        still = float(vf.get("still", 1.0)) * ((STILL_FRACTION * self.noise.gyro) ** 2 * T
-                                              + 2.0 * self.noise.gyro_quantization ** 2)
+        gyro = float(vf.get("rotation", 1.0)) * self.noise.gyro ** 2 * self.record.T_key[self.still_keys]
+        still = float(vf.get("still", 1.0)) * self._still_variance()
         return still / (gyro + still)
 
     def still_factors(self, R, preint, x):
@@ -405,10 +409,8 @@ class CalibrationModel:
         turns by less than its gyros can tell), with a ring-laser gyro's quantization at the keyframe's two ends
         added (the keyframe attitudes are the indicated ones); the kind's variance factor (``still``) scales it.
         """
-        k = self.still_keys
-        T = self.record.T_key[k]
-        sigma = np.sqrt((STILL_FRACTION * self.noise.gyro) ** 2 * T + 2.0 * self.noise.gyro_quantization ** 2)
-        return self.noise.scaled("still", factors.still_factors(self.record, R, preint, x, keys=k, sigma=sigma))
+        return self.noise.scaled("still", factors.still_factors(self.record, R, preint, x, keys=self.still_keys,
+                                                                 sigma=np.sqrt(self._still_variance())))
 
     def rotation_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.rotation_factors` of this model."""

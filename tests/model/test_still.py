@@ -136,3 +136,13 @@ def test_a_rests_edge_keyframes_have_no_still_factor_a_lone_one_has():
     mask[model.record.k0[5]:model.record.k0[6]] = True
     single = CalibrationModel(exp, options=ModelOptions(keyframe_s=0.5, still_at_rest=True), static_mask=mask)
     assert list(single.still_keys) == [5]
+
+
+def test_a_rest_rows_variance_is_the_gyros_but_for_the_still_factors_share(problem):
+    """A fused still row's variance is the rotation factor's (the gyro's noise over the keyframe) and the still
+    factor's; the latter's share is 0.1^2 / (1 + 0.1^2) at unit factors and follows both kinds' factors."""
+    model, *_ = problem
+    np.testing.assert_allclose(model.still_share(), STILL_FRACTION ** 2 / (1.0 + STILL_FRACTION ** 2), rtol=1e-12)
+    scaled = CalibrationModel.from_record(model.record, options=replace(model.options,
+                                                                        variance_factors={"rotation": 99.0}))
+    np.testing.assert_allclose(scaled.still_share(), STILL_FRACTION ** 2 / (99.0 + STILL_FRACTION ** 2), rtol=1e-12)
