@@ -29,7 +29,8 @@ from imucal_peer import imucal_ferraris  # noqa: E402
 from graph_calib.calibrate import calibrate  # noqa: E402
 from graph_calib.compensation.calibration import Calibration  # noqa: E402
 from graph_calib.errors import InputError  # noqa: E402
-from graph_calib.evaluation.crossval import Fold, held_out_figures, make_folds, record_rests, training_record  # noqa: E402
+from graph_calib.evaluation.crossval import (face_to_face_folds, held_out_figures, make_folds, record_rests,
+                                             training_record)  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
 from graph_calib.options import CalibrationOptions  # noqa: E402
 from graph_calib.simulation.scenarios import SHORT_REST_FERRARIS, simulate  # noqa: E402
@@ -74,24 +75,14 @@ def diagnose_fit(train, *, options=CONSUMER):
     return Calibration.from_result(diag.after.results["factor-graph"])
 
 
-def face_folds(exp, rests, *, folds=2):
-    """Folds holding out only the motions between two different faces (``--by faces``), dealt in turn.
-
-    imucal fits the rests and the three full turns and never these motions, so on them it is out of sample as
-    the product is (the product fitted without them, every rest and turn kept)."""
-    face = [i for i in range(rests.shape[0] - 1)
-            if np.max(np.abs(exp.dtheta[rests[i, 1]:rests[i + 1, 0]].sum(axis=0))) < np.deg2rad(300.0)]
-    return [Fold(index=j, spans=tuple((int(rests[i, 1]), int(rests[i + 1, 0])) for i in face[j::folds]),
-                 rests=tuple(rests[i:i + 2] for i in face[j::folds]), transitions_only=True) for j in range(folds)]
-
-
 def compare(seed, *, folds=2, by="pairs", fit=product_fit):
     """``{name: [(transitions rms deg, |f| spread m/s^2) per fold]}`` for raw, truth, imucal and the product."""
     exp, truth = session(seed)
     rests = record_rests(exp)
     peer = imucal_ferraris(exp, rests)
     out = {name: [] for name in NAMES}
-    made = face_folds(exp, rests, folds=folds) if by == "faces" else make_folds(exp, folds=folds, by=by, rests=rests)
+    made = (face_to_face_folds(exp, folds=folds, rests=rests) if by == "faces"
+            else make_folds(exp, folds=folds, by=by, rests=rests))
     for fold in made:
         try:
             cal = fit(training_record(exp, fold, rests=rests))

@@ -25,7 +25,9 @@ the units are dealt to the ``K`` folds:
     to the start of rest ``i + 1``, dealt in turn), every rest stays in the training record: the gyro
     triad is judged out of sample on the transitions while the accelerometer triad keeps every pose
     (a six-face session has no face to spare); the static figures are then not held out and are left
-    out (NaN).
+    out (NaN).  :func:`face_to_face_folds` deals the rotations between two faces alone, the full turns
+    of a Ferraris session kept for training with the rests (what imucal fits, so that on the held-out
+    motions both are out of sample).
 
 A unit's held-out span runs from the first sample of its first rest to the first sample of the rest
 after its last (or the record's end), so the rotations inside a unit are held out with its rests and
@@ -67,6 +69,9 @@ FIGURES = ("static_norm_std_mps2", "transitions_rms_deg", "static_rate_rms_dps")
 
 #: A held-out figure counts as worse than the raw one when it exceeds it by this factor.
 WORSE_FACTOR = 1.0
+#: A rotation between two rests whose raw gyro angle about one axis exceeds this is a full turn (a Ferraris
+#: session's 360 deg turns), deg.
+FULL_TURN_DEG = 300.0
 
 
 @dataclass(frozen=True)
@@ -223,10 +228,7 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
         if p - 1 < folds:
             raise InputError(f"has {p} rest(s), {max(p - 1, 0)} transition(s): fewer than the {folds} folds asked "
                              f"for", path=experiment.source or None, dataset="/imu")
-        owner = np.arange(p - 1) % folds
-        return [Fold(index=j, spans=tuple((int(rests[i, 1]), int(rests[i + 1, 0])) for i in np.flatnonzero(owner == j)),
-                     rests=tuple(rests[i:i + 2] for i in np.flatnonzero(owner == j)), transitions_only=True)
-                for j in range(folds)]
+        return _transition_folds(rests, np.arange(p - 1), folds)
     if by == "pairs":
         units = [np.arange(i, min(i + 2, p)) for i in range(0, p, 2)]
         owner = np.arange(len(units)) % folds
@@ -250,6 +252,38 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
             rs.append(rests[u])
         out.append(Fold(index=j, spans=tuple(spans), rests=tuple(rs)))
     return out
+
+
+def face_to_face_folds(experiment, *, folds=2, rests=None):
+    """Folds of the rotations between two faces alone, dealt in turn (a ``by="transitions"`` fold of those): every
+    rest and every full turn (a raw gyro angle above :data:`FULL_TURN_DEG` about one axis) stays in the training
+    record.
+
+    Parameters
+    ----------
+    experiment : graph_calib.records.experiment.Experiment
+    folds : int
+    rests : array_like of int, shape (P, 2), optional
+        ``[start, stop)`` of the rests; default :func:`record_rests`.
+
+    Returns
+    -------
+    list of Fold
+    """
+    rests = record_rests(experiment) if rests is None else np.asarray(rests, dtype=np.int64).reshape(-1, 2)
+    turn = np.deg2rad(FULL_TURN_DEG)
+    faces = [i for i in range(rests.shape[0] - 1)
+             if np.max(np.abs(experiment.dtheta[rests[i, 1]:rests[i + 1, 0]].sum(axis=0))) < turn]
+    if len(faces) < folds:
+        raise InputError(f"has {len(faces)} rotation(s) between two faces: fewer than the {folds} folds asked for",
+                         path=experiment.source or None, dataset="/imu")
+    return _transition_folds(rests, np.asarray(faces, dtype=np.int64), folds)
+
+
+def _transition_folds(rests, which, folds):
+    """Folds of the rotations ``which`` (rest ``i`` to rest ``i + 1``), dealt in turn; every rest stays."""
+    return [Fold(index=j, spans=tuple((int(rests[i, 1]), int(rests[i + 1, 0])) for i in which[j::folds]),
+                 rests=tuple(rests[i:i + 2] for i in which[j::folds]), transitions_only=True) for j in range(folds)]
 
 
 def _segments_of(experiment):

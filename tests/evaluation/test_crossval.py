@@ -9,8 +9,8 @@ from graph_calib import io
 from graph_calib.cli import main
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.errors import InputError
-from graph_calib.evaluation.crossval import (cross_validate, held_out_figures, make_folds, record_rests,
-                                             training_record)
+from graph_calib.evaluation.crossval import (FULL_TURN_DEG, cross_validate, face_to_face_folds, held_out_figures,
+                                             make_folds, record_rests, training_record)
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.records.problem import build_problem
@@ -48,6 +48,23 @@ def test_folds_hold_out_disjoint_spans_and_training_keeps_the_rest(ferraris, by)
         if train.segment is not None:
             for a, b in train.segment_bounds():    # each piece starts at one of the record's rests
                 assert np.any(rests[:, 0] == np.searchsorted(exp.t, train.t[a]))
+
+
+def test_face_to_face_folds_hold_out_the_rotations_between_faces_and_keep_the_full_turns(ferraris):
+    """A six-face session: the rotations between two faces dealt into the folds, the three full turns in none, every
+    rest kept for training; a record with too few such rotations is refused naming it."""
+    exp, _, _ = ferraris
+    rests = record_rests(exp)
+    folds = face_to_face_folds(exp, rests=rests)
+    transitions = [(int(rests[i, 1]), int(rests[i + 1, 0])) for i in range(rests.shape[0] - 1)]
+    angle = {t: np.rad2deg(np.max(np.abs(exp.dtheta[t[0]:t[1]].sum(axis=0)))) for t in transitions}
+    held = [s for f in folds for s in f.spans]
+    assert all(f.transitions_only for f in folds) and len(held) == len(set(held))
+    assert sorted(held) == sorted(t for t, a in angle.items() if a < FULL_TURN_DEG)
+    assert sum(a > FULL_TURN_DEG for a in angle.values()) == 3          # the three full turns, none held out
+    assert len(folds[0].spans) - len(folds[1].spans) in (0, 1)
+    with pytest.raises(InputError, match="rotation.s. between two faces"):
+        face_to_face_folds(exp, rests=rests, folds=len(held) + 1)
 
 
 def test_the_truth_beats_the_raw_samples_out_of_sample(ferraris):

@@ -11,7 +11,7 @@ import pytest
 from graph_calib.calibrate import calibrate
 from graph_calib.cli import main
 from graph_calib.compensation.calibration import Calibration
-from graph_calib.evaluation.crossval import Fold, held_out_figures, record_rests, training_record
+from graph_calib.evaluation.crossval import face_to_face_folds, held_out_figures, record_rests, training_record
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.simulation.scenarios import SHORT_REST_FERRARIS, simulate
@@ -60,14 +60,6 @@ def test_both_solvers_agree_with_still_rests_and_the_kind_fits():
     assert "still" in v.text()
 
 
-def _face_folds(exp, rests):
-    """The face-to-face motions (not the full turns) dealt into two folds, every rest kept for training."""
-    face = [i for i in range(rests.shape[0] - 1)
-            if np.max(np.abs(exp.dtheta[rests[i, 1]:rests[i + 1, 0]].sum(axis=0))) < np.deg2rad(300.0)]
-    return [Fold(index=j, spans=tuple((int(rests[i, 1]), int(rests[i + 1, 0])) for i in face[j::2]),
-                 rests=tuple(rests[i:i + 2] for i in face[j::2]), transitions_only=True) for j in range(2)]
-
-
 @pytest.mark.slow
 def test_held_out_face_to_face_motions_come_closer_with_still_rests():
     """Seeds 1 and 2, both folds of the face-to-face motions (scripts/handheld_vs_imucal.py --by faces): the pooled
@@ -76,7 +68,7 @@ def test_held_out_face_to_face_motions_come_closer_with_still_rests():
     for seed in (1, 2):
         exp, _ = _session(seed)
         rests = record_rests(exp)
-        for fold in _face_folds(exp, rests):
+        for fold in face_to_face_folds(exp, rests=rests):
             train = training_record(exp, fold, rests=rests)
             for out, options in ((plain, HAND), (still, STILL)):
                 cal = Calibration.from_result(_graph(train, options))
