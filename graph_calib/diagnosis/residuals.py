@@ -48,7 +48,7 @@ def factor_residuals(model, R, x, *, pre=None, factors=None):
     out = {}
     for k in FACTOR_KINDS:
         kind, res, t = k.name, factors[k.name], k.times(model)
-        if res.key.size == 0 and k.optional:
+        if not k.listed(res):
             continue                     # a kind this model does not have (no still factors asked for)
         w = res.whitened()
         d = {"t": np.asarray(t, dtype=float), "key": res.key.copy(), "r": res.r.copy(), "w": w}

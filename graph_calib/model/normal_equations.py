@@ -152,7 +152,7 @@ def linearise(model, preint, R, x, *, R_prior, M=None, n_extra=0, robust=None, r
         if keep_factors:
             kept[kind.name] = _without_jacobians(res)
         if F == 0:
-            if not kind.optional:
+            if kind.listed(res):
                 whitened[kind.name] = np.zeros((0, 3))
             continue
         c, w, s = whiten(kind, res, robust=robust, robust_k=robust_k)

@@ -62,6 +62,11 @@ class FactorKind:
         kind as the solvers use it)."""
         return getattr(model, self.method)(R, preint, x)
 
+    def listed(self, res):
+        """Whether the kind, its factors ``res``, is listed in the residual series and statistics: every kind, empty
+        or not, but an optional one only where the model has such factors."""
+        return not self.optional or res.key.size > 0
+
     def times(self, model):
         """Time of each factor, s: the rotation factor's end, the gravity factor's keyframe start, a reading's time."""
         if self.name == "rotation":
