@@ -11,7 +11,10 @@ it).  Prints per seed and pooled the held-out transition rms and |f| spread of r
 (``--diagnose``: the loop's calibration).
 
     PYTHONPATH=$PWD python scripts/handheld_vs_imucal.py --seeds 1 2 3 [--diagnose] [--guess] [--sway-sigma none]
-        [--still-rests] [--by faces]
+        [--still-rests] [--by faces] [--triads]
+
+``--triads`` adds the calibrations made of one calibration's gyro and another's accelerometer (``gyro/accel``: truth,
+imucal, product), which tells which triad a held-out gap sits in.
 """
 
 from __future__ import annotations
@@ -53,6 +56,19 @@ def sway_option(text):
     return text if text == "estimate" else None if text == "none" else float(text)
 #: The calibrations judged, in the order of the table's columns.
 NAMES = ("raw", "truth", "imucal", "product")
+#: ``--triads``: (gyro from, accelerometer from) of the mixed calibrations judged besides.
+TRIAD_MIXES = (("truth", "product"), ("product", "truth"), ("imucal", "truth"), ("truth", "imucal"),
+               ("imucal", "product"), ("product", "imucal"))
+
+
+class TriadMix:
+    """The gyro of one calibration and the accelerometer of another, behind the ``correct`` interface."""
+
+    def __init__(self, gyro, accel):
+        self.gyro, self.accel = gyro, accel
+
+    def correct(self, experiment):
+        return self.gyro.correct(experiment)[0], self.accel.correct(experiment)[1]
 
 
 def session(seed):
@@ -75,12 +91,14 @@ def diagnose_fit(train, *, options=CONSUMER):
     return Calibration.from_result(diag.after.results["factor-graph"])
 
 
-def compare(seed, *, folds=2, by="pairs", fit=product_fit):
-    """``{name: [(transitions rms deg, |f| spread m/s^2) per fold]}`` for raw, truth, imucal and the product."""
+def compare(seed, *, folds=2, by="pairs", fit=product_fit, triads=False):
+    """``{name: [(transitions rms deg, |f| spread m/s^2) per fold]}`` for raw, truth, imucal and the product (and,
+    ``triads``, the :data:`TRIAD_MIXES` named ``gyro/accel``)."""
     exp, truth = session(seed)
     rests = record_rests(exp)
     peer = imucal_ferraris(exp, rests)
-    out = {name: [] for name in NAMES}
+    names = NAMES + (tuple(f"{g}/{a}" for g, a in TRIAD_MIXES) if triads else ())
+    out = {name: [] for name in names}
     made = (face_to_face_folds(exp, folds=folds, rests=rests) if by == "faces"
             else make_folds(exp, folds=folds, by=by, rests=rests))
     for fold in made:
@@ -88,10 +106,13 @@ def compare(seed, *, folds=2, by="pairs", fit=product_fit):
             cal = fit(training_record(exp, fold, rests=rests))
         except InputError as e:
             print(f"  seed {seed} fold {fold.index + 1}: not calibrated: {e}", flush=True)
-            for name in NAMES:
+            for name in names:
                 out[name].append((np.nan, np.nan))
             continue
-        for name, c in zip(NAMES, (None, truth, peer, cal)):
+        cals = dict(zip(NAMES, (None, truth, peer, cal)))
+        if triads:
+            cals.update({f"{g}/{a}": TriadMix(cals[g], cals[a]) for g, a in TRIAD_MIXES})
+        for name, c in cals.items():
             f = held_out_figures(exp, fold, c)
             out[name].append((f.transitions_rms_deg, f.static_norm_std_mps2))
     return out
@@ -113,6 +134,8 @@ def main(argv=None):
     p.add_argument("--sway-sigma", type=sway_option, default="estimate",
                    help="the product's sway sigma: 'estimate' (default), 'none' or m/s^2")
     p.add_argument("--still-rests", action="store_true", help="the product's rests still (ModelOptions.still_at_rest)")
+    p.add_argument("--triads", action="store_true",
+                   help="also judge one calibration's gyro with another's accelerometer (pooled transitions)")
     args = p.parse_args(argv)
     every = {name: [] for name in NAMES}
     print(f"{'seed':>4} {'fold':>4} {'transitions rms [deg]':>44} {'|f| spread [m/s^2]':>52}")
@@ -120,15 +143,18 @@ def main(argv=None):
     for seed in args.seeds:
         options = product_options(guess=args.guess, sway=args.sway_sigma, still=args.still_rests)
         fit = diagnose_fit if args.diagnose else product_fit
-        res = compare(seed, by=args.by, fit=lambda train: fit(train, options=options))
+        res = compare(seed, by=args.by, fit=lambda train: fit(train, options=options), triads=args.triads)
         for j in range(len(res["raw"])):
             print(f"{seed:>4} {j + 1:>4} " + " ".join(f"{res[n][j][0]:>10.3f}" for n in NAMES) + " "
                   + " ".join(f"{res[n][j][1]:>12.3e}" for n in NAMES), flush=True)
-        for k in every:
-            every[k].extend(res[k])
+        for k in res:
+            every.setdefault(k, []).extend(res[k])
     p = {n: pooled(every[n]) for n in NAMES}
     print(f"{'all':>4} {'':>4} " + " ".join(f"{p[n][0]:>10.3f}" for n in NAMES) + " "
           + " ".join(f"{p[n][1]:>12.3e}" for n in NAMES))
+    if args.triads:
+        print("pooled transitions rms [deg], gyro/accel: " + ", ".join(
+            f"{name} {pooled(rows)[0]:.4f}" for name, rows in every.items() if "/" in name))
     return 0
 
 

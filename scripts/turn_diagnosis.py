@@ -9,13 +9,17 @@ axes whose full turn the training record holds (the most any use of a known full
 give) and of the axes whose full turn is held out. Also prints, per gyro element, the product's error against its
 sigma.
 
-    PYTHONPATH=$PWD python scripts/turn_diagnosis.py --seeds 1 2 3 [--sway-sigma none]
+    PYTHONPATH=$PWD python scripts/turn_diagnosis.py --seeds 1 2 3 [--sway-sigma none] [--still-rests] [--by faces]
+
+``--by faces`` holds out the face-to-face motions alone (:func:`graph_calib.evaluation.crossval.face_to_face_folds`:
+every full turn stays in training); ``--still-rests`` declares the rests still (``ModelOptions.still_at_rest``).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -27,7 +31,8 @@ from imucal_peer import imucal_ferraris  # noqa: E402
 
 from graph_calib.calibrate import calibrate  # noqa: E402
 from graph_calib.compensation.calibration import Calibration  # noqa: E402
-from graph_calib.evaluation.crossval import held_out_figures, make_folds, record_rests, training_record  # noqa: E402
+from graph_calib.evaluation.crossval import (face_to_face_folds, held_out_figures, make_folds, record_rests,  # noqa: E402
+                                             training_record)
 from graph_calib.simulation.scenarios import SHORT_REST_FERRARIS, simulate  # noqa: E402
 
 from handheld_vs_imucal import product_options, sway_option  # noqa: E402
@@ -82,13 +87,24 @@ def column(axes, *, whole):
     return out or ("-",)
 
 
+def gyro_matrix(cal):
+    """The gyro matrix ``A`` of a calibration (measured rate = ``A omega`` + bias, at its reference temperature)."""
+    zero = np.zeros((1, 3))
+    e0 = cal.sensor_errors(zero, zero, dT=np.zeros(6))[0][0]
+    return np.eye(3) + np.stack([cal.sensor_errors(np.eye(3)[k:k + 1], zero, dT=np.zeros(6))[0][0] - e0
+                                 for k in range(3)], axis=1)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3])
     p.add_argument("--sway-sigma", type=sway_option, default="estimate",
                    help="the product's sway sigma: 'estimate' (default), 'none' or m/s^2")
+    p.add_argument("--by", choices=("pairs", "faces"), default="pairs",
+                   help="folds by pairs of rests, or the face-to-face motions alone")
+    p.add_argument("--still-rests", action="store_true", help="the product's rests still (ModelOptions.still_at_rest)")
     args = p.parse_args(argv)
-    options = product_options(sway=args.sway_sigma)
+    options = product_options(sway=args.sway_sigma, still=args.still_rests)
     turn_groups = ("trained turns' scales", "trained turns' columns", "held-out turns' scales",
                    "held-out turns' columns")
     rows = {name: [] for name in ("raw", "imucal", "product", *GROUPS, *turn_groups)}
@@ -99,7 +115,9 @@ def main(argv=None):
         rests = record_rests(exp)
         peer = imucal_ferraris(exp, rests)
         turns = full_turns(exp, rests)
-        for fold in make_folds(exp, folds=2, by="pairs", rests=rests):
+        folds = (face_to_face_folds(exp, folds=2, rests=rests) if args.by == "faces"
+                 else make_folds(exp, folds=2, by="pairs", rests=rests))
+        for fold in folds:
             held = held_transitions(fold, rests)
             trained = tuple(a for i, a in turns.items() if i not in held)
             out = tuple(a for i, a in turns.items() if i in held)
@@ -118,12 +136,21 @@ def main(argv=None):
                   f"{''.join(out) or '-'}): " + "  ".join(line), flush=True)
             z = {k: (res.values[k] - truth.values.get(k, 0.0)) / res.sigmas[k] for k in res.values
                  if k.startswith("gyro.") and res.sigmas.get(k)}
+            off = ~np.eye(3, dtype=bool)
+            A_true = gyro_matrix(Calibration.from_result(truth))
+            print("   gyro matrix off-diagonal error, 1e-3: product "
+                  + " ".join(f"{v:+.3f}" for v in 1e3 * (gyro_matrix(cals["product"]) - A_true)[off])
+                  + ", imucal " + " ".join(f"{v:+.3f}" for v in
+                                          1e3 * (np.asarray(peer.info.K_g) @ np.asarray(peer.info.R_g) - A_true)[off]),
+                  flush=True)
             print("   gyro error/sigma: " + " ".join(
                 f"{k[5:]}={res.values[k] - truth.values.get(k, 0.0):+.1e}({v:+.1f}s)" for k, v in z.items()),
                 flush=True)
     print(f"{'pooled over seeds ' + ' '.join(map(str, args.seeds)):<40} {'transitions rms deg':>20} {'|f| spread':>12}")
     for name, r in rows.items():
-        a = np.sqrt(np.nanmean(np.asarray(r, dtype=float) ** 2, axis=0))
+        with warnings.catch_warnings():     # --by faces holds out no rest: the |f| column is all NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            a = np.sqrt(np.nanmean(np.asarray(r, dtype=float) ** 2, axis=0))
         print(f"{name:<40} {a[0]:>20.3f} {a[1]:>12.2e}")
     return 0
 
