@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
-from graph_calib.model.redundancy import FLOORED, MOVING, PSEUDO_KINDS, fit_statistics
+from graph_calib.model.redundancy import FLOORED, MOVING, PSEUDO_KINDS, fit_statistics, static_gravity
 from graph_calib.records.experiment import Result
 
 
@@ -52,6 +52,7 @@ def residual_block(output, *, statistics=None):
             kinds[kind] = {**kinds.get(kind, {}), **fit.to_json()}
         if MOVING in statistics.kinds and "gravity" in kinds:
             kinds["gravity"]["moving"] = statistics.kinds[MOVING].to_json()
+            kinds["gravity"]["static"] = static_gravity(statistics.kinds).to_json()
         if FLOORED in statistics.kinds and "encoder" in kinds:
             kinds["encoder"]["floored"] = statistics.kinds[FLOORED].to_json()
     all_measured = np.concatenate(measured) if measured else np.zeros(0)

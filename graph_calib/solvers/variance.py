@@ -22,7 +22,8 @@ This is an outer iteration around any registered solver (solve, rescale, re-solv
 solution), so that it does not depend on a solver's internals; the factors live in the model's
 :class:`graph_calib.model.factors.Noise` (``ModelOptions.variance_factors``), so every solver that then
 solves the problem uses the same ones.  A kind whose redundancy is below :data:`MIN_REDUNDANCY` keeps its
-factor (too few degrees of freedom to estimate one), and so does a kind the caller fixes; no factor goes
+factor (too few degrees of freedom to estimate one), and so does a kind the caller fixes; one below
+:data:`MIN_LOWERING_REDUNDANCY` has its factor raised where its residuals ask, never lowered below 1; no factor goes
 below :data:`FACTOR_MIN` or above :data:`FACTOR_MAX`.
 
 Moving keyframes.  Without a table the gravity factor of a keyframe in motion has the sigma
@@ -34,8 +35,9 @@ and a guess twenty times that leaves the attitude in a turn, and so the gyro's c
 rotation factors alone.  Not the default: on the MPU-6050 session it
 settles at 0.09 m/s^2 and the held-out transitions (two folds by pairs) grow from 2.24 to 3.61 deg while the
 |f| spread falls from 0.126 to 0.082 m/s^2 (measured while every rest shorter than two keyframes had keyframes of its
-own; by default, as on main, 2.48 deg and 0.155 m/s^2).  While the moving keyframes' sigma is estimated
-the gravity kind's factor is estimated from the static keyframes' ``chi2 / redundancy`` alone.
+own; by default, as on main, 2.48 deg and 0.155 m/s^2).  Whether the moving keyframes' sigma is the guess or
+estimated, the gravity kind's factor is estimated from the static keyframes' ``chi2 / redundancy`` alone: the
+moving rows' sigma does not follow it.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel
-from graph_calib.model.redundancy import FLOORED, MOVING, fit_statistics
+from graph_calib.model.redundancy import FLOORED, MOVING, fit_statistics, static_gravity
 from graph_calib.records.problem import MOVING_ESTIMATED
 from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
 
@@ -53,6 +55,13 @@ from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
 KINDS = ("rotation", "gravity", "encoder")
 #: Least redundancy of a kind whose factor is estimated.
 MIN_REDUNDANCY = 10.0
+#: Least redundancy of a kind whose factor may go below 1 (its estimate scatters by about ``sqrt(2 / redundancy)``,
+#: 20 % here).  Below it the factor only rises: a low ``chi2 / redundancy`` of so few degrees of freedom is as likely
+#: their scatter as an overstated noise, and a factor below 1 would make the sigmas optimistic; a high one is a misfit
+#: the sigmas must follow.  On the simulated consumer Ferraris sessions the rotation kind keeps a redundancy of about
+#: 23 of its 390 components (the rests' gravity holds the attitudes), its ``chi2 / redundancy`` barely answers its
+#: factor, and the iteration drove it to 0.16 where the gyro noise is the simulated one.
+MIN_LOWERING_REDUNDANCY = 50.0
 #: The iteration stops when no kind's chi2 / redundancy is further than this from 1.
 TOLERANCE = 0.05
 #: At most this many solves.
@@ -171,15 +180,19 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         out = solve(solver, problem, options=options, progress=progress, initial=initial)
         initial = (out.attitudes, out.x)
         st = fit_statistics(problem.model, out.attitudes, out.x)
-        if estimate_moving:                # the moving rows have a factor of their own: the gravity kind's is the static's
-            st = _static_gravity(st)
+        # the moving rows have a sigma of their own (a guess, or estimated as MOVING): the gravity kind's factor is
+        # the static rows'
+        st = _static_gravity(st)
         if estimate_floor and FLOORED in st.kinds and st.kinds[FLOORED].redundancy >= MIN_REDUNDANCY:
             factors.setdefault(FLOORED, 1.0)
         # a kind's redundancy gate on the figures its factor is estimated from (the gyro's component takes the
         # rests' measurement rows of the still factors as well as the rotation kind's own)
         figures = {k: fig for k, fig in ((k, _component(st, k, factors)) for k in st.kinds)
                    if k in factors_estimated(factors) and k not in fixed and fig.redundancy >= MIN_REDUNDANCY}
-        ratios = {k: f.chi2_per_redundancy for k, f in figures.items() if f.chi2 > 0}
+        # a kind of little redundancy whose factor is down to 1 and whose residuals ask for less stays at 1
+        rising = {k for k, f in figures.items() if k in KINDS and f.redundancy < MIN_LOWERING_REDUNDANCY}
+        ratios = {k: f.chi2_per_redundancy for k, f in figures.items()
+                  if f.chi2 > 0 and not (k in rising and factors.get(k, 1.0) <= 1.0 and f.chi2_per_redundancy < 1.0)}
         history.append(dict(ratios))
         unsettled = [k for k, v in ratios.items() if not (abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
                                                           or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])))]
@@ -217,7 +230,7 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
             if k in previous and abs(lf - previous[k][0]) > 0.05:      # a step large enough to read a from
                 a = float(np.clip(-(lr - previous[k][1]) / (lf - previous[k][0]), MIN_EXPONENT, 1.0))
             previous[k] = (lf, lr)
-            factors[k] = float(np.clip(np.exp(lf + lr / a), FACTOR_MIN, FACTOR_MAX))
+            factors[k] = float(np.clip(np.exp(lf + lr / a), 1.0 if k in rising else FACTOR_MIN, FACTOR_MAX))
         # the last rescale is kept without a further solve: near 1 it moves the solution to second order only
         if estimate_moving:
             moving = float(np.clip(moving0 * np.sqrt(factors[MOVING] / factors.get("gravity", 1.0)),
@@ -330,12 +343,10 @@ def tested_problem(identified, weighted):
 
 
 def _static_gravity(st):
-    """``st`` whose ``"gravity"`` counts the static keyframes only when the moving ones are apart (MOVING)."""
-    g, m = st.kinds.get("gravity"), st.kinds.get(MOVING)
-    if g is None or m is None:
-        return st
-    static = replace(g, count=g.count - m.count, chi2=g.chi2 - m.chi2, redundancy=g.redundancy - m.redundancy)
-    return replace(st, kinds={**st.kinds, "gravity": static})
+    """``st`` whose ``"gravity"`` counts the static keyframes only when the moving ones are apart
+    (:func:`graph_calib.model.redundancy.static_gravity`)."""
+    static = static_gravity(st.kinds)
+    return st if static is None else replace(st, kinds={**st.kinds, "gravity": static})
 
 
 def _component(st, kind, factors):
@@ -398,4 +409,4 @@ def factors_estimated(factors):
 
 
 __all__ = ["VarianceComponents", "Weighted", "estimate_variance_components", "weighted_problem", "with_variance_factors", "tested_problem", "KINDS",
-           "MOVING_SIGMA_BOUNDS", "MIN_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]
+           "MOVING_SIGMA_BOUNDS", "MIN_REDUNDANCY", "MIN_LOWERING_REDUNDANCY", "TOLERANCE", "MAX_SOLVES", "FACTOR_MIN", "FACTOR_MAX"]

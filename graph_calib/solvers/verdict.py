@@ -60,6 +60,10 @@ RESIDUAL_ALPHA = 1e-3
 VARIANCE_FACTOR_LIMIT = 4.0
 #: The words of a staged solve's problem (:mod:`graph_calib.solvers.staged`), which the verdict line repeats.
 STAGED_WORDS = "the gyro model does not fit"
+#: Least redundancy of a kind the residual test judges (one degree of freedom).
+MIN_JUDGED_REDUNDANCY = 1.0
+#: The part of the gravity kind's figures the verdict judges where the moving keyframes' are apart (data-format.md).
+STATIC_PART = "static"
 #: The measurement kinds the verdict judges, and the sensor whose noise each is weighted by.
 JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder", "still": "gyro"}
 #: What a kind's residuals measure, where its name does not say (the verdict's words).
@@ -81,6 +85,16 @@ def kind_limits(redundancy, *, alpha=RESIDUAL_ALPHA):
             float(2.0 * gammaincinv(0.5 * nu, 1.0 - 0.5 * alpha) / nu))
 
 
+def judged_figures(kinds, kind):
+    """The figures of ``kinds[kind]`` (a result's ``residuals.kinds``) that the residual test judges: the kind's own,
+    or for gravity with the moving keyframes apart its static keyframes' (:data:`STATIC_PART`: the moving ones'
+    sigma is their own, a guess or estimated, and no claim of the noise model;
+    :func:`graph_calib.model.redundancy.static_gravity`)."""
+    k = kinds.get(kind) or {}
+    static = k.get(STATIC_PART) if kind == "gravity" else None
+    return static if static and static.get("chi2_per_redundancy") is not None else k
+
+
 def judge_kinds(result):
     """``(figures, problems, notes)`` of one result's per-kind residual test.
 
@@ -97,11 +111,18 @@ def judge_kinds(result):
         k = kinds.get(kind)
         if not k or k.get("redundancy") is None or k.get("chi2_per_redundancy") is None:
             continue
-        v, nu = float(k["chi2_per_redundancy"]), float(k["redundancy"])
         vf = float(k.get("variance_factor", 1.0))
+        judged = judged_figures(kinds, kind)
+        v, nu = float(judged["chi2_per_redundancy"]), float(judged["redundancy"])
+        if nu < MIN_JUDGED_REDUNDANCY:
+            # the attitudes and the calibration absorb the kind's residuals: nothing left to test them by (and the
+            # chi-square quantile of a vanishing redundancy is no number)
+            notes.append(f"{kind}: redundancy {nu:.2g}, too little to test its residuals")
+            continue
         lo, hi = kind_limits(nu)
         figures[kind] = {"chi2_per_redundancy": v, "redundancy": nu, "low": lo, "high": hi, "variance_factor": vf}
-        what = f"{kind} chi2/redundancy {v:.3g} (redundancy {nu:.1f})"
+        part = " (static keyframes)" if judged is not k else ""
+        what = f"{kind}{part} chi2/redundancy {v:.3g} (redundancy {nu:.1f})"
         if kind == "encoder" and quiet and source.get("encoder") == "grade":
             problems.append(_quiet_readings_text(what, quiet))
             continue
@@ -185,7 +206,7 @@ def fit_chi2_per_redundancy(block):
     kinds = (block or {}).get("kinds") or {}
     c = r = 0.0
     for kind in JUDGED_KINDS:
-        k = kinds.get(kind) or {}
+        k = judged_figures(kinds, kind)
         if k.get("redundancy") is not None and k.get("chi2") is not None:
             c += float(k["chi2"])
             r += float(k["redundancy"])
@@ -347,5 +368,5 @@ def verdict_of(results, comparison=None, *, structure=()):
                    structure=structure)
 
 
-__all__ = ["Verdict", "verdict_of", "judge_kinds", "kind_limits", "fit_chi2_per_dof", "fit_chi2_per_redundancy",
+__all__ = ["Verdict", "verdict_of", "judge_kinds", "judged_figures", "kind_limits", "fit_chi2_per_dof", "fit_chi2_per_redundancy",
            "RESIDUAL_CHI2_LIMIT", "RESIDUAL_CHI2_LOW", "RESIDUAL_ALPHA", "VARIANCE_FACTOR_LIMIT", "JUDGED_KINDS"]

@@ -86,6 +86,7 @@ def test_a_calibration_that_adds_errors_is_worse_than_raw(ferraris):
     cal = Calibration.from_values(wrong, t_ref_degC=truth.t_ref_degC, parameters=tuple(truth.effects))
     cv = cross_validate(exp, fit=lambda train: cal, folds=2)
     assert "static_norm_std_mps2" in cv.worse_than_raw()
+    assert [i for i, _ in cv.folds_worse_than_raw()] == [0, 1]          # each fold's own figures judged too
     fold = cv.folds[0].fold
     assert held_out_figures(exp, fold).static_norm_std_mps2 == cv.folds[0].raw.static_norm_std_mps2
 
@@ -139,11 +140,11 @@ def test_crossval_by_transitions_writes_null_for_the_figures_it_does_not_hold_ou
     _, path = short_first_rest
     code = main(["crossval", str(path), "--out", str(tmp_path / "cv"), "--grade", "consumer", "--by", "transitions"])
     doc = json.loads((tmp_path / "cv" / "crossval.json").read_text())
-    # the default calibration turns the first fold's held-out motions worse than raw (5.33 against 5.07 deg) while
-    # the pooled figure is better (3.89 against 4.73): one fold worse than none fails the verdict too
-    assert doc["worse_than_raw"] == [] and doc["folds"][0]["worse_than_raw"] == ["transitions_rms_deg"]
+    # each fold's held-out motions better than raw (the first 2.45 against 5.07 deg; 5.33 while the moving keyframes'
+    # gravity factors dragged the gravity kind's variance factor down, docs/model.md "The verdict")
+    assert doc["worse_than_raw"] == [] and all(f["worse_than_raw"] == [] for f in doc["folds"])
     out = capsys.readouterr().out
-    assert code == 3 and "fold 1: transitions_rms_deg" in out
+    assert code == 0
     assert "nan" not in out and "-: not held out" in out        # the table marks what it does not hold out
     for f in doc["folds"]:
         assert f["calibrated"]["static_norm_std_mps2"] is None and f["raw"]["static_rate_rms_dps"] is None

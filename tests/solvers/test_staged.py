@@ -110,9 +110,9 @@ def test_gyro_misfit_no_longer_spoils_the_accelerometer_held_out():
 
 
 def test_screen_gives_the_solved_statistic_to_first_order(monkeypatch):
-    """A clean hand-held fold whose rotation kind opens the gate (its gravity factor within the limit): the one
-    linearisation's statistic is the solved gravity-only stage's within 10 %, and far below the threshold the
-    stage is not solved."""
+    """A clean hand-held fold with the rotation kind's factor raised past the gate (as a gyro misfit would; its own
+    estimate is 1 there), its gravity factor within the limit: the one linearisation's statistic is the solved
+    gravity-only stage's within 10 %, and far below the threshold the stage is not solved."""
     from graph_calib.calibrate import build_problem
     from graph_calib.model.calibration_model import reusing_preintegrations
     from graph_calib.solvers import staged
@@ -125,7 +125,9 @@ def test_screen_gives_the_solved_statistic_to_first_order(monkeypatch):
     with reusing_preintegrations():
         weighted = weighted_problem(build_problem(train, options=options), options=options, solver="factor-graph")
         problem, initial = weighted.problem, weighted.initial
-        factors = problem.model.options.variance_factors
+        assert not gyro_misfit_gate(problem)                      # a clean record's factors: the gate is closed
+        factors = {**problem.model.options.variance_factors, "rotation": 2.0 * VARIANCE_FACTOR_LIMIT}
+        problem = with_variance_factors(problem, factors)
         assert gyro_misfit_gate(problem) and factors["gravity"] <= VARIANCE_FACTOR_LIMIT
         start = initial["factor-graph"]
         gravity_only = with_variance_factors(problem, {**factors, "rotation": GRAVITY_ONLY_FACTOR})

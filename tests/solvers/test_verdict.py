@@ -47,6 +47,27 @@ def test_each_kind_either_side_of_each_limit(kind, side):
     assert v.text().startswith("verdict: FAIL")
 
 
+def test_a_kind_without_a_degree_of_freedom_is_not_tested_but_said():
+    """A training piece whose attitudes absorb every rotation residual (redundancy 1e-4): no chi-square to judge by."""
+    v = verdict_of({"factor-graph": _result({"rotation": (0.498, 1e-4, 1.0), "gravity": (1.0, 900.0, 1.0)})})
+    assert v.passed, v.problems
+    assert any("rotation: redundancy 0.0001, too little to test its residuals" in n for n in v.notes)
+
+
+def test_the_gravity_kind_is_judged_on_its_static_keyframes():
+    """The moving keyframes' gravity factors have a sigma of their own (a guess of 1 m/s^2: chi2 about 0): counted in,
+    a static part at twice its noise would hide behind them."""
+    res = _result({"gravity": (0.6, 900.0, 1.0), "rotation": (1.0, 60.0, 1.0)})
+    res.residuals["kinds"]["gravity"]["static"] = {"count": 150, "chi2": 2.0 * 300.0, "redundancy": 300.0,
+                                                   "chi2_per_redundancy": 2.0}
+    v = verdict_of({"factor-graph": res})
+    assert not v.passed
+    (problem,) = v.problems
+    assert problem.startswith("factor-graph: gravity (static keyframes) chi2/redundancy 2 (redundancy 300.0)")
+    res.residuals["kinds"]["gravity"]["static"].update(chi2=300.0, chi2_per_redundancy=1.0)
+    assert verdict_of({"factor-graph": res}).passed
+
+
 @pytest.mark.parametrize("vf, passes", [(VARIANCE_FACTOR_LIMIT * 0.99, True), (VARIANCE_FACTOR_LIMIT * 1.01, False),
                                          (1 / VARIANCE_FACTOR_LIMIT * 1.01, True), (1 / VARIANCE_FACTOR_LIMIT * 0.99, False)])
 def test_a_variance_factor_far_from_the_identified_noise_fails_naming_the_kind(vf, passes):
