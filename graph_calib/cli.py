@@ -136,7 +136,8 @@ def main(argv=None):
     nothing waits for the collector.  Called with ``argv`` (the tests, other Python code), nothing is frozen.
     """
     if argv is None:
-        sys.stdout = _PipeSafe(sys.stdout)
+        # both streams: ``graph-calib ... 2>&1 | head`` closes the pipe the progress and verdict lines go to as well
+        sys.stdout, sys.stderr = _PipeSafe(sys.stdout), _PipeSafe(sys.stderr)
     code = _main(sys.argv[1:] if argv is None else list(argv))
     if argv is None:
         gc.freeze()
@@ -144,7 +145,7 @@ def main(argv=None):
 
 
 class _PipeSafe:
-    """stdout that survives a reader closing the pipe (``graph-calib ... | head``): the work goes on, the files are
+    """stdout (or stderr) that survives a reader closing the pipe (``graph-calib ... | head``): the work goes on, the files are
     written, the rest of the output is dropped (fd 1 is pointed at /dev/null so that no later flush fails)."""
 
     def __init__(self, stream):

@@ -10,7 +10,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
-from graph_calib.commands.model_options import add_moving, add_still, add_sway, moving_of, still_of, sway_of
+from graph_calib.commands.model_options import finite_float, add_moving, add_still, add_sway, moving_of, still_of, sway_of
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions
@@ -28,10 +28,10 @@ def add_arguments(p):
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals' noise and "
                         "offsets, printed with the reason)")
-    p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
+    p.add_argument("--keyframe", type=finite_float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="model a further effect of model.md (repeatable)")
-    p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
+    p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
     add_sway(p)
     add_moving(p)

@@ -14,7 +14,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import calibrate
 from graph_calib.commands.calibrate_cmd import options_from_args
-from graph_calib.commands.model_options import add_moving, add_still, add_sway
+from graph_calib.commands.model_options import finite_float, add_moving, add_still, add_sway
 from graph_calib.commands.paths import make_output_folder, output_folder
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.diagnosis import DiagnosisOptions, diagnose
@@ -37,10 +37,10 @@ def add_arguments(p):
                    help="calibrate each fold with the closed loop (diagnose) instead of the declared model")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade (default: chosen from the whole record's rests, printed with the reason)")
-    p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
+    p.add_argument("--keyframe", type=finite_float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="model a further effect of model.md (repeatable)")
-    p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
+    p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
     add_sway(p)
     add_moving(p)

@@ -14,7 +14,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from graph_calib.commands.model_options import add_moving, add_still, add_sway, moving_of, still_of, sway_of
+from graph_calib.commands.model_options import finite_float, add_moving, add_still, add_sway, moving_of, still_of, sway_of
 from graph_calib.commands.paths import make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
@@ -34,10 +34,10 @@ def add_arguments(p):
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals, printed with "
                         "the reason)")
-    p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
+    p.add_argument("--keyframe", type=finite_float, default=1.0, help="keyframe interval, s (default 1.0)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="a further effect of model.md in the model from the start, not tested (repeatable)")
-    p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
+    p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--alpha", type=float, default=0.01,
                    help="false-alarm probability of each decision (default 0.01, Bonferroni over the tests)")
     p.add_argument("--max-added", type=int, default=4, help="most effects added (default 4)")

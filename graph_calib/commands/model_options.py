@@ -2,9 +2,21 @@
 
 from __future__ import annotations
 
+import argparse
 import math
 
 from graph_calib.errors import InputError
+
+
+def finite_float(text):
+    """An option's number, refused (exit 2 naming the option) when it is not a finite one (``nan``, ``inf``)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+    return value
 
 
 def add_sway(parser):
@@ -73,7 +85,7 @@ def add_noise(parser, *, grade_default, noise_default):
     parser.add_argument("--grade", choices=GRADE_CHOICES, default=None,
                         help=f"IMU grade for priors and noise (default: {grade_default})")
     for flag, _, metavar, what in _NOISE:
-        parser.add_argument(flag, type=float, default=None, metavar=metavar,
+        parser.add_argument(flag, type=finite_float, default=None, metavar=metavar,
                             help=f"{what} (default: {noise_default})")
 
 
@@ -88,4 +100,4 @@ def noise_of(args):
     return out
 
 
-__all__ = ["add_sway", "sway_of", "add_still", "still_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise", "noise_of"]
+__all__ = ["finite_float", "add_sway", "sway_of", "add_still", "still_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise", "noise_of"]

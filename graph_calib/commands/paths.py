@@ -7,18 +7,31 @@ where it writes a folder (or the reverse) wastes the hour; each command calls
 
 from __future__ import annotations
 
+import tempfile
 from pathlib import Path
 
 from graph_calib.errors import InputError
 
 
 def _parent_ok(path, option):
-    """The nearest existing ancestor of ``path`` is a folder (so the missing ones can be created)."""
+    """The nearest existing ancestor of ``path`` is a folder that takes new entries (so the missing ones can be
+    created)."""
     for parent in path.parents:
         if parent.exists():
             if not parent.is_dir():
                 raise InputError(f"cannot be created: {parent} is a file, not a folder", path=path, dataset=option)
+            _writable(parent, path, option)
             return
+
+
+def _writable(folder, path, option):
+    """A file can be made in ``folder`` (tried: permission bits do not tell for every user, root among them)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".graph-calib-probe-"):
+            pass
+    except OSError as exc:
+        raise InputError(f"cannot be written: {folder} takes no new files ({exc.strerror or exc})", path=path,
+                         dataset=option) from None
 
 
 def output_file(path, *, option="--out", suffixes=None):
@@ -44,7 +57,10 @@ def output_folder(path, *, option="--out"):
     path = Path(path)
     if path.exists() and not path.is_dir():
         raise InputError("is a file; it names the folder to write into", path=path, dataset=option)
-    _parent_ok(path, option)
+    if path.is_dir():
+        _writable(path, path, option)
+    else:
+        _parent_ok(path, option)
     return path
 
 

@@ -22,7 +22,7 @@ from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.design.prediction import expected_variance_factors, predict, prediction_result
 from graph_calib.records.problem import build_problem
-from graph_calib.commands.model_options import add_noise, noise_of
+from graph_calib.commands.model_options import finite_float, add_noise, noise_of
 from graph_calib.simulation.program import nominal_experiment, read_program
 
 
@@ -33,8 +33,8 @@ def add_arguments(p):
               noise_default="identified from the record's rests, as calibrate; a program: the grade's")
     p.add_argument("--effect", action="append", default=[], metavar="NAME",
                    help="further effects of model.md to include (repeatable)")
-    p.add_argument("--keyframe", type=float, default=1.0, help="keyframe interval, s (default 1.0)")
-    p.add_argument("--t-ref", type=float, default=None, help="reference temperature, degC")
+    p.add_argument("--keyframe", type=finite_float, default=1.0, help="keyframe interval, s (default 1.0)")
+    p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--variance-components", action="store_true",
                    help="apply the variance factors calibrate estimates (solves the record, or one simulated noise "
                         "realisation of a program): the sigmas calibrate reports (docs/design.md)")

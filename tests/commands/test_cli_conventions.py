@@ -62,6 +62,32 @@ def test_an_output_path_of_the_wrong_kind_is_refused_before_any_work(tmp_path, c
     assert f"{out}: --out: {expected}" in err and "internal error" not in err
 
 
+@pytest.mark.parametrize("argv", [["calibrate", "x.h5"], ["diagnose", "x.h5"], ["crossval", "x.h5"],
+                                  ["import", "csv", "a.csv"], ["apply", "r.json", "x.h5"], ["export", "camp"]])
+def test_an_output_place_that_takes_no_files_is_refused_before_any_work(tmp_path, capsys, monkeypatch, argv):
+    """A read-only folder (tried by making a file there: permission bits do not tell for root)."""
+    import tempfile
+
+    def refuse(*args, **kwargs):
+        raise PermissionError(13, "Permission denied")
+
+    monkeypatch.setattr(tempfile, "NamedTemporaryFile", refuse)
+    out = tmp_path / "ro" / ("out.h5" if argv[0] in ("import", "apply") else "out.json" if argv[0] == "export" else "o")
+    assert cli.main(argv + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out}: --out: cannot be written: {tmp_path} takes no new files (Permission denied)" in err, err
+    assert not (tmp_path / "ro").exists()
+
+
+@pytest.mark.parametrize("command", ["calibrate", "diagnose", "crossval", "predict"])
+@pytest.mark.parametrize("option, value", [("--keyframe", "nan"), ("--t-ref", "inf"), ("--keyframe", "-inf")])
+def test_a_number_option_that_is_not_finite_is_refused(capsys, command, option, value):
+    with pytest.raises(SystemExit) as exc:
+        cli.main([command, "x.h5", "--out", "o", f"{option}={value}"])
+    assert exc.value.code == 2
+    assert f"argument {option}: must be a finite number, got '{value}'" in capsys.readouterr().err
+
+
 def test_a_closed_pipe_is_not_an_internal_error():
     """``graph-calib ... | head``: the reader closes the pipe before the command writes."""
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
@@ -71,6 +97,16 @@ def test_a_closed_pipe_is_not_an_internal_error():
     err = proc.stderr.read().decode()
     assert proc.wait() == 0, err
     assert "internal error" not in err and "BrokenPipeError" not in err
+
+
+def test_a_closed_pipe_on_both_streams_leaves_the_work_done(tmp_path):
+    """``graph-calib simulate ... 2>&1 | head -1``: the reader goes after the first line; the files are still written."""
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.Popen([sys.executable, "-m", "graph_calib.cli", "simulate", "consumer-ferraris", "--seed", "1",
+                             "--out", str(tmp_path / "sim")], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, env=env)
+    proc.stdout.close()
+    assert proc.wait() == 0
+    assert (tmp_path / "sim" / "ferraris.h5").exists() and (tmp_path / "sim" / "ferraris.truth.json").exists()
 
 
 def test_the_sway_term_is_reachable_from_the_command_line():
