@@ -55,6 +55,10 @@ def _strip_comment(line):
     return line.split("#", 1)[0].strip()
 
 
+#: The column separators a text log may use, by the name ``--delimiter`` takes (None: any whitespace).
+DELIMITERS = {"comma": ",", "semicolon": ";", "tab": "\t", "space": " ", "whitespace": None}
+
+
 def split_cells(line, delimiter):
     """Cells of one line: a one-character delimiter with ``"`` quoting (as numpy reads it), or whitespace."""
     if delimiter is None:
@@ -67,7 +71,7 @@ def split_cells(line, delimiter):
 def data_rows(path, skip_lines):
     """``(line number, text)`` of every data row (1-based; blank and comment lines and the header skipped)."""
     try:
-        with open(path, encoding="utf-8") as fh:
+        with open(path, encoding="utf-8-sig") as fh:
             for no, line in enumerate(fh, start=1):
                 text = _strip_comment(line)
                 if no > skip_lines and text:
@@ -161,7 +165,7 @@ def read_numeric_table(path, *, delimiter=None, skip_lines=0, n_columns=None, us
             "usecols": None if usecols is None else list(usecols), "names": column_names}
     try:
         data = np.loadtxt(path, delimiter=delimiter, skiprows=skip_lines, comments="#", ndmin=2,
-                          dtype=np.float64, encoding="utf-8", quotechar='"', usecols=scan["usecols"])
+                          dtype=np.float64, encoding="utf-8-sig", quotechar='"', usecols=scan["usecols"])
     except UnicodeDecodeError:
         raise InputError("not a UTF-8 text file", path=path) from None
     except ValueError:
@@ -295,4 +299,4 @@ def constant_temperature(n, temperature_degC):
 
 __all__ = ["read_numeric_table", "table_width", "split_cells", "data_rows", "data_line_numbers", "require_file", "show",
            "as_float", "positive", "check_counts", "check_time_column", "nominal_rate", "intervals",
-           "constant_temperature", "build_experiment", "normal_gravity", "ASSUMED_TEMPERATURE_NAME"]
+           "constant_temperature", "build_experiment", "normal_gravity", "ASSUMED_TEMPERATURE_NAME", "DELIMITERS"]

@@ -16,6 +16,7 @@ from graph_calib import constants as c
 from graph_calib.errors import InputError
 from graph_calib.importers.common import (
     ASSUMED_TEMPERATURE_NAME,
+    DELIMITERS,
     as_float,
     build_experiment,
     check_time_column,
@@ -76,7 +77,7 @@ def _resolve_columns(columns, *, path, delimiter, header_lines):
                     raise InputError(f"column {key}={show(col)} names a header column, but header_lines is 0",
                                      dataset="columns")
                 try:
-                    with open(path, encoding="utf-8") as fh:
+                    with open(path, encoding="utf-8-sig") as fh:
                         lines = [fh.readline() for _ in range(header_lines)]
                 except UnicodeDecodeError:
                     raise InputError("not a UTF-8 text file", path=path) from None
@@ -148,7 +149,15 @@ def _time_column(raw, *, time_units, rate_hz, path, skip_lines, segment=None):
             "the time column holds whole numbers one apart, a 1 Hz record if they are seconds: if they count "
             "samples give time units 'samples' (--time-units samples) and the sample rate (--rate-hz); if they "
             "are seconds, confirm with a rate of 1 Hz (--rate-hz 1)", path=path, dataset="time_units")
-    return raw * TIME_UNITS[time_units]
+    seconds = raw * TIME_UNITS[time_units]
+    if seconds.shape[0] >= 2:
+        step = float(np.median(np.diff(seconds)))
+        if step > 1.0:
+            raise InputError(f"the time column advances by {show(step)} s per row read as {time_units} (a "
+                             f"{show(1.0 / step)} Hz record): an IMU samples faster; if the column counts "
+                             f"milliseconds or nanoseconds give --time-units ms or ns", path=path,
+                             dataset="time_units")
+    return seconds
 
 
 def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, time_units=None,
@@ -276,7 +285,7 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
         # keep their exact differences from the first
         try:
             exact = np.loadtxt(path, delimiter=delimiter, skiprows=header_lines, comments="#", ndmin=1,
-                               dtype=np.int64, encoding="utf-8", quotechar='"', usecols=[index["t"]])
+                               dtype=np.int64, encoding="utf-8-sig", quotechar='"', usecols=[index["t"]])
         except ValueError:
             exact = None
         if exact is not None and exact.shape == col["t"].shape:
@@ -293,6 +302,13 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
             raise InputError("sorting needs a time column (t=COLUMN)", dataset="sort")
         order = np.argsort(col["t"], kind="stable")
         col = {k: v[order] for k, v in col.items()}
+        same = np.flatnonzero(np.diff(col["t"]) == 0)
+        if same.size:
+            lines = data_line_numbers(path, header_lines)
+            a, b = sorted((int(lines[order[same[0]]]), int(lines[order[same[0] + 1]])))
+            raise InputError(f"lines {a} and {b} have the same time {show(col['t'][same[0]])}"
+                             f"{' ' + time_units if time_units else ''}: a row logged twice? sorting cannot order "
+                             f"them; remove one", path=path, dataset=f"line {b}")
     timing_note = ""
     if "t" in index:
         t = _time_column(col["t"], time_units=time_units, rate_hz=rate_hz, path=path, skip_lines=header_lines,
@@ -337,8 +353,9 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
         temp_text = f"temperature channels {', '.join(names)} from the log"
     else:
         if temperature_degC is None:
-            raise InputError("no temperature column: map one (temp=COLUMN in --columns) or give an assumed constant "
-                             "temperature (--temperature DEGC)", dataset="temperature_degC")
+            raise InputError("no temperature column: map one (temp=COLUMN in --columns, or a header column named "
+                             "temp or temperature) or give an assumed constant temperature (--temperature "
+                             "DEGC)", path=path, dataset="--temperature")
         temperature, names = constant_temperature(n, temperature_degC)
         temp_text = (f"no temperature was recorded: channel '{ASSUMED_TEMPERATURE_NAME}' holds an assumed "
                      f"{float(temperature_degC):g} degC")
@@ -379,7 +396,6 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
 # ---------------------------------------------------------------------------
 
 #: Names of delimiters on the command line.
-DELIMITERS = {"comma": ",", "semicolon": ";", "tab": "\t", "space": " ", "whitespace": None}
 
 
 def parse_columns(text):

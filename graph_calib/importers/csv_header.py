@@ -5,7 +5,7 @@ ignored): time ``t``, ``time``, ``timestamp``, ``stamp``, ``%time``, ``header.st
 gyro ``gx``, ``gyro_x``, ``gyr_x``, ``omega_x``, ``wx``, ``w_x``, ``angular_velocity.x``,
 EuRoC's ``w_RS_S_x``; accelerometer ``ax``, ``acc_x``, ``accel_x``, ``a_x``, ``alpha_x``
 (Kalibr's ``imu0.csv``), ``linear_acceleration.x``, EuRoC's ``a_RS_S_x``;
-temperature ``temp``, ``temperature``, ``temp_c``, ``temperature_degc``; ``segment``.
+temperature ``temp``, ``temperature``, ``temp_c``, ``temperature_degc``, ``imu_temp``, ``temp_imu``; ``segment``.
 Units in brackets set the units (``[ns]``, ``[rad s^-1]``, ``[deg/s]``, ``[m s^-2]``,
 ``[g]``); a time column of whole numbers above 1e12 without a unit is read as
 nanoseconds (Kalibr's and ROS's stamps), and the note says so.
@@ -16,7 +16,7 @@ from __future__ import annotations
 import re
 
 from graph_calib.errors import InputError
-from graph_calib.importers.common import data_rows, require_file, split_cells
+from graph_calib.importers.common import DELIMITERS, data_rows, require_file, split_cells
 
 _AXES = "xyz"
 _NAMES = {"t": ("t", "time", "timestamp", "stamp", "%time", "header.stamp", "time_s", "timestamp_s")}
@@ -25,7 +25,8 @@ for _i, _a in enumerate(_AXES):
                         f"angular_velocity.{_a}", f"w_rs_s_{_a}", f"gyroscope_{_a}")
     _NAMES[f"a{_a}"] = (f"a{_a}", f"acc_{_a}", f"accel_{_a}", f"acc{_a}", f"accel{_a}", f"a_{_a}", f"alpha_{_a}",
                         f"linear_acceleration.{_a}", f"a_rs_s_{_a}", f"accelerometer_{_a}")
-_NAMES["temp"] = ("temp", "temperature", "temp_c", "temperature_degc", "temp_degc", "imu_temp")
+_NAMES["temp"] = ("temp", "temperature", "temp_c", "temperature_degc", "temp_degc", "imu_temp", "temp_imu",
+                  "imu_temperature", "temperature_imu")
 _NAMES["segment"] = ("segment",)
 _LOOKUP = {alias: key for key, aliases in _NAMES.items() for alias in aliases}
 _UNITS = {"ns": ("time", "ns"), "us": ("time", "us"), "ms": ("time", "ms"), "s": ("time", "s"),
@@ -68,7 +69,7 @@ def detect_layout(path, *, delimiter):
         A header that names no gyro or accelerometer triad in a known way (naming what it found).
     """
     path = require_file(path)
-    with open(path, encoding="utf-8", errors="replace") as fh:
+    with open(path, encoding="utf-8-sig", errors="replace") as fh:
         first = fh.readline().strip()
     cells = split_cells(first, delimiter)
     try:
@@ -91,6 +92,11 @@ def detect_layout(path, *, delimiter):
                 units[kind] = uname
     missing = [k for k in ("gx", "gy", "gz", "ax", "ay", "az") if k not in columns]
     if missing:
+        other = next((name for name, d in DELIMITERS.items() if d not in (delimiter, None, " ") and len(cells) == 1
+                      and len(split_cells(first, d)) > 1), None)
+        if other is not None:
+            raise InputError(f"the header line is one column ({first[:60]}) but splits at each {other}: give "
+                             f"--delimiter {other}", path=path, dataset="line 1")
         raise InputError(f"the header line names its columns ({', '.join(cells)}) but none is a known name for "
                          f"{', '.join(missing)}: give --columns (e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6)",
                          path=path, dataset="line 1")

@@ -39,7 +39,7 @@ MPU6050_NOTICE = "UNCuyo ImuCalibration sample data, MIT licence: Copyright (c) 
 
 def _read_mpu6050_header(path):
     """The four ``key,value`` header lines and the column line; returns (fs_hz, header dict)."""
-    with open(path, encoding="utf-8") as fh:
+    with open(path, encoding="utf-8-sig") as fh:
         lines = [fh.readline() for _ in range(5)]
     header = {}
     for no, line in enumerate(lines[:4], start=1):

@@ -137,7 +137,67 @@ def test_a_missing_temperature_names_the_option(tmp_path, capsys):
     omega, f = _signals(50)
     path = _write(tmp_path / "t.csv", "t,gx,gy,gz,ax,ay,az", _rows(np.arange(50) / RATE, omega, f))
     assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--out", str(tmp_path / "x.h5")]) == 2
-    assert ("no temperature column: map one (temp=COLUMN in --columns) or give an assumed constant temperature "
-            "(--temperature DEGC)") in capsys.readouterr().err
+    assert (f"{path}: --temperature: no temperature column: map one (temp=COLUMN in --columns, or a header column "
+            "named temp or temperature) or give an assumed constant temperature (--temperature DEGC)"
+            ) in capsys.readouterr().err
     assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--temperature", "21",
                      "--out", str(tmp_path / "x.h5")]) == 0
+
+
+def test_a_header_column_temp_imu_is_the_temperature(tmp_path):
+    omega, f = _signals(50)
+    path = _write(tmp_path / "t.csv", "t,gx,gy,gz,ax,ay,az,temp_imu",
+                  _rows(np.arange(50) / RATE, omega, f, np.full(50, 21.0)))
+    from graph_calib.importers.csv import FORMAT
+    exp = FORMAT.read([path], {"latitude_rad": LAT})
+    assert np.all(exp.temperature == 21.0)
+
+
+def test_a_byte_order_mark_before_the_header_is_read_past(tmp_path):
+    omega, f = _signals(50)
+    path = _write(tmp_path / "bom.csv", "timestamp,gx,gy,gz,ax,ay,az,temp",
+                  _rows(np.arange(50) / RATE, omega, f, np.full(50, 21.0)))
+    path.write_bytes(b"\xef\xbb\xbf" + path.read_bytes())
+    from graph_calib.importers.csv import FORMAT
+    exp = FORMAT.read([path], {"latitude_rad": LAT})
+    assert exp.n_samples == 50 and exp.rate_hz == RATE
+
+
+@pytest.mark.parametrize("sep, name", [(";", "semicolon"), ("\t", "tab")])
+def test_a_header_split_by_another_separator_names_the_delimiter_option(tmp_path, sep, name):
+    omega, f = _signals(20)
+    rows = _rows(np.arange(20) / RATE, omega, f, np.full(20, 21.0))
+    path = tmp_path / "s.csv"
+    path.write_text(sep.join("t gx gy gz ax ay az temp".split()) + "\n"
+                    + "\n".join(sep.join(map(str, r)) for r in rows) + "\n")
+    from graph_calib.importers.csv import FORMAT
+    with pytest.raises(InputError, match=re.escape(f"line 1: the header line is one column (t{sep}gx") + ".*"
+                       + re.escape(f"but splits at each {name}: give --delimiter {name}")):
+        FORMAT.read([path], {"latitude_rad": LAT})
+    exp = FORMAT.read([path], {"latitude_rad": LAT, "delimiter": sep})
+    assert exp.n_samples == 20
+
+
+def test_a_row_logged_twice_is_named_when_sorting(tmp_path):
+    omega, f = _signals(100)
+    rows = _rows(np.arange(100) / RATE, omega, f, np.full(100, 20.0))
+    rows.insert(40, list(rows[39]))                      # line 41 repeats line 40
+    order = np.random.default_rng(3).permutation(len(rows))
+    path = _write(tmp_path / "d.csv", None, [rows[k] for k in order])
+    lines = sorted(int(np.flatnonzero(order == k)[0]) + 1 for k in (39, 40))
+    with pytest.raises(InputError, match=re.escape(f"line {lines[1]}: lines {lines[0]} and {lines[1]} have the same "
+                                                   "time 0.39 s: a row logged twice? sorting cannot order them; "
+                                                   "remove one")):
+        import_csv(path, columns=COLS, latitude_rad=LAT, sort=True)
+
+
+@pytest.mark.parametrize("scale, units", [(1e3, "ms"), (1e9, "ns")])
+def test_a_time_column_in_other_units_read_as_seconds_is_refused(tmp_path, scale, units):
+    omega, f = _signals(100)
+    path = _write(tmp_path / "ms.csv", None, _rows(np.arange(100) / RATE * scale, omega, f, np.full(100, 20.0)))
+    with pytest.raises(InputError, match=re.escape("time_units: the time column advances by ") + ".*"
+                       + re.escape("an IMU samples faster; if the column counts milliseconds or nanoseconds give "
+                                   "--time-units ms or ns")):
+        import_csv(path, columns=COLS, latitude_rad=LAT, time_units="s")
+    exp = import_csv(path, columns=COLS, latitude_rad=LAT, time_units=units)
+    assert exp.rate_hz == pytest.approx(RATE)

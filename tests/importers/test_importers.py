@@ -305,7 +305,7 @@ def test_csv_errors(tmp_path):
         importers.import_csv(path, columns={**COLS, "temp": 9}, **kw)
     with pytest.raises(InputError, match="rate_hz: no time column: give the sample rate"):
         importers.import_csv(path, columns={k: v for k, v in COLS.items() if k != "t"}, **kw)
-    with pytest.raises(InputError, match="temperature_degC: no temperature column"):
+    with pytest.raises(InputError, match="--temperature: no temperature column"):
         importers.import_csv(path, columns={k: v for k, v in COLS.items() if k != "temp"}, **kw)
     with pytest.raises(InputError, match="gyro_units: unknown gyro units 'rpm'"):
         importers.import_csv(path, columns=COLS, gyro_units="rpm", **kw)
