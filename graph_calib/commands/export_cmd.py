@@ -16,6 +16,7 @@ a suffix that belongs to another format is refused (never JSON under a YAML name
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -49,7 +50,7 @@ def add_arguments(p):
                    help=f"px4, ardupilot, kalibr, openvins: largest rate over which the loss is reported, deg/s "
                         f"(default {DEFAULT_ENVELOPE_DPS:g}; the specific force is 1 g in any direction)")
     p.add_argument("--instance", type=int, default=None, metavar="N",
-                   help="px4: TC_G{N}/TC_A{N} (default 0); ardupilot: INS_TCAL{N} (default 1)")
+                   help="px4: TC_G{N}/TC_A{N}, 0-3 (default 0); ardupilot: INS_TCAL{N}, 1-3 (default 1)")
     p.add_argument("--gyro-id", type=int, default=0, metavar="ID",
                    help="px4: TC_G{N}_ID, the gyro's device id (default 0: set it before loading)")
     p.add_argument("--accel-id", type=int, default=0, metavar="ID",
@@ -81,6 +82,11 @@ def _format(args, out):
 
 
 def _table(args, out, fmt):
+    source = Path(args.source)
+    if source.is_file() and source.name != "campaign.json":
+        raise InputError(f"--format {fmt} writes a compensation table over temperature, made from a campaign (its "
+                         f"folder or campaign.json); a single result exports as "
+                         f"{', '.join(f for f in EXPORT_FORMATS)}", path=source, dataset="--format")
     if args.solver == JOINT:       # the joint campaign solver's curves (docs/campaign.md), not a stitching
         if args.model:
             raise InputError("the joint calibration has one curve form; --model chooses among stitched models",
@@ -108,6 +114,10 @@ def _table(args, out, fmt):
     return 0
 
 
+#: The instance numbers each autopilot's parameters take (PX4 ``TC_G{N}``, ArduPilot ``INS_TCAL{N}``), first and last.
+INSTANCES = {"px4": (0, 3), "ardupilot": (1, 3)}
+
+
 def export_document(args, fmt):
     """The source and the format's document (loss included) for ``args``: what ``run`` writes."""
     spec = EXPORT_FORMATS[fmt]
@@ -116,10 +126,16 @@ def export_document(args, fmt):
     source = load_source(args.source, solver=args.solver, model=args.model, force=args.force)
     options = {"envelope_dps": args.envelope_dps}
     if "instance" in spec.options:
-        options["instance"] = (0 if fmt == "px4" else 1) if args.instance is None else args.instance
+        first, last = INSTANCES[fmt]
+        instance = first if args.instance is None else args.instance
+        if not first <= instance <= last:
+            raise InputError(f"{fmt} numbers its instances {first} to {last}, got {instance}", dataset="--instance")
+        options["instance"] = instance
     if "gyro_id" in spec.options:
         options.update(gyro_id=args.gyro_id, accel_id=args.accel_id)
     if "rate_hz" in spec.options:
+        if args.rate_hz is not None and not (math.isfinite(args.rate_hz) and args.rate_hz > 0):
+            raise InputError(f"must be a positive sample rate in Hz, got {args.rate_hz!r}", dataset="--rate-hz")
         rate = args.rate_hz or source.rate_hz
         if not rate:
             raise InputError("the calibrated record's rate was not found beside the result: give it "

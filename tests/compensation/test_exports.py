@@ -238,3 +238,27 @@ def test_export_of_a_table_is_refused_naming_the_remedy(sources, tmp_path, capsy
     assert cli.main(["export", str(sources["campaign"]), "--out", str(table)]) == 0
     assert cli.main(["export", str(table), "--format", "px4", "--out", str(tmp_path / "t.params")]) == 2
     assert "export from the campaign folder or the result file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("fmt", ["json", "csv", "c-header"])
+def test_a_table_format_of_a_single_result_names_what_it_needs(sources, tmp_path, capsys, fmt):
+    out = tmp_path / f"t.{ {'json': 'json', 'csv': 'csv', 'c-header': 'h'}[fmt] }"
+    assert cli.main(["export", str(sources["result"]), "--format", fmt, "--out", str(out)]) == 2
+    assert (f"--format: --format {fmt} writes a compensation table over temperature, made from a campaign (its "
+            "folder or campaign.json); a single result exports as px4, ardupilot, kalibr, openvins"
+            ) in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("fmt, extra, message", [
+    ("px4", ["--instance", "-1"], "--instance: px4 numbers its instances 0 to 3, got -1"),
+    ("px4", ["--instance", "4"], "--instance: px4 numbers its instances 0 to 3, got 4"),
+    ("ardupilot", ["--instance", "0"], "--instance: ardupilot numbers its instances 1 to 3, got 0"),
+    ("kalibr", ["--rate-hz", "nan"], "--rate-hz: must be a positive sample rate in Hz, got nan"),
+    ("openvins", ["--rate-hz", "-5"], "--rate-hz: must be a positive sample rate in Hz, got -5.0"),
+])
+def test_an_instance_or_rate_the_consumer_cannot_take_is_refused(sources, tmp_path, capsys, fmt, extra, message):
+    out = tmp_path / {"px4": "x.params", "ardupilot": "x.parm", "kalibr": "x.yaml", "openvins": "x.yaml"}[fmt]
+    assert cli.main(["export", str(sources["result"]), "--format", fmt, "--out", str(out), *extra]) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
