@@ -49,6 +49,7 @@ from typing import Mapping
 from graph_calib.constants import RAD_TO_ARCSEC
 from graph_calib.model.options import SWAY_SEEN_KEY
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
+from graph_calib.solvers.results import PRIOR_DOMINATED_RATIO
 
 #: Largest chi-square per measurement component of a result without redundancies (the old statistic).
 RESIDUAL_CHI2_LIMIT = 2.0
@@ -60,6 +61,8 @@ RESIDUAL_ALPHA = 1e-3
 VARIANCE_FACTOR_LIMIT = 4.0
 #: The words of a staged solve's problem (:mod:`graph_calib.solvers.staged`), which the verdict line repeats.
 STAGED_WORDS = "the gyro model does not fit"
+#: The share of a result's elements held by their priors from which the verdict says so.
+PRIOR_HELD_SHARE = 0.5
 #: Least redundancy of a kind the residual test judges (one degree of freedom).
 MIN_JUDGED_REDUNDANCY = 1.0
 #: The part of the gravity kind's figures the verdict judges where the moving keyframes' are apart (data-format.md).
@@ -341,6 +344,11 @@ def verdict_of(results, comparison=None, *, structure=()):
             problems.append(f"the solvers disagree: max |difference| {maxdiff:.3g} sigma, sigma ratio range {rr}"
                             + _cost_words(results, comparison))
     for s, r in results.items():
+        held = (r.extra or {}).get("prior_dominated") or {}
+        if r.values and len(held) >= PRIOR_HELD_SHARE * len(r.values):
+            notes.append(f"{s}: {len(held)} of {len(r.values)} elements are held by their priors (sigma above "
+                         f"{PRIOR_DOMINATED_RATIO:g} of the prior's): the record informs little of this model, and "
+                         "their values and sigmas are the priors' (prior_dominated in the result)")
         figures, kp, kn = judge_kinds(r)
         if figures:
             kinds[s] = figures

@@ -203,3 +203,17 @@ def test_rests_that_turn_fail_the_still_kind_in_words():
     (problem,) = v.problems
     assert "the still (the rests' gyro integrals against the Earth's turn) residuals are larger" in problem
     assert "the unit turned while it rested" in problem and "--still-rests" not in problem
+
+
+def test_a_result_held_by_its_priors_is_said():
+    """A 3 s record: 31 of 33 elements at their priors' sigma; the verdict may pass, but says so."""
+    res = _result({"gravity": (1.0, 900.0, 1.0), "rotation": (1.0, 60.0, 1.0)})
+    names = [f"e{i}" for i in range(4)]
+    res = replace(res, values=dict.fromkeys(names, 0.0), sigmas=dict.fromkeys(names, 1.0),
+                  extra={**res.extra, "prior_dominated": {"e0": 0.99, "e1": 0.95}})
+    v = verdict_of({"factor-graph": res})
+    assert v.passed
+    assert ("factor-graph: 2 of 4 elements are held by their priors (sigma above 0.7 of the prior's): the record "
+            "informs little of this model") in " ".join(v.notes)
+    res = replace(res, extra={**res.extra, "prior_dominated": {"e0": 0.99}})
+    assert not any("held by their priors" in n for n in verdict_of({"factor-graph": res}).notes)
