@@ -444,6 +444,12 @@ def _read(inputs, options):
             raise InputError("required for format csv when the first line holds no column names (e.g. "
                              "t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6,temp=7)", dataset="--columns")
         header_lines = 1 if header_lines is None else header_lines
+    for kind, option in (("time", "time_units"), ("gyro", "gyro_units"), ("accel", "accel_units")):
+        given, said = options.get(option), units.get(kind)
+        if given is not None and said is not None and given != said:
+            raise InputError(f"the header line says the {kind} column is in {said}, but {given} is given: give "
+                             f"--{option.replace('_', '-')} only where the header says nothing (or leave it out)",
+                             path=inputs[0], dataset=f"--{option.replace('_', '-')}")
     options["_notes"] = notes
     return import_csv(
         inputs[0], columns=columns, latitude_rad=options["latitude_rad"], gravity_mps2=options.get("gravity_mps2"),

@@ -201,3 +201,20 @@ def test_a_time_column_in_other_units_read_as_seconds_is_refused(tmp_path, scale
         import_csv(path, columns=COLS, latitude_rad=LAT, time_units="s")
     exp = import_csv(path, columns=COLS, latitude_rad=LAT, time_units=units)
     assert exp.rate_hz == pytest.approx(RATE)
+
+
+@pytest.mark.parametrize("option, value, said", [("gyro_units", "deg/s", "rad/s"), ("time_units", "s", "ns")])
+def test_a_units_option_against_the_headers_units_is_refused(tmp_path, option, value, said):
+    """EuRoC's header names its units; a --gyro-units deg/s beside it made the rates 57 times too small."""
+    n = 50
+    omega, f = _signals(n)
+    stamps = 1_400_000_000 * 10**9 + np.arange(n, dtype=np.int64) * (10**9 // int(RATE))
+    header = ("#timestamp [ns],w_RS_S_x [rad s^-1],w_RS_S_y [rad s^-1],w_RS_S_z [rad s^-1],a_RS_S_x [m s^-2],"
+              "a_RS_S_y [m s^-2],a_RS_S_z [m s^-2],temp")
+    path = _write(tmp_path / "e.csv", header, [[int(stamps[k]), *omega[k], *f[k], 21.5] for k in range(n)])
+    from graph_calib.importers.csv import FORMAT
+    flag = "--" + option.replace("_", "-")
+    with pytest.raises(InputError, match=re.escape(f"{flag}: the header line says the {option.split('_')[0]} column "
+                                                   f"is in {said}, but {value} is given")):
+        FORMAT.read([path], {"latitude_rad": LAT, option: value})
+    assert FORMAT.read([path], {"latitude_rad": LAT, option: said}).n_samples == n
