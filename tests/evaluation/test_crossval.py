@@ -101,6 +101,8 @@ def test_crossval_command_writes_its_file_and_its_exit_code_follows_the_figures(
     out = capsys.readouterr().out
     assert "transitions rms" in out and ("verdict: FAIL" in out) == failed
     assert doc["by"] == "rests" and doc["grade"] == "consumer"
+    faces = any("static_norm_std_mps2" in f["worse_than_raw"] for f in doc["folds"])
+    assert ("--by transitions keeps every rest in training" in out) == faces
 
 
 def test_crossval_refuses_too_few_folds_and_too_few_rests(ferraris, tmp_path, capsys):
