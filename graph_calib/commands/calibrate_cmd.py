@@ -99,6 +99,11 @@ def run(args):
     if calibration.comparison is not None:
         io.atomic_write_json(out / "comparison.json", calibration.comparison)
         print(f"  comparison: {comparison_text(calibration.comparison['summary'])} -> {out / 'comparison.json'}")
+    written = {f"{s}.json" for s in calibration.results} | ({"comparison.json"} if calibration.comparison else set())
+    earlier = sorted(p.name for p in out.iterdir() if p.name not in written and p.suffix == ".json"
+                     and (p.stem in registry.solver_names() or p.name == "comparison.json"))
+    if earlier:
+        print(f"  note: {out} also holds {', '.join(earlier)} of an earlier run, not this one's", file=sys.stderr)
     verdict = calibration.verdict
     for problem in verdict.problems:
         print(f"  {problem}")

@@ -134,3 +134,19 @@ def test_the_moving_sigma_is_reachable_from_the_command_line(command):
     args = p.parse_args([command, "x.h5", "--out", "o", "--moving-sigma", "small"])
     with pytest.raises(InputError, match="--moving-sigma: must be 'estimate' or a non-negative number of m/s"):
         calibrate_cmd.options_from_args(args)
+
+
+def test_files_of_an_earlier_run_in_the_output_folder_are_named(tmp_path, capsys):
+    """A second calibrate with one solver into the folder of a run with two: the other solver's file is not this run's."""
+    data = tmp_path / "sim"
+    assert cli.main(["simulate", "nav-subrange-short", "--seed", "3", "--hours", "0.05", "--out", str(data)]) == 0
+    (h5,) = data.glob("*.h5")
+    out = tmp_path / "cal"
+    out.mkdir()
+    (out / "sqrt-kf.json").write_text("{}")
+    (out / "comparison.json").write_text("{}")
+    (out / "notes.json").write_text("{}")                     # not a file the command writes: not named
+    capsys.readouterr()
+    assert cli.main(["calibrate", str(h5), "--out", str(out), "--solver", "factor-graph"]) in (0, 3)
+    err = capsys.readouterr().err
+    assert f"note: {out} also holds comparison.json, sqrt-kf.json of an earlier run, not this one's" in err
