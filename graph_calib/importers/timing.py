@@ -26,6 +26,9 @@ from graph_calib.io import MAX_GAP_PERIODS
 JITTER_TOLERANCE_PERIODS = 4.0
 #: Largest relative difference between the rate of the stamps' end points and the nominal rate for that reading.
 JITTER_RATE_TOLERANCE = 0.01
+#: A spacing of stamps whose standard deviation is above this share of the median spacing is jitter to look at
+#: (a sample clock's spacing varies by well under a per cent).
+JITTER_SPACING = 0.05
 
 
 #: What a logged rate is: the mean over the interval its stamp closes, or a sample at the stamp.
@@ -121,7 +124,14 @@ def regular_times(t, rate_hz, *, segment=None, source="the log", given_rate=Fals
     """
     d = np.diff(t)
     limit = MAX_GAP_PERIODS / rate_hz
-    if segment is not None or t.shape[0] < 3 or not np.any(d > limit):
+    if segment is not None or t.shape[0] < 3:
+        return t, rate_hz, ""
+    gaps = bool(np.any(d > limit))
+    # stamps taken on arrival scatter about the sample clock even where no gap shows: a spacing that varies by more
+    # than JITTER_SPACING of the period is no sample clock's (each sample's increment is its rate times that
+    # spacing, so the per-sample noise the record shows would be the stamps' scatter)
+    scattered = float(np.std(d)) > JITTER_SPACING * float(np.median(d))
+    if not gaps and not scattered:
         return t, rate_hz, ""
     k = np.arange(t.shape[0], dtype=float)
     end_rate = (t.shape[0] - 1) / (t[-1] - t[0])
@@ -131,10 +141,12 @@ def regular_times(t, rate_hz, *, segment=None, source="the log", given_rate=Fals
     jitter = (abs(end_rate / rate - 1.0) <= JITTER_RATE_TOLERANCE
               and departure <= JITTER_TOLERANCE_PERIODS)
     if jitter:
-        note = (f"time stamps of {source} jitter (largest gap {d[worst]:.4g} s, {d[worst] * rate:.3g} periods) but "
-                f"follow the sample index within {departure:.2g} periods, so no sample is missing: t = t0 + k / "
-                f"{rate:g} Hz")
+        note = (f"time stamps of {source} jitter (largest gap {d[worst]:.4g} s, {d[worst] * rate:.3g} periods; "
+                f"spacing scatter {np.std(d) * rate:.2g} periods) but follow the sample index within {departure:.2g} "
+                f"periods, so no sample is missing: t = t0 + k / {rate:g} Hz")
         return t[0] + k / rate, rate, note
+    if not gaps:
+        return t, rate_hz, ""
     first = int(np.flatnonzero(d > limit)[0])
     raise InputError(
         f"gap of {d[first]:.6g} s ({d[first] * rate_hz:.4g} nominal periods) before sample {first + 1} (at "

@@ -218,3 +218,28 @@ def test_a_units_option_against_the_headers_units_is_refused(tmp_path, option, v
                                                    f"is in {said}, but {value} is given")):
         FORMAT.read([path], {"latitude_rad": LAT, option: value})
     assert FORMAT.read([path], {"latitude_rad": LAT, option: said}).n_samples == n
+
+
+def test_stamps_jittered_within_a_period_follow_the_sample_index(tmp_path):
+    """Stamps taken on arrival, +-4 ms about a 100 Hz clock, in order and no gap: taken as they were, each sample's
+    increment carried the stamps' scatter and the calibration read it as accelerometer noise (variance factor 0.01)."""
+    n = 400
+    omega, f = _signals(n)
+    t = np.arange(n) / RATE + np.random.default_rng(5).uniform(-0.004, 0.004, n)
+    exp = import_csv(_write(tmp_path / "j.csv", None, _rows(t, omega, f, np.full(n, 20.0))), columns=COLS,
+                     latitude_rad=LAT)
+    np.testing.assert_allclose(np.diff(exp.t), np.diff(exp.t)[0], rtol=1e-9)
+    assert exp.rate_hz == pytest.approx(RATE, rel=2e-3)
+    assert "follow the sample index" in exp.description and "spacing scatter" in exp.description
+    np.testing.assert_allclose(exp.dv[1:] * exp.rate_hz, f[1:], rtol=1e-6)
+
+
+def test_a_sample_clock_s_stamps_are_kept(tmp_path):
+    """A clock whose spacing varies by a fraction of a per cent (a drifting crystal): its stamps stay."""
+    n = 400
+    omega, f = _signals(n)
+    t = np.cumsum(np.full(n, 1.0 / RATE) * (1.0 + 0.002 * np.sin(np.arange(n) / 30.0)))
+    exp = import_csv(_write(tmp_path / "c.csv", None, _rows(t, omega, f, np.full(n, 20.0))), columns=COLS,
+                     latitude_rad=LAT)
+    np.testing.assert_allclose(exp.t, t - t[0] + exp.t[0], atol=1e-12)
+    assert "follow the sample index" not in exp.description
