@@ -36,3 +36,13 @@ def _first(mask):
     if mask.ndim > 1:
         mask = mask.reshape(mask.shape[0], -1).any(axis=1)
     return int(np.flatnonzero(mask)[0])
+
+
+def version_problem(version, known):
+    """What is wrong with a file's ``version`` for a reader that knows version ``known`` (None when nothing): a
+    version stored as text or as a fraction is not a version number (``'1'`` is not 1)."""
+    if not _is_int(version):
+        return f"must be the integer {known}, got {type(version).__name__} {_show(version)}"
+    if version != known:
+        return f"version {_show(version)} is not supported (this reader knows version {known})"
+    return None

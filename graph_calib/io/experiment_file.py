@@ -36,7 +36,7 @@ from graph_calib import constants as c
 from graph_calib.errors import InputError
 from graph_calib.records.experiment import Experiment, Table
 from graph_calib.io.atomic import atomic_path
-from graph_calib.io.checks import _first, _is_int, _is_real, _show
+from graph_calib.io.checks import _first, _is_int, _is_real, _show, version_problem
 
 # ---------------------------------------------------------------------------
 # Format identifiers and validation thresholds (docs/data-format.md explains each)
@@ -454,9 +454,9 @@ def read_experiment(path):
             raise InputError(f"format is {_show(fmt)}, expected {_show(EXPERIMENT_FORMAT)}",
                              path=path, dataset=_ROOT.format("format"))
         version = _attr_scalar(_require_attr(f, "version", path, _ROOT.format("version")))
-        if not _is_int(version) or version != EXPERIMENT_VERSION:
-            raise InputError(f"version {_show(version)} is not supported (this reader knows version {EXPERIMENT_VERSION})",
-                             path=path, dataset=_ROOT.format("version"))
+        problem = version_problem(version, EXPERIMENT_VERSION)
+        if problem:
+            raise InputError(problem, path=path, dataset=_ROOT.format("version"))
         root = {name: _attr_scalar(_require_attr(f, name, path, _ROOT.format(name)))
                 for name in ("latitude_rad", "gravity_mps2", "imu_id")}
         description = _attr_scalar(f.attrs.get("description", ""))

@@ -18,7 +18,7 @@ from graph_calib.sensors import effects, params
 from graph_calib.errors import InputError
 from graph_calib.records.experiment import Result
 from graph_calib.io.atomic import atomic_write_text, dumps_json
-from graph_calib.io.checks import _first, _is_int, _is_real, _show
+from graph_calib.io.checks import _first, _is_int, _is_real, _show, version_problem
 
 RESULT_FORMAT = "imu-calibration-result"
 RESULT_VERSION = 1
@@ -304,9 +304,9 @@ def read_result(path):
             raise InputError("missing key", path=path, dataset=key)
     if doc["format"] != RESULT_FORMAT:
         raise InputError(f"format is {_show(doc['format'])}, expected {_show(RESULT_FORMAT)}", path=path, dataset="format")
-    if not _is_int(doc["version"]) or doc["version"] != RESULT_VERSION:
-        raise InputError(f"version {_show(doc['version'])} is not supported (this reader knows version {RESULT_VERSION})",
-                         path=path, dataset="version")
+    problem = version_problem(doc["version"], RESULT_VERSION)
+    if problem:
+        raise InputError(problem, path=path, dataset="version")
     for key in _REQUIRED_RESULT_KEYS:
         if key not in doc:
             raise InputError("missing key", path=path, dataset=key)
