@@ -35,7 +35,8 @@ def add_arguments(p):
     p.add_argument("--again", action="store_true",
                    help="correct a record that is already corrected (subtracts the sensor errors a second time)")
     p.add_argument("--force", action="store_true",
-                   help="apply a result or campaign whose verdict failed (refused otherwise, exit 2)")
+                   help="apply a result or campaign whose verdict failed, or a result of another IMU (refused "
+                        "otherwise, exit 2)")
 
 
 def run(args):
@@ -50,6 +51,10 @@ def run(args):
         raise InputError(f"its verdict failed ({failed}); a calibration that failed its own checks is not applied "
                          "without --force", path=args.calibration, dataset="verdict")
     experiment = io.read_experiment(src)
+    other = provenance.get("imu_id") if provenance["kind"] == "result" else None
+    if other and experiment.imu_id and other != experiment.imu_id and not args.force:
+        raise InputError(f"is a record of IMU {experiment.imu_id!r}, the calibration is of IMU {other!r}: one unit's "
+                         "errors are not another's (--force applies it anyway)", path=src, dataset="imu_id")
     before = correction_of(src)
     if before is not None and not args.again:
         what = before.get("file") or before.get("text") or "?"
@@ -71,6 +76,9 @@ def run(args):
               file=sys.stderr)
     if failed:
         print(f"  warning: applied with --force although its verdict failed ({failed})", file=sys.stderr)
+    if other and experiment.imu_id and other != experiment.imu_id:
+        print(f"  warning: applied with --force to a record of IMU {experiment.imu_id!r}, the calibration is of IMU "
+              f"{other!r}", file=sys.stderr)
     for name, r in provenance.get("unresolved_not_applied", {}).items():
         gs = {k: v for k, v in r["elements"].items() if k.startswith("gyro.g_sensitivity")}
         size = max((abs(v) for v in gs.values()), default=0.0)

@@ -96,6 +96,8 @@ def read_compensation(path, *, solver=None, model=None):
                 if isinstance(result.extra.get(JOINT), dict) else Calibration.from_result(result))
         prov.update(solver=result.solver, source=result.source, t_ref_degC=result.t_ref_degC,
                     temperature_range_degC=list(result.temperature_range_degC))
+        if result.extra.get("imu_id"):
+            prov["imu_id"] = str(result.extra["imu_id"])
         if isinstance(result.extra.get("verdict"), dict):
             prov["verdict"] = result.extra["verdict"]
         if result.extra.get("unresolved") and isinstance(comp, Calibration):

@@ -143,6 +143,7 @@ def to_result(model, output, *, extra=None):
     T = model.temperatures
     ex = {"priors": model.priors_used(), "keyframe_s": model.options.keyframe_s, "grade": model.options.grade,
           "prior_dominated": prior_dominated(model, output),
+          "imu_id": model.experiment.imu_id,
           "noise": noise_block(model)}
     if model.options.grade_choice:     # chosen from the record's rests (no grade given)
         ex["grade_choice"] = dict(model.options.grade_choice)

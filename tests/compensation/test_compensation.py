@@ -606,3 +606,25 @@ def test_written_tables_are_atomic_and_bench_parameters_stay_out(stitched, tmp_p
     with h5py.File(tmp_path / "x.h5", "w") as f:           # a raw HDF5 file has no provenance attribute
         f.attrs["format"] = "x"
     assert correction_of(tmp_path / "x.h5") is None and PROVENANCE_ATTRIBUTE == "corrected_by"
+
+
+def test_a_result_of_another_imu_is_not_applied_without_force(campaign, tmp_path, capsys):
+    """One unit's errors are not another's: a result names its IMU (imu_id), and apply compares it with the record's."""
+    result = campaign[1] / "sub2_0_10" / "factor-graph.json"
+    doc = json.loads(result.read_text())
+    src = campaign[0] / "sub2_0_10.h5"
+    assert doc["imu_id"] == io.read_experiment(src).imu_id
+    doc["imu_id"] = "SIM-MEMS 0002"
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps(doc))
+    out = tmp_path / "out.h5"
+    code, _, err = _cli(["apply", other, src, "--out", out], capsys)
+    assert code == 2 and not out.exists()
+    assert (f"sub2_0_10.h5: imu_id: is a record of IMU {doc_id(src)!r}, the calibration is of IMU 'SIM-MEMS 0002': "
+            "one unit's errors are not another's (--force applies it anyway)") in err
+    code, _, err = _cli(["apply", other, src, "--out", out, "--force"], capsys)
+    assert code == 0 and "warning: applied with --force to a record of IMU" in err
+
+
+def doc_id(path):
+    return io.read_experiment(path).imu_id
