@@ -453,7 +453,7 @@ def _read(inputs, options):
     options["_notes"] = notes
     return import_csv(
         inputs[0], columns=columns, latitude_rad=options["latitude_rad"], gravity_mps2=options.get("gravity_mps2"),
-        rate_hz=options.get("rate_hz"), time_units=options.get("time_units", units.get("time")),
+        rate_hz=options.get("rate_hz"), time_units=options.get("time_units", units.get("time", units.get("time_guess"))),
         gyro_units=options.get("gyro_units", units.get("gyro", "rad/s")),
         accel_units=options.get("accel_units", units.get("accel", "m/s^2")),
         gyro_counts_per_unit=options.get("gyro_scale"), gyro_offset_counts=options.get("gyro_offset", 0.0),

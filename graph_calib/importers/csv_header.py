@@ -59,7 +59,9 @@ def detect_layout(path, *, delimiter):
     columns : dict or None
         ``{key: index}`` for ``--columns``; None when the first line holds numbers (no header).
     units : dict
-        ``{"time"|"gyro"|"accel": units}`` read from the header (or inferred for the time).
+        ``{"time"|"gyro"|"accel": units}`` the header says (in brackets), and ``"time_guess"``: ``"ns"`` for a
+        time column of whole numbers above :data:`NANOSECOND_STAMPS_ABOVE` that says nothing (``--time-units``
+        overrides a guess; against what the header says it is refused).
     notes : list of str
         What was read, to print.
 
@@ -104,13 +106,14 @@ def detect_layout(path, *, delimiter):
     if "t" in columns and "time" not in units:
         for _, text in data_rows(path, 1):
             try:
-                stamp = float(split_cells(text, delimiter)[columns["t"]])
+                cell = split_cells(text, delimiter)[columns["t"]]
+                stamp = float(cell)
             except (ValueError, IndexError):
                 break
             if stamp >= NANOSECOND_STAMPS_ABOVE and stamp == round(stamp):
-                units["time"] = "ns"
-                notes.append(f"time column read as nanoseconds (whole numbers from {stamp:.0f}); "
-                             "--time-units says otherwise")
+                units["time_guess"] = "ns"          # inferred, not said: --time-units overrides it
+                notes.append(f"time column read as nanoseconds (whole numbers from {cell.strip()}); give "
+                             "--time-units to read it in other units")
             break
     return columns, units, notes
 

@@ -243,3 +243,21 @@ def test_a_sample_clock_s_stamps_are_kept(tmp_path):
                      latitude_rad=LAT)
     np.testing.assert_allclose(exp.t, t - t[0] + exp.t[0], atol=1e-12)
     assert "follow the sample index" not in exp.description
+
+
+def test_nanosecond_stamps_guessed_without_units_are_named_exactly_and_give_way_to_an_option(tmp_path):
+    n = 50
+    omega, f = _signals(n)
+    stamps = 1_600_000_000_010_000_000 + np.arange(n, dtype=np.int64) * 10_000_000
+    path = _write(tmp_path / "ns.csv", "t,gx,gy,gz,ax,ay,az,temp", [[int(stamps[k]), *omega[k], *f[k], 21.0]
+                                                                    for k in range(n)])
+    from graph_calib.importers.csv import FORMAT
+    from graph_calib.importers.csv_header import detect_layout
+    _, units, notes = detect_layout(path, delimiter=",")
+    assert units == {"time_guess": "ns"}
+    assert ("time column read as nanoseconds (whole numbers from 1600000000010000000); give --time-units to read it "
+            "in other units") in notes
+    assert FORMAT.read([path], {"latitude_rad": LAT}).rate_hz == pytest.approx(RATE)
+    # a guess gives way: read as microseconds the record is 0.1 Hz, which the time check refuses by name
+    with pytest.raises(InputError, match="time_units: the time column advances by 10.0 s per row read as us"):
+        FORMAT.read([path], {"latitude_rad": LAT, "time_units": "us"})
