@@ -85,7 +85,7 @@ def add_noise(parser, *, grade_default, noise_default):
     parser.add_argument("--grade", choices=GRADE_CHOICES, default=None,
                         help=f"IMU grade for priors and noise (default: {grade_default})")
     for flag, _, metavar, what in _NOISE:
-        parser.add_argument(flag, type=finite_float, default=None, metavar=metavar,
+        parser.add_argument(flag, type=float, default=None, metavar=metavar,
                             help=f"{what} (default: {noise_default})")
 
 
