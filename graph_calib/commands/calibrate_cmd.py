@@ -107,5 +107,7 @@ def run(args):
     verdict = calibration.verdict
     for problem in verdict.problems:
         print(f"  {problem}")
+    if any(t["significant"] for t in verdict.structure):
+        print("  graph-calib diagnose adds the most significant of these effects and tests the others again")
     print(verdict.text())
     return 0 if verdict.passed else 3

@@ -370,7 +370,7 @@ def verdict_of(results, comparison=None, *, structure=()):
         if t["significant"]:
             problems.append(f"the residuals carry {t['effect']}: score statistic {t['statistic']:.3g} > threshold "
                             f"{t['threshold']:.3g} ({t['dof']} dof): the model lacks it or an effect that shares its "
-                            "signature (graph-calib diagnose adds the most significant and tests the others again)")
+                            "signature")
     return Verdict(converged=converged, agree=agree, max_difference_sigma=maxdiff, fit_chi2=fit,
                    passed=not problems, problems=tuple(problems), notes=tuple(notes), kinds=kinds,
                    structure=structure)

@@ -217,3 +217,21 @@ def test_a_result_held_by_its_priors_is_said():
             "informs little of this model") in " ".join(v.notes)
     res = replace(res, extra={**res.extra, "prior_dominated": {"e0": 0.99}})
     assert not any("held by their priors" in n for n in verdict_of({"factor-graph": res}).notes)
+
+
+def test_calibrate_points_to_diagnose_where_a_score_test_is_significant(tmp_path, capsys, monkeypatch):
+    """The advice is the command's, not the verdict's: `diagnose`'s own verdict must not send the user to diagnose."""
+    from graph_calib.cli import main
+    from graph_calib.diagnosis import structure
+    data = tmp_path / "sim"
+    assert main(["simulate", "nav-subrange-short", "--seed", "3", "--hours", "0.05", "--out", str(data)]) == 0
+    (h5,) = data.glob("*.h5")
+    loud = {"effect": "accel.bias_dtdt", "statistic": 698.0, "threshold": 17.0, "dof": 3, "significant": True}
+    monkeypatch.setattr(structure, "structure_tests", lambda problem, output, **kw: [loud])
+    capsys.readouterr()
+    assert main(["calibrate", str(h5), "--out", str(tmp_path / "cal"), "--solver", "factor-graph"]) == 3
+    out = capsys.readouterr().out
+    assert "the residuals carry accel.bias_dtdt: score statistic 698 > threshold 17 (3 dof)" in out
+    assert "graph-calib diagnose adds the most significant of these effects and tests the others again" in out
+    doc = json.loads((tmp_path / "cal" / "factor-graph.json").read_text())
+    assert "diagnose" not in json.dumps(doc.get("verdict", {}))
