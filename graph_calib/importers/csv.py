@@ -439,11 +439,11 @@ def _read(inputs, options):
     if "columns" in options:
         columns = parse_columns(options["columns"])
     else:
-        columns, units, notes = detect_layout(inputs[0], delimiter=delimiter)
+        columns, units, notes, found_lines = detect_layout(inputs[0], delimiter=delimiter)
         if columns is None:
             raise InputError("required for format csv when the first line holds no column names (e.g. "
                              "t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6,temp=7)", dataset="--columns")
-        header_lines = 1 if header_lines is None else header_lines
+        header_lines = found_lines if header_lines is None else header_lines
     for kind, option in (("time", "time_units"), ("gyro", "gyro_units"), ("accel", "accel_units")):
         given, said = options.get(option), units.get(kind)
         if given is not None and said is not None and given != said:

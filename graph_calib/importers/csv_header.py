@@ -64,6 +64,8 @@ def detect_layout(path, *, delimiter):
         overrides a guess; against what the header says it is refused).
     notes : list of str
         What was read, to print.
+    header_lines : int
+        Lines before the data: the header line and any comment lines above it (an exporter's ``# ...``).
 
     Raises
     ------
@@ -71,14 +73,21 @@ def detect_layout(path, *, delimiter):
         A header that names no gyro or accelerometer triad in a known way (naming what it found).
     """
     path = require_file(path)
+    leading = []
     with open(path, encoding="utf-8-sig", errors="replace") as fh:
-        first = fh.readline().strip()
+        for _ in range(MAX_LEADING_LINES):
+            line = fh.readline()
+            if not line:
+                break
+            if _numeric(line.strip(), delimiter):
+                break
+            leading.append(line.strip())
+    if not leading:
+        return None, {}, [], 0
+    # the header is the last line before the data; what comes before it is an exporter's comment lines
+    first = leading[-1]
+    header_lines = len(leading)
     cells = split_cells(first, delimiter)
-    try:
-        [float(c) for c in cells]
-        return None, {}, []
-    except ValueError:
-        pass
     columns, units = {}, {}
     for j, cell in enumerate(cells):
         name, unit = _normal(cell)
@@ -103,8 +112,10 @@ def detect_layout(path, *, delimiter):
                          f"{', '.join(missing)}: give --columns (e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6)",
                          path=path, dataset="line 1")
     notes = ["columns from the header line: " + ", ".join(f"{k}={cells[j].strip()}" for k, j in columns.items())]
+    if header_lines > 1:
+        notes.append(f"{header_lines - 1} line(s) above the header line read as comments")
     if "t" in columns and "time" not in units:
-        for _, text in data_rows(path, 1):
+        for _, text in data_rows(path, header_lines):
             try:
                 cell = split_cells(text, delimiter)[columns["t"]]
                 stamp = float(cell)
@@ -115,7 +126,25 @@ def detect_layout(path, *, delimiter):
                 notes.append(f"time column read as nanoseconds (whole numbers from {cell.strip()}); give "
                              "--time-units to read it in other units")
             break
-    return columns, units, notes
+    return columns, units, notes, header_lines
+
+
+#: Lines read before the data at most when looking for the header line.
+MAX_LEADING_LINES = 50
+
+
+def _numeric(line, delimiter):
+    """Whether ``line`` is a data row: every cell a number, split at ``delimiter`` or at another separator (a file
+    split at another separator is then told so at its header line; an empty line is no data row)."""
+    if not line:
+        return False
+    for d in dict.fromkeys((delimiter, *DELIMITERS.values())):
+        try:
+            [float(c) for c in split_cells(line, d)]
+        except ValueError:
+            continue
+        return True
+    return False
 
 
 __all__ = ["detect_layout", "NANOSECOND_STAMPS_ABOVE"]

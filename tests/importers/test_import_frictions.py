@@ -253,7 +253,8 @@ def test_nanosecond_stamps_guessed_without_units_are_named_exactly_and_give_way_
                                                                     for k in range(n)])
     from graph_calib.importers.csv import FORMAT
     from graph_calib.importers.csv_header import detect_layout
-    _, units, notes = detect_layout(path, delimiter=",")
+    _, units, notes, header_lines = detect_layout(path, delimiter=",")
+    assert header_lines == 1
     assert units == {"time_guess": "ns"}
     assert ("time column read as nanoseconds (whole numbers from 1600000000010000000); give --time-units to read it "
             "in other units") in notes
@@ -261,3 +262,17 @@ def test_nanosecond_stamps_guessed_without_units_are_named_exactly_and_give_way_
     # a guess gives way: read as microseconds the record is 0.1 Hz, which the time check refuses by name
     with pytest.raises(InputError, match="time_units: the time column advances by 10.0 s per row read as us"):
         FORMAT.read([path], {"latitude_rad": LAT, "time_units": "us"})
+
+
+def test_comment_lines_above_the_header_are_read_past(tmp_path):
+    """An exporter's own lines (# exported by ..., # date ...) above the header line that names the columns."""
+    n = 50
+    omega, f = _signals(n)
+    path = _write(tmp_path / "c.csv", "# exported by some logger v2\n# 2026-12-05\ntimestamp,gx,gy,gz,ax,ay,az,temp",
+                  _rows(np.arange(n) / RATE, omega, f, np.full(n, 21.0)))
+    from graph_calib.importers.csv import FORMAT
+    options = {"latitude_rad": LAT}
+    exp = FORMAT.read([path], options)
+    assert exp.n_samples == n and exp.rate_hz == pytest.approx(RATE)
+    assert "2 line(s) above the header line read as comments" in options["_notes"]
+    np.testing.assert_allclose(exp.dv[1:] * RATE, f[1:], rtol=1e-6)
