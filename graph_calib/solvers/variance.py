@@ -112,6 +112,9 @@ class VarianceComponents:
         The kinds that had not settled when the iteration ended because their factor sat at :data:`FACTOR_MIN`
         or :data:`FACTOR_MAX` with the residuals asking for more (the iteration stops once every kind that has not
         settled is such).
+    held : tuple of str
+        The kinds whose residuals asked for a factor below 1 at the last solve but whose redundancy is below
+        :data:`MIN_LOWERING_REDUNDANCY`: their factor stays 1 (sigmas perhaps conservative there).
     """
 
     problem: object
@@ -122,6 +125,7 @@ class VarianceComponents:
     history: tuple
     initial: tuple
     at_bound: tuple = ()
+    held: tuple = ()
 
 
 def with_variance_factors(problem, factors, *, moving_sigma=None):
@@ -191,8 +195,9 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
                    if k in factors_estimated(factors) and k not in fixed and fig.redundancy >= MIN_REDUNDANCY}
         # a kind of little redundancy whose factor is down to 1 and whose residuals ask for less stays at 1
         rising = {k for k, f in figures.items() if k in KINDS and f.redundancy < MIN_LOWERING_REDUNDANCY}
-        ratios = {k: f.chi2_per_redundancy for k, f in figures.items()
-                  if f.chi2 > 0 and not (k in rising and factors.get(k, 1.0) <= 1.0 and f.chi2_per_redundancy < 1.0)}
+        held = tuple(k for k, f in figures.items()
+                     if k in rising and factors.get(k, 1.0) <= 1.0 and f.chi2 > 0 and f.chi2_per_redundancy < 1.0)
+        ratios = {k: f.chi2_per_redundancy for k, f in figures.items() if f.chi2 > 0 and k not in held}
         history.append(dict(ratios))
         unsettled = [k for k, v in ratios.items() if not (abs(v - 1.0) <= (MOVING_TOLERANCE if k == MOVING else tolerance)
                                                           or (k == FLOORED and _floor_settled(factors[k], st.kinds[k])))]
@@ -245,7 +250,7 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         out_factors[FLOORED] = factors[FLOORED]
     return VarianceComponents(problem=problem, factors=out_factors, moving_sigma=moving, solves=n,
                               converged=converged, history=tuple(history), initial=initial,
-                              at_bound=() if converged else bounded)
+                              at_bound=() if converged else bounded, held=held)
 
 
 def _at_bound(factor, ratio, *, low=FACTOR_MIN):
@@ -277,14 +282,16 @@ class Weighted:
     def iteration(self):
         """The result's ``residuals.variance_iteration`` (data-format.md; None without the variance components):
         ``solves``, ``converged``, ``last``, each estimated kind's ``chi2 / redundancy`` at the last solve of
-        the iteration (before its last rescale), and ``at_bound``, the kinds that had not settled because their
-        factor sat at a bound (:attr:`VarianceComponents.at_bound`)."""
+        the iteration (before its last rescale), ``at_bound``, the kinds that had not settled because their
+        factor sat at a bound (:attr:`VarianceComponents.at_bound`), and ``held``, the kinds whose factor stayed 1 for
+        too little redundancy to lower it (:attr:`VarianceComponents.held`)."""
         vc = self.components
         if vc is None:
             return None
         last = vc.history[-1] if vc.history else {}
         return {"solves": int(vc.solves), "converged": bool(vc.converged),
-                "last": {k: float(v) for k, v in last.items()}, "at_bound": list(vc.at_bound)}
+                "last": {k: float(v) for k, v in last.items()}, "at_bound": list(vc.at_bound),
+                "held": list(vc.held)}
 
 
 def weighted_problem(problem, *, options, solver, progress=None):

@@ -150,6 +150,12 @@ def judge_kinds(result):
             elif vf < 1.0 / VARIANCE_FACTOR_LIMIT:
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} < 1/{VARIANCE_FACTOR_LIMIT:g} on "
                                 f"the {source.get(sensor, 'assumed')} {sensor} noise: that noise is overstated")
+    for kind in ((result.residuals or {}).get("variance_iteration") or {}).get("held") or ():
+        if kind in figures:
+            f = figures[kind]
+            notes.append(f"{kind}: chi2/redundancy {f['chi2_per_redundancy']:.2g} over a redundancy of "
+                         f"{f['redundancy']:.0f}, too few degrees of freedom to lower its variance factor below 1: "
+                         "the sigmas it governs may be conservative")
     unsettled = _unsettled_text((result.residuals or {}).get("variance_iteration"))
     if unsettled:
         notes.append(unsettled)

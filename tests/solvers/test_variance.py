@@ -37,7 +37,7 @@ def test_with_them_the_factors_problem_and_the_solvers_last_solution(problem):
     vc = estimate_variance_components(problem, options=OPTIONS, solver=PRIMARY_SOLVER)
     assert weighted.iteration() == {"solves": vc.solves, "converged": vc.converged,
                                     "last": {k: float(v) for k, v in vc.history[-1].items()},
-                                    "at_bound": list(vc.at_bound)}
+                                    "at_bound": list(vc.at_bound), "held": list(vc.held)}
     assert not problem.model.options.variance_factors
     assert got.model.options.variance_factors == vc.problem.model.options.variance_factors
     assert set(got.model.options.variance_factors) <= set(KINDS) and got.model.options.variance_factors
@@ -118,4 +118,5 @@ def test_the_gravity_factor_comes_from_the_static_keyframes_and_a_kind_of_little
     assert gravity["chi2_per_redundancy"] < 0.7                                 # the whole kind's figure, diluted
     assert rotation["redundancy"] < 50 and rotation["chi2_per_redundancy"] < 1.0
     assert rotation["variance_factor"] == 1.0                                   # not lowered on so little
+    assert run.results[PRIMARY_SOLVER].residuals["variance_iteration"]["held"] == ["rotation"]
     assert run.verdict.passed, run.verdict.text()

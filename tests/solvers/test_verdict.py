@@ -235,3 +235,13 @@ def test_calibrate_points_to_diagnose_where_a_score_test_is_significant(tmp_path
     assert "graph-calib diagnose adds the most significant of these effects and tests the others again" in out
     doc = json.loads((tmp_path / "cal" / "factor-graph.json").read_text())
     assert "diagnose" not in json.dumps(doc.get("verdict", {}))
+
+
+def test_a_kind_held_at_one_for_little_redundancy_is_said():
+    res = _result({"rotation": (0.71, 27.0, 1.0), "gravity": (1.0, 900.0, 1.06)})
+    res.residuals["variance_iteration"] = {"solves": 2, "converged": True, "last": {"gravity": 1.0}, "at_bound": [],
+                                           "held": ["rotation"]}
+    v = verdict_of({"factor-graph": res})
+    assert v.passed
+    assert ("factor-graph: rotation: chi2/redundancy 0.71 over a redundancy of 27, too few degrees of freedom to lower "
+            "its variance factor below 1") in " ".join(v.notes)
