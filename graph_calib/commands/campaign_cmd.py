@@ -98,6 +98,10 @@ def print_summary(run, out=None):
     checks = doc.get("campaign_checks")
     for line in check_lines(checks) if checks else []:
         print(f"  check {line}", file=out)
+    if run.failed:
+        names = sorted({f"{f['name']} {f['solver']}" for f in run.failed})
+        print(f"verdict: FAIL: {len(run.failed)} task(s) did not finish ({', '.join(names)}): their errors follow",
+              file=out)
     failed = run.verdict_failed
     if failed:
         print(f"verdict: FAIL: {len(failed)} of {len(doc['experiments'])} experiment(s) failed theirs "
@@ -105,7 +109,7 @@ def print_summary(run, out=None):
     if checks and not checks["passed"]:
         print(f"verdict: FAIL: {len(checks['failed'])} check(s) over the whole campaign failed: "
               + " | ".join(checks["failed"]), file=out)
-    if not failed and not (checks and not checks["passed"]):
+    if not run.failed and not failed and not (checks and not checks["passed"]):
         print("verdict: pass: every experiment converged, its solvers agree and its residuals are consistent",
               file=out)
 

@@ -281,11 +281,13 @@ def linearise(model, R, x, *, q_nb0, null_names, drivers=True, n_segments=TIME_S
     if drivers:
         if sums is None:
             sums = DriverSums.of(model, n_segments=n_segments)
-        dlist = sums.drivers
+        # a driver acts as a bias: none on a triad whose bias the model leaves out (a manifest's [model].exclude)
+        dlist = [d for d in sums.drivers if f"{d.axis.split('.')[0]}.bias" in layout]
         axis_col = {}
         for ax in SENSOR_AXES:
             triad, el = ax.split(".")
-            axis_col[ax] = layout.slice(f"{triad}.bias").start + "xyz".index(el)
+            if f"{triad}.bias" in layout:
+                axis_col[ax] = layout.slice(f"{triad}.bias").start + "xyz".index(el)
         d_bias = np.array([axis_col[d.axis] for d in dlist], dtype=np.int64)
         d_series = np.array([d.series for d in dlist], dtype=np.int64)
     ND = len(dlist)

@@ -499,3 +499,34 @@ def test_validation_record_without_truth_is_checked_against_its_own_calibration(
     assert s["largest"]["accel_mps2"] < 2e-4
     assert s["largest_z"]["gyro"] < 4.0 and s["largest_z"]["accel"] < 4.0
     assert "held_out.h5" in (tmp_path / "out" / "report.html").read_text()
+
+
+def test_a_campaign_whose_tasks_fail_never_says_pass(simulated, tmp_path, monkeypatch, capsys):
+    """Every task failing with an internal error: exit 1, and the verdict line says FAIL naming them (it said pass)."""
+    from graph_calib.campaign import execution
+    from graph_calib.cli import main
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("boom")
+
+    monkeypatch.setattr(execution, "build_problem", broken)
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    capsys.readouterr()
+    assert main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--workers", "0", "--no-report",
+                 "--no-diagnose"]) == 1
+    out, err = capsys.readouterr()
+    assert "verdict: FAIL: 3 task(s) did not finish (sub2_0_10 factor-graph, sub3_10_20 factor-graph, " \
+           "sub4_20_30 factor-graph): their errors follow" in out
+    assert "verdict: pass" not in out
+    assert "sub2_0_10 factor-graph failed: RuntimeError: boom" in err
+
+
+def test_a_campaign_that_excludes_a_bias_runs_its_loop(simulated, tmp_path):
+    """The loop's drivers act as biases: none on a triad whose bias the manifest leaves out (was a KeyError)."""
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    text = manifest.read_text().replace('[solver]', '[model]\nexclude = ["gyro.bias"]\n\n[solver]')
+    manifest.write_text(text)
+    run = run_campaign(manifest, tmp_path / "out", options=CampaignOptions(workers=0, report=False, progress=False))
+    assert not run.failed
+    res = run.results[run.document["experiments"][0]["name"]]["factor-graph"]
+    assert not any(k.startswith("gyro.bias.") for k in res.values)
