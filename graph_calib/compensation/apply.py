@@ -132,7 +132,13 @@ def verdict_failed(provenance):
     verdict = provenance.get("verdict")
     if not isinstance(verdict, dict) or verdict.get("passed", True):
         return None
-    text = verdict.get("text") or "; ".join(str(p) for p in verdict.get("problems", ())) or "failed"
+    text = verdict.get("text") or "; ".join(str(p) for p in verdict.get("problems", ()))
+    if not text:
+        # a campaign's (campaign.json): the experiments that failed theirs and the checks over the campaign
+        parts = ([f"experiments that failed theirs: {', '.join(map(str, verdict['failed']))}"]
+                 if verdict.get("failed") else [])
+        parts += [" ".join(str(c).split()) for c in verdict.get("campaign_checks_failed") or ()]
+        text = "; ".join(parts) or "failed"
     return str(text).splitlines()[0]
 
 

@@ -54,6 +54,24 @@ class Problem:
         return replace(self, model=self.model.with_effects(extra_effects))
 
 
+#: How far outside a record's temperatures a reference temperature may lie, degC: a campaign's common reference sits
+#: within its span (-40..85 degC at most); beyond, the temperature coefficients are extrapolated so far that the
+#: fit is ill-posed (1000 degC for a record at -9 degC ended in an indeterminate system).
+T_REF_REACH_DEGC = 125.0
+
+
+def check_t_ref(experiment, t_ref_degC):
+    """Refuse a reference temperature that is not a number or lies beyond :data:`T_REF_REACH_DEGC` of the record's
+    temperatures (:class:`~graph_calib.errors.InputError`)."""
+    t = float(t_ref_degC)
+    T = np.asarray(experiment.temperature, dtype=float)
+    lo, hi = float(np.min(T)), float(np.max(T))
+    if not np.isfinite(t) or t < lo - T_REF_REACH_DEGC or t > hi + T_REF_REACH_DEGC:
+        raise InputError(f"{t:g} degC lies beyond {T_REF_REACH_DEGC:g} degC of the record's temperatures "
+                         f"({lo:.1f}..{hi:.1f} degC): the temperature coefficients would be extrapolated that far; give "
+                         "a reference temperature near the data", path=experiment.source or None, dataset="t_ref_degC")
+
+
 def build_problem(experiment, *, options=CalibrationOptions(), check=True):
     """Set up the shared model of ``experiment`` and align it.
 
@@ -82,6 +100,8 @@ def build_problem(experiment, *, options=CalibrationOptions(), check=True):
     """
     if check:
         check_record(experiment)
+    if options.t_ref_degC is not None:
+        check_t_ref(experiment, options.t_ref_degC)
     model_options = options.model
     # each segment its own threshold: its first seconds' unless they are loud (graph_calib.noise.rests)
     segs = segment_thresholds(experiment)

@@ -150,3 +150,15 @@ def test_files_of_an_earlier_run_in_the_output_folder_are_named(tmp_path, capsys
     assert cli.main(["calibrate", str(h5), "--out", str(out), "--solver", "factor-graph"]) in (0, 3)
     err = capsys.readouterr().err
     assert f"note: {out} also holds comparison.json, sqrt-kf.json of an earlier run, not this one's" in err
+
+
+def test_a_reference_temperature_far_from_the_data_is_refused(tmp_path, capsys):
+    """1000 degC for a record near 20 degC ended in an indeterminate system (an internal error)."""
+    data = tmp_path / "sim"
+    assert cli.main(["simulate", "nav-subrange-short", "--seed", "3", "--hours", "0.05", "--out", str(data)]) == 0
+    (h5,) = data.glob("*.h5")
+    capsys.readouterr()
+    assert cli.main(["calibrate", str(h5), "--out", str(tmp_path / "cal"), "--t-ref", "1000"]) == 2
+    err = capsys.readouterr().err
+    assert "t_ref_degC: 1000 degC lies beyond 125 degC of the record's temperatures" in err
+    assert not (tmp_path / "cal").exists()

@@ -262,3 +262,20 @@ def test_an_instance_or_rate_the_consumer_cannot_take_is_refused(sources, tmp_pa
     assert cli.main(["export", str(sources["result"]), "--format", fmt, "--out", str(out), *extra]) == 2
     assert message in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_table_of_a_campaign_that_failed_its_checks_needs_force(sources, tmp_path, capsys):
+    """json, csv and c-header tabulate the campaign: the same failed-verdict guard as the other formats (they were
+    written without a word, and apply then took the table)."""
+    import shutil
+    camp = tmp_path / "camp"
+    shutil.copytree(sources["campaign"], camp)
+    doc = json.loads((camp / "campaign.json").read_text())
+    doc["verdict"] = {"passed": False, "failed": [], "campaign_checks_failed": ["validation v.h5: not met"]}
+    (camp / "campaign.json").write_text(json.dumps(doc))
+    out = tmp_path / "t.json"
+    assert cli.main(["export", str(camp), "--format", "json", "--out", str(out)]) == 2
+    assert ("verdict: its verdict failed (validation v.h5: not met); a table of a campaign that failed its own checks "
+            "is not written without --force") in capsys.readouterr().err
+    assert not out.exists()
+    assert cli.main(["export", str(camp), "--format", "json", "--out", str(out), "--force"]) == 0
