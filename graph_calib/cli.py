@@ -204,6 +204,10 @@ def _main(argv):
         return 2
     except BrokenPipeError:      # a reader closed the pipe before stdout was made safe: not an internal error
         return 141
+    except MemoryError as exc:   # an input that asks for more than the machine has (a program of 1e9 s dwells)
+        print(f"graph-calib {args.command}: error: the input asks for more memory than this machine has "
+              f"({_one_line(exc)}): shorten the record or program", file=sys.stderr)
+        return 2
     except KeyboardInterrupt:
         print(f"graph-calib {args.command}: interrupted; finished work is kept", file=sys.stderr)
         return 130

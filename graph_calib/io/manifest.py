@@ -200,11 +200,15 @@ def read_manifest(path):
             raise InputError("must be a table", path=path, dataset=where)
         _unknown_keys(entry, _EXPERIMENT_KEYS, path=path, where=where)
         file = entry.get("file")
-        if not isinstance(file, str) or not file:
+        if file is None or file == "":
             raise InputError("missing file", path=path, dataset=where)
+        if not isinstance(file, str):
+            raise InputError(f"must be the experiment file's path as a string, got {_show(file)}", path=path,
+                             dataset=f"{where}.file")
         resolved = (path.parent / file).resolve()
         if not resolved.is_file():
-            raise InputError(f"experiment file {resolved} not found", path=path, dataset=f"{where}.file")
+            raise InputError(f"experiment file {resolved} " + ("is a folder" if resolved.is_dir() else "not found"),
+                             path=path, dataset=f"{where}.file")
         t_ref = entry.get("t_ref_degC")
         if t_ref is not None:
             if not _is_real(t_ref) or not math.isfinite(t_ref):

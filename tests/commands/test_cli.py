@@ -67,6 +67,16 @@ def test_unexpected_exception_is_exit_1_with_one_line(failing_simulate, capsys):
     assert "Traceback" not in captured.err + captured.out
 
 
+def test_an_input_that_asks_for_more_memory_than_there_is_is_exit_2(failing_simulate, capsys):
+    """A program of 1e9 s dwells asked numpy for 745 GiB: the input's size, said in one line, not an internal error."""
+    failing_simulate.exc = MemoryError("Unable to allocate 745. GiB for an array with shape (100000000000,)")
+    assert main(["simulate", "nav-subrange"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == ["graph-calib simulate: error: the input asks for more memory than this machine has (MemoryError: "
+                   "Unable to allocate 745. GiB for an array with shape (100000000000,)): shorten the record or "
+                   "program"]
+
+
 def test_a_multi_line_message_still_gives_one_line(failing_simulate, capsys):
     failing_simulate.exc = ValueError("first line\nsecond line\nthird")
     assert main(["simulate", "nav-subrange"]) == 1
