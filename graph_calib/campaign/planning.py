@@ -95,6 +95,7 @@ def plan_campaign(campaign, out, *, options):
     records = _check_records(options.validate)
     todo, done = plan(campaign, out, options=options)
     vtodo, vdone, refs = _validation_tasks(campaign, out, records, options=options)
+    _make_out(out)              # only once every file has passed its check: a refusal leaves no empty folder
     return CampaignPlan(campaign=campaign, out=out, solvers=_solvers(campaign, options), records=tuple(records),
                         todo=tuple(todo), done=tuple(done), validation_todo=tuple(vtodo),
                         validation_done=tuple(vdone), references=refs,
@@ -169,11 +170,14 @@ def _check_out(out):
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise InputError("exists and is not a folder", path=out, dataset="--out")
+    return out
+
+
+def _make_out(out):
     try:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise InputError(f"cannot create the output folder: {exc}", path=out, dataset="--out") from None
-    return out
 
 
 def check_experiment_header(path, *, dataset=None):

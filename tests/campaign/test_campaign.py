@@ -18,6 +18,7 @@ from graph_calib import constants as c
 from graph_calib import io
 from graph_calib.campaign import CampaignOptions, run_campaign
 from graph_calib.cli import main
+from graph_calib.errors import InputError
 
 #: Every test here shares a simulated six-subrange campaign (minutes to simulate and run).
 pytestmark = pytest.mark.slow
@@ -530,3 +531,14 @@ def test_a_campaign_that_excludes_a_bias_runs_its_loop(simulated, tmp_path):
     assert not run.failed
     res = run.results[run.document["experiments"][0]["name"]]["factor-graph"]
     assert not any(k.startswith("gyro.bias.") for k in res.values)
+
+
+def test_a_refused_campaign_leaves_no_output_folder(simulated, tmp_path):
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    bogus = tmp_path / "m" / "notes.h5"
+    bogus.write_text("not HDF5")
+    manifest.write_text(manifest.read_text() + f'[[experiment]]\nfile = "{bogus}"\n')
+    out = tmp_path / "out"
+    with pytest.raises(InputError, match="not an HDF5 file"):
+        run_campaign(manifest, out, options=CampaignOptions(workers=0, report=False, progress=False))
+    assert not out.exists()
