@@ -137,9 +137,15 @@ def _label(v):
 # ---------------------------------------------------------------------------
 
 
+#: Longest simulated record, h: a campaign's longest subrange is some hours; 1e5 h ran until it was killed.
+MAX_HOURS = 100.0
+
+
 def _check_common(hours, rate_hz, effect_scale, effect_names):
     if hours is not None and not (np.isfinite(hours) and hours > 0):
         raise InputError(f"--hours must be a positive number, got {hours!r}")
+    if hours is not None and hours > MAX_HOURS:
+        raise InputError(f"--hours must be at most {MAX_HOURS:g} (a record of {hours:g} h is no bench's), got {hours!r}")
     if not (np.isfinite(rate_hz) and rate_hz > 0):
         raise InputError(f"rate_hz must be positive, got {rate_hz!r}")
     if not (np.isfinite(effect_scale) and effect_scale >= 0):

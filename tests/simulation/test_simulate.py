@@ -466,3 +466,15 @@ def test_further_experiment_of_the_same_imu_and_its_refusal_without_a_table():
     hh = _simulate("consumer-handheld", rng=np.random.default_rng(2))
     with pytest.raises(ValueError, match="'consumer-handheld' has no turntable experiment to extend"):
         hh.further_experiment(file_name="v.h5", seed=5, hours=0.1, start_degC=0.0, span_degC=10.0)
+
+
+@pytest.mark.parametrize("hours, words", [("0", "--hours must be a positive number, got 0.0"),
+                                          ("nan", "--hours must be a positive number, got nan"),
+                                          ("100000", "--hours must be at most 100 (a record of 100000 h is no bench's)")])
+def test_simulate_refuses_a_length_no_bench_records(tmp_path, capsys, hours, words):
+    """A record of 1e5 h ran until it was killed and left an empty folder."""
+    from graph_calib.cli import main
+    out = tmp_path / "s"
+    assert main(["simulate", "nav-subrange-short", "--hours", hours, "--out", str(out)]) == 2
+    assert words in capsys.readouterr().err
+    assert not out.exists()
