@@ -90,6 +90,7 @@ def _table(args, out, fmt):
                          f"folder or campaign.json); a single result exports as "
                          f"{', '.join(f for f in EXPORT_FORMATS)}", path=source, dataset="--format")
     campaign_json = source / "campaign.json" if source.is_dir() else source
+    verdict = None
     if campaign_json.is_file():
         try:
             verdict = json.loads(campaign_json.read_text(encoding="utf-8")).get("verdict")
@@ -107,6 +108,10 @@ def _table(args, out, fmt):
     else:
         stitched = StitchedCalibration.from_campaign(args.source, solver=args.solver, model=args.model)
     table = stitched.table(step_degC=args.step_degC)
+    if isinstance(verdict, dict):
+        # the campaign's verdict travels with its table: apply refuses a failed one without --force, as it does the
+        # campaign itself
+        table.info["verdict"] = verdict
     out.parent.mkdir(parents=True, exist_ok=True)
     write_table(table, out, fmt=fmt)
     g = table.grid_degC

@@ -114,6 +114,8 @@ def read_compensation(path, *, solver=None, model=None):
         prov.update(format=fmt, **{k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model",
                                                                               "source", "step_degC")})
         prov["grid_degC"] = [float(comp.grid_degC[0]), float(comp.grid_degC[-1])]
+        if isinstance(comp.info.get("verdict"), dict):
+            prov["verdict"] = comp.info["verdict"]
     elif solver == JOINT:
         comp = JointCalibration.from_campaign(path)
         prov.update({k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model", "subranges")})

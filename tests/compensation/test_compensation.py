@@ -423,7 +423,7 @@ def test_applying_the_table_and_measuring_against_the_reference_gives_the_same_f
     corrected_file = tmp_path / "validation.corrected.h5"
     # the validation is not met (three-minute subranges): the table is written with --force
     assert _cli(["export", validated["camp"], "--out", table_file, "--force"], capsys)[0] == 0
-    assert _cli(["apply", table_file, validated["record"], "--out", corrected_file], capsys)[0] == 0
+    assert _cli(["apply", table_file, validated["record"], "--out", corrected_file, "--force"], capsys)[0] == 0
     raw = io.read_experiment(validated["record"])
     corrected = io.read_experiment(corrected_file)
     reference = ResultCalibration(io.read_result(entry["reference"]))

@@ -264,7 +264,7 @@ def test_an_instance_or_rate_the_consumer_cannot_take_is_refused(sources, tmp_pa
     assert not out.exists()
 
 
-def test_a_table_of_a_campaign_that_failed_its_checks_needs_force(sources, tmp_path, capsys):
+def test_a_table_of_a_campaign_that_failed_its_checks_needs_force(sources, campaign, tmp_path, capsys):
     """json, csv and c-header tabulate the campaign: the same failed-verdict guard as the other formats (they were
     written without a word, and apply then took the table)."""
     import shutil
@@ -279,3 +279,11 @@ def test_a_table_of_a_campaign_that_failed_its_checks_needs_force(sources, tmp_p
             "is not written without --force") in capsys.readouterr().err
     assert not out.exists()
     assert cli.main(["export", str(camp), "--format", "json", "--out", str(out), "--force"]) == 0
+    # the table carries the campaign's verdict: apply refuses it as it refuses the campaign
+    assert json.loads(out.read_text())["verdict"]["passed"] is False
+    record, corrected = campaign[0] / "sub2_0_10.h5", tmp_path / "c.h5"
+    capsys.readouterr()
+    assert cli.main(["apply", str(out), str(record), "--out", str(corrected)]) == 2
+    assert "verdict: its verdict failed (validation v.h5: not met)" in capsys.readouterr().err
+    assert not corrected.exists()
+    assert cli.main(["apply", str(out), str(record), "--out", str(corrected), "--force"]) == 0
