@@ -16,9 +16,12 @@ seconds and a campaign run in this process (``workers=0``) never needs it.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import signal
 import sys
+import threading
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -371,7 +374,8 @@ class Pool:
             # which fixes glibc's mmap threshold at 128 KiB, so that every large temporary of a job is mapped,
             # faulted in and unmapped again (a 3 h loop job 1.38 times as long, a third of its CPU in the kernel:
             # docs/performance.md, "One 3 h job of the first wave"); a value set in the environment is passed on
-            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}):
+            with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
+                    _children_ignore_interrupt():
                 self._cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                                              dashboard_address=":0", silence_logs=logging.ERROR)
             self.client = Client(self._cluster)
@@ -386,6 +390,22 @@ class Pool:
             if self._cluster is not None:
                 self._cluster.close()
             self.client = self._cluster = None
+
+
+@contextlib.contextmanager
+def _children_ignore_interrupt():
+    """Processes started inside ignore Ctrl-C (SIGINT), which the terminal sends to the whole process group: this
+    process takes it, stops the run and closes the cluster; the Dask nannies and workers, each printing the traceback
+    of its own KeyboardInterrupt, said nothing a user needs (an ignored signal stays ignored across exec, and Python
+    then installs no handler of its own)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def execute(tasks, *, options, on_done=None, timing=None, pool=None):

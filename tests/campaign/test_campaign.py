@@ -542,3 +542,21 @@ def test_a_refused_campaign_leaves_no_output_folder(simulated, tmp_path):
     with pytest.raises(InputError, match="not an HDF5 file"):
         run_campaign(manifest, out, options=CampaignOptions(workers=0, report=False, progress=False))
     assert not out.exists()
+
+
+def test_the_local_cluster_s_processes_leave_ctrl_c_to_this_one():
+    """Started inside, a process ignores SIGINT (Dask's nannies and workers each printed the traceback of their own
+    KeyboardInterrupt before the clean 'interrupted' line); outside, the handler is this process's again."""
+    import signal
+    import subprocess
+    import sys
+
+    from graph_calib.campaign import execution
+
+    probe = [sys.executable, "-c", "import signal; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"]
+    before = signal.getsignal(signal.SIGINT)
+    with execution._children_ignore_interrupt():
+        inside = subprocess.run(probe, capture_output=True, text=True, check=True).stdout.strip()
+    assert inside == "True"
+    assert signal.getsignal(signal.SIGINT) is before
+    assert subprocess.run(probe, capture_output=True, text=True, check=True).stdout.strip() == "False"
