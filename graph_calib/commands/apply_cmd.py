@@ -52,7 +52,8 @@ def run(args):
                          "without --force", path=args.calibration, dataset="verdict")
     experiment = io.read_experiment(src)
     other = provenance.get("imu_id") if provenance["kind"] == "result" else None
-    if other and experiment.imu_id and other != experiment.imu_id and not args.force:
+    foreign = bool(other and experiment.imu_id and other != experiment.imu_id)
+    if foreign and not args.force:
         raise InputError(f"is a record of IMU {experiment.imu_id!r}, the calibration is of IMU {other!r}: one unit's "
                          "errors are not another's (--force applies it anyway)", path=src, dataset="imu_id")
     before = correction_of(src)
@@ -76,7 +77,7 @@ def run(args):
               file=sys.stderr)
     if failed:
         print(f"  warning: applied with --force although its verdict failed ({failed})", file=sys.stderr)
-    if other and experiment.imu_id and other != experiment.imu_id:
+    if foreign:
         print(f"  warning: applied with --force to a record of IMU {experiment.imu_id!r}, the calibration is of IMU "
               f"{other!r}", file=sys.stderr)
     for name, r in provenance.get("unresolved_not_applied", {}).items():

@@ -10,7 +10,8 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
-from graph_calib.commands.model_options import finite_float, add_moving, add_still, add_sway, moving_of, still_of, sway_of
+from graph_calib.commands.model_options import (add_moving, add_still, add_sway, finite_float, moving_of, still_of,
+                                                 sway_of)
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade
 from graph_calib.model import ModelOptions

@@ -14,7 +14,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from graph_calib.commands.model_options import finite_float, add_moving, add_still, add_sway, moving_of, still_of, sway_of
+from graph_calib.commands.model_options import (add_moving, add_still, add_sway, finite_float, moving_of, still_of,
+                                                 sway_of)
 from graph_calib.commands.paths import make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade

@@ -16,14 +16,13 @@ a suffix that belongs to another format is refused (never JSON under a YAML name
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
 
 from graph_calib.commands.paths import output_file
 from graph_calib.compensation import STITCH_MODELS, SUFFIX, TABLE_FORMATS, StitchedCalibration, write_table
-from graph_calib.compensation.apply import verdict_failed
+from graph_calib.compensation.apply import campaign_verdict, verdict_failed
 from graph_calib.compensation.exports import DEFAULT_ENVELOPE_DPS, EXPORT_FORMATS, load_source
 from graph_calib.compensation.joint import JointCalibration
 from graph_calib.errors import InputError
@@ -88,18 +87,12 @@ def _table(args, out, fmt):
     if source.is_file() and source.name != "campaign.json":
         raise InputError(f"--format {fmt} writes a compensation table over temperature, made from a campaign (its "
                          f"folder or campaign.json); a single result exports as "
-                         f"{', '.join(f for f in EXPORT_FORMATS)}", path=source, dataset="--format")
-    campaign_json = source / "campaign.json" if source.is_dir() else source
-    verdict = None
-    if campaign_json.is_file():
-        try:
-            verdict = json.loads(campaign_json.read_text(encoding="utf-8")).get("verdict")
-        except (OSError, ValueError):
-            verdict = None      # the reader below says what is wrong with the file
-        failed = verdict_failed({"verdict": verdict})
-        if failed and not args.force:
-            raise InputError(f"its verdict failed ({failed}); a table of a campaign that failed its own checks is "
-                             "not written without --force", path=source, dataset="verdict")
+                         f"{', '.join(EXPORT_FORMATS)}", path=source, dataset="--format")
+    verdict = campaign_verdict(source)
+    failed = verdict_failed({"verdict": verdict})
+    if failed and not args.force:
+        raise InputError(f"its verdict failed ({failed}); a table of a campaign that failed its own checks is "
+                         "not written without --force", path=source, dataset="verdict")
     if args.solver == JOINT:       # the joint campaign solver's curves (docs/campaign.md), not a stitching
         if args.model:
             raise InputError("the joint calibration has one curve form; --model chooses among stitched models",
@@ -108,7 +101,7 @@ def _table(args, out, fmt):
     else:
         stitched = StitchedCalibration.from_campaign(args.source, solver=args.solver, model=args.model)
     table = stitched.table(step_degC=args.step_degC)
-    if isinstance(verdict, dict):
+    if verdict is not None:
         # the campaign's verdict travels with its table: apply refuses a failed one without --force, as it does the
         # campaign itself
         table.info["verdict"] = verdict

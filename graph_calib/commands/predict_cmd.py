@@ -22,7 +22,7 @@ from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.design.prediction import expected_variance_factors, predict, prediction_result
 from graph_calib.records.problem import build_problem
-from graph_calib.commands.model_options import finite_float, add_noise, noise_of
+from graph_calib.commands.model_options import add_noise, finite_float, noise_of
 from graph_calib.simulation.program import nominal_experiment, read_program
 
 

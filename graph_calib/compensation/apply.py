@@ -123,10 +123,22 @@ def read_compensation(path, *, solver=None, model=None):
         comp = StitchedCalibration.from_campaign(path, solver=solver, model=model)
         prov.update({k: v for k, v in comp.info.items() if k in ("imu_id", "solver", "stitch_model", "subranges")})
     if kind == "stitched":
-        verdict = json.loads(path.read_text(encoding="utf-8")).get("verdict")
-        if isinstance(verdict, dict):
+        verdict = campaign_verdict(path)
+        if verdict is not None:
             prov["verdict"] = verdict
     return comp, prov
+
+
+def campaign_verdict(path):
+    """The verdict (dict) of a campaign, its folder or its ``campaign.json``; None where it holds none or cannot be
+    read (its reader says what is wrong with it)."""
+    path = Path(path)
+    path = path / "campaign.json" if path.is_dir() else path
+    try:
+        verdict = json.loads(path.read_text(encoding="utf-8")).get("verdict")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return verdict if isinstance(verdict, dict) else None
 
 
 def verdict_failed(provenance):
