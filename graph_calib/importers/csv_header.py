@@ -107,10 +107,10 @@ def detect_layout(path, *, delimiter):
                       and len(split_cells(first, d)) > 1), None)
         if other is not None:
             raise InputError(f"the header line is one column ({first[:60]}) but splits at each {other}: give "
-                             f"--delimiter {other}", path=path, dataset="line 1")
+                             f"--delimiter {other}", path=path, dataset=f"line {header_lines}")
         raise InputError(f"the header line names its columns ({', '.join(cells)}) but none is a known name for "
                          f"{', '.join(missing)}: give --columns (e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6)",
-                         path=path, dataset="line 1")
+                         path=path, dataset=f"line {header_lines}")
     notes = ["columns from the header line: " + ", ".join(f"{k}={cells[j].strip()}" for k, j in columns.items())]
     if header_lines > 1:
         notes.append(f"{header_lines - 1} line(s) above the header line read as comments")

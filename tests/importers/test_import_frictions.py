@@ -276,3 +276,11 @@ def test_comment_lines_above_the_header_are_read_past(tmp_path):
     assert exp.n_samples == n and exp.rate_hz == pytest.approx(RATE)
     assert "2 line(s) above the header line read as comments" in options["_notes"]
     np.testing.assert_allclose(exp.dv[1:] * RATE, f[1:], rtol=1e-6)
+
+
+def test_a_header_below_comment_lines_is_named_by_its_own_line(tmp_path):
+    path = _write(tmp_path / "a.csv", "# exported by some logger\nwhen,p,q,r,u,v,w", [[0.0] * 7])
+    from graph_calib.importers.csv import FORMAT
+    with pytest.raises(InputError, match=re.escape("line 2: the header line names its columns (when, p, q, r, u, v, "
+                                                   "w)")):
+        FORMAT.read([path], {"latitude_rad": LAT})
