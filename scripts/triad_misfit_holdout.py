@@ -15,7 +15,7 @@ alone.
     PYTHONPATH=$PWD python scripts/triad_misfit_holdout.py --seeds 1 2 3 --effect gyro.bias_dtdt --effect-scale 3e4
     PYTHONPATH=$PWD python scripts/triad_misfit_holdout.py --seeds 1 2 3 --diagnose
 
-``--diagnose`` adds a third fit, ``diagnose`` (the loop as it runs by default, the factor graph), and prints its
+``--truth`` adds the true calibration's held-out figures (what the record's noise allows). ``--diagnose`` adds a third fit, ``diagnose`` (the loop as it runs by default, the factor graph), and prints its
 held-out figures and ratio too; ``--holdout`` runs that loop with its held-out guard (``DiagnosisOptions.holdout``,
 off by default: :mod:`graph_calib.diagnosis.holdout`).
 """
@@ -61,32 +61,38 @@ def main(argv=None):
     p.add_argument("--diagnose", action="store_true", help="also fit with diagnose (the loop)")
     p.add_argument("--holdout", action="store_true", help="the loop of --diagnose with its held-out guard")
     p.add_argument("--still-rests", action="store_true", help="the product's rests still (ModelOptions.still_at_rest)")
+    p.add_argument("--truth", action="store_true",
+                   help="also print the true calibration's held-out figures (the floor the record's noise sets)")
     args = p.parse_args(argv)
     product = CalibrationOptions(model=ModelOptions(grade="consumer", still_at_rest=args.still_rests))
     gravity_only = CalibrationOptions(model=ModelOptions(grade="consumer",
                                                          variance_factors={"rotation": GRAVITY_ONLY_FACTOR}))
     rows = []
     head = (f"{'seed':>4} {'|f| spread [m/s^2]: raw':>24} {'gravity-only':>13} {'product':>10}"
-            + (f" {'diagnose':>10}" if args.diagnose else "")
+            + (f" {'diagnose':>10}" if args.diagnose else "") + (f" {'truth':>10}" if args.truth else "")
             + f"   {'transitions [deg]: raw':>22} {'gravity-only':>13} {'product':>10}"
-            + (f" {'diagnose':>10}" if args.diagnose else "") + f"   {'ratio':>6}" + (f" {'diag':>6}" if args.diagnose else ""))
+            + (f" {'diagnose':>10}" if args.diagnose else "") + (f" {'truth':>10}" if args.truth else "")
+            + f"   {'ratio':>6}" + (f" {'diag':>6}" if args.diagnose else "") + (f" {'truth':>6}" if args.truth else ""))
     print(head)
 
     def line(label, r):
-        k = 4 if args.diagnose else 3
+        k = 3 + args.diagnose + args.truth
         f, t = r[:k], r[k:]
         text = f"{label:>4} {f[0]:>24.3e} " + " ".join(f"{v:>{13 if i == 0 else 10}.3e}" for i, v in enumerate(f[1:]))
         text += f"   {t[0]:>22.3f} " + " ".join(f"{v:>{13 if i == 0 else 10}.3f}" for i, v in enumerate(t[1:]))
-        text += f"   {f[2] / f[1]:>6.2f}" + (f" {f[3] / f[1]:>6.2f}" if args.diagnose else "")
+        text += "   " + " ".join(f"{v / f[1]:>6.2f}" for v in f[2:])
         print(text, flush=True)
 
     for seed in args.seeds:
-        exp = simulate("consumer-handheld", rng=np.random.default_rng(seed), n_poses=args.poses,
-                       effects=(args.effect,), effect_scale=args.effect_scale).plans[0].make().experiment
+        made = simulate("consumer-handheld", rng=np.random.default_rng(seed), n_poses=args.poses,
+                        effects=(args.effect,), effect_scale=args.effect_scale).plans[0].make()
+        exp, truth = made.experiment, Calibration.from_result(made.truth)
         cvs = [cross_validate(exp, fit=fitter(gravity_only), folds=2, by="pairs"),
                cross_validate(exp, fit=fitter(product), folds=2, by="pairs")]
         if args.diagnose:
             cvs.append(cross_validate(exp, fit=diagnose_fitter(product, holdout=args.holdout), folds=2, by="pairs"))
+        if args.truth:
+            cvs.append(cross_validate(exp, fit=lambda train: truth, folds=2, by="pairs"))
         raw = cvs[0].pooled("raw")
         fits = [cv.pooled("calibrated") for cv in cvs]
         rows.append([raw["static_norm_std_mps2"]] + [f["static_norm_std_mps2"] for f in fits]

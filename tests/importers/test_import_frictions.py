@@ -284,3 +284,14 @@ def test_a_header_below_comment_lines_is_named_by_its_own_line(tmp_path):
     with pytest.raises(InputError, match=re.escape("line 2: the header line names its columns (when, p, q, r, u, v, "
                                                    "w)")):
         FORMAT.read([path], {"latitude_rad": LAT})
+
+
+@pytest.mark.parametrize("fmt", ["rosbag", "ulog", "csv"])
+def test_a_missing_input_is_named_before_any_option_it_lacks(tmp_path, capsys, fmt):
+    """Without ``--latitude-deg`` too, a missing input is what the one message names (it is the first to fix)."""
+    missing = tmp_path / "nowhere.bag"
+    out = tmp_path / "out.h5"
+    assert cli.main(["import", fmt, str(missing), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{missing}: no such file or folder" in err and "latitude" not in err
+    assert not out.exists()
