@@ -256,6 +256,11 @@ def parse_procedure(doc, *, path=""):
             raise InputError("a step procedure needs at least two temperatures", path=path,
                              dataset="temperatures_degC")
         kw["soak_s"] = _number(doc, "soak_s", path=path, default=None)
+        named = [f"{T:g}" for T in kw["temperatures_degC"]]       # each step is the experiment step_<T>
+        twice = sorted({n for n in named if named.count(n) > 1}, key=float)
+        if twice:
+            raise InputError(f"each step is one experiment: {', '.join(twice)} degC appear(s) more than once",
+                             path=path, dataset="temperatures_degC")
     else:
         subs = doc.get("subranges_degC")
         if not isinstance(subs, list) or not subs:
@@ -268,6 +273,9 @@ def parse_procedure(doc, *, path=""):
                 raise InputError(f"must be [low, high] with low < high, got {s!r}", path=path,
                                  dataset=f"subranges_degC[{i}]")
             pairs.append((float(s[0]), float(s[1])))
+            if f"{s[0]:g}_{s[1]:g}" in (f"{lo:g}_{hi:g}" for lo, hi in pairs[:-1]):   # the experiment sub_<lo>_<hi>
+                raise InputError(f"each subrange is one experiment: {s!r} appears more than once", path=path,
+                                 dataset=f"subranges_degC[{i}]")
         kw["subranges_degC"] = tuple(pairs)
     if kind in ("steps", "ramp"):
         kw["lengths_s"] = _numbers(doc, "lengths_s", path=path, positive=True)

@@ -60,6 +60,8 @@ def test_shipped_procedures_read():
     (("lengths_s = [600.0, 1200.0]", "lengths_s = [600.0, -1.0]"), "lengths_s[1]", "positive"),
     (("temperatures_degC = [0.0, 13.333333333333334, 26.666666666666668, 40.0]", "temperatures_degC = [0.0]"),
      "temperatures_degC", "at least two"),
+    (("temperatures_degC = [0.0, 13.333333333333334, 26.666666666666668, 40.0]", "temperatures_degC = [0.0, 40.0, 0.0]"),
+     "temperatures_degC", "0 degC appear(s) more than once"),
     (("soak_s = 3600.0", "soak_s = 3600.0\ndiscarded_s = -5.0"), "discarded_s", "non-negative"),
     (("soak_s = 3600.0", "soak_s = 3600.0\ndiscarded_s = 400.0"), "lengths_s", "after the 400 s discarded"),
 ])
@@ -74,6 +76,7 @@ def test_bad_step_procedure_refused(tmp_path, edit, key, words):
 @pytest.mark.parametrize("edit, key, words", [
     (("[[0.0, 20.0], [20.0, 40.0]]", "[[0.0, 20.0], [30.0, 20.0]]"), "subranges_degC[1]", "low < high"),
     (("span_degC = 16.0", "span_degC = 25.0"), "span_degC", "narrowest subrange"),
+    (("[[0.0, 20.0], [20.0, 40.0]]", "[[0.0, 20.0], [0.0, 20.0]]"), "subranges_degC[1]", "more than once"),
     (('kind = "ramp"', 'kind = "program"'), "lengths_s", "unknown key"),
 ])
 def test_bad_ramp_procedure_refused(tmp_path, edit, key, words):
