@@ -218,6 +218,9 @@ def read_manifest(path):
         name = entry.get("name", Path(file).stem)
         if not isinstance(name, str) or not name:
             raise InputError(f"name must be a non-empty string, got {_show(name)}", path=path, dataset=f"{where}.name")
+        if any(c in name for c in "/\\\0") or name.startswith("."):
+            raise InputError(f"name {_show(name)} names the experiment's folder under the output: one folder name, "
+                             "without a path separator and not starting with '.'", path=path, dataset=f"{where}.name")
         if name in names:
             raise InputError(f"name {_show(name)} used twice; give each experiment its own 'name'", path=path,
                              dataset=f"{where}.name")

@@ -701,6 +701,10 @@ MANIFEST_RULES = [
      "must be a positive number"),
     ("duplicate-name", lambda s: s.replace('name = "second"', 'name = "sub1_20_30"'), "[[experiment]] #2.name",
      "used twice"),
+    ("name-a-path", lambda s: s.replace('name = "second"', 'name = "../../escaped"'), "[[experiment]] #2.name",
+     "one folder name, without a path separator"),
+    ("name-hidden", lambda s: s.replace('name = "second"', 'name = ".."'), "[[experiment]] #2.name",
+     "not starting with '.'"),
 ]
 
 
