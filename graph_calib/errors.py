@@ -19,6 +19,7 @@ class InputError(ValueError):
         if index is not None:
             where = f"{where} [sample {index}]" if where else f"[sample {index}]"
         super().__init__(f"{where}: {message}" if where else message)
+        self.reason = message
         self.path = path
         self.dataset = dataset
         self.index = index

@@ -11,6 +11,7 @@ import tempfile
 from pathlib import Path
 
 from graph_calib.errors import InputError
+from graph_calib.io.atomic import regular_target
 
 
 def _parent_ok(path, option):
@@ -45,6 +46,10 @@ def output_file(path, *, option="--out", suffixes=None):
     path = Path(path)
     if path.is_dir():
         raise InputError("is a folder; it names the file to write", path=path, dataset=option)
+    try:
+        path = regular_target(path)
+    except InputError as exc:
+        raise InputError(exc.reason, path=exc.path, dataset=option) from None
     if suffixes and path.suffix.lower() not in suffixes:
         raise InputError(f"ends in {path.suffix or 'no suffix'!r}; this file is written as "
                          f"{' or '.join(suffixes)}", path=path, dataset=option)

@@ -31,6 +31,31 @@ def _umask():
     return mask
 
 
+def regular_target(path):
+    """The file a write to ``path`` replaces: ``path`` itself, or the file a symbolic link at ``path`` points to (a
+    link is written through, as ``cp`` does, never replaced by a file); InputError when that is a folder or exists
+    and is no regular file (a device, a pipe, a socket: the rename of an atomic write would replace the node
+    itself, ``/dev/stdout`` or ``/dev/full`` for a user who may).
+
+    Parameters
+    ----------
+    path : str or Path
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    if path.is_symlink():
+        path = Path(os.path.realpath(path))
+    if path.is_dir():
+        raise InputError("is a folder, expected a file name", path=path)
+    if path.exists() and not path.is_file():
+        raise InputError("is not a regular file (a device, a pipe or a socket): name a file to write; the file is "
+                         "written whole and then renamed into place", path=path)
+    return path
+
+
 @contextlib.contextmanager
 def atomic_path(path):
     """Yield a temporary path next to ``path``; rename it onto ``path`` on success.
@@ -55,12 +80,10 @@ def atomic_path(path):
     InputError
         If the folder does not exist or ``path`` is a folder.
     """
-    path = Path(path)
+    path = regular_target(path)
     folder = path.parent
     if not folder.is_dir():
         raise InputError(f"folder {folder} does not exist", path=path)
-    if path.is_dir():
-        raise InputError("is a folder, expected a file name", path=path)
     fd, tmp_name = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp")
     os.close(fd)
     tmp = Path(tmp_name)

@@ -62,6 +62,30 @@ def test_an_output_path_of_the_wrong_kind_is_refused_before_any_work(tmp_path, c
     assert f"{out}: --out: {expected}" in err and "internal error" not in err
 
 
+@pytest.mark.parametrize("argv", [["import", "csv", "a.csv"], ["predict", "x.h5"], ["apply", "r.json", "x.h5"],
+                                  ["export", "camp"]])
+def test_an_output_file_that_is_a_pipe_or_device_is_refused_before_any_work(tmp_path, capsys, argv):
+    """The atomic write's rename would replace the node itself (``/dev/full``, ``/dev/stdout`` for root)."""
+    out = tmp_path / "fifo"
+    os.mkfifo(out)
+    assert cli.main(argv + ["--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert f"{out}: --out: is not a regular file (a device, a pipe or a socket)" in err, err
+    assert out.is_fifo()
+
+
+def test_a_symbolic_link_is_written_through_not_replaced(tmp_path):
+    from graph_calib.io import atomic_write_text
+
+    target = tmp_path / "real" / "target.txt"
+    target.parent.mkdir()
+    target.write_text("old")
+    link = tmp_path / "link.txt"
+    link.symlink_to(target)
+    atomic_write_text(link, "new")
+    assert link.is_symlink() and target.read_text() == "new"
+
+
 @pytest.mark.parametrize("argv", [["calibrate", "x.h5"], ["diagnose", "x.h5"], ["crossval", "x.h5"],
                                   ["import", "csv", "a.csv"], ["apply", "r.json", "x.h5"], ["export", "camp"]])
 def test_an_output_place_that_takes_no_files_is_refused_before_any_work(tmp_path, capsys, monkeypatch, argv):
