@@ -154,12 +154,25 @@ def export_document(args, fmt):
     return source, spec.document(source, **options)
 
 
+def _not_the_source(out, source):
+    """Refuse an ``--out`` that is the file exported from (a result, or a campaign's ``campaign.json``)."""
+    src = Path(source)
+    read = {src.resolve(), (src / "campaign.json").resolve()} if src.is_dir() else {src.resolve()}
+    if out.resolve() in read:
+        raise InputError(f"is the file being exported from ({source}); name another file", path=out, dataset="--out")
+
+
 def run(args):
     out = output_file(args.out)
+    _not_the_source(out, args.source)
     fmt = _format(args, out)
     if fmt in TABLE_FORMATS:
         return _table(args, out, fmt)
     source, doc = export_document(args, fmt)
+    failed = verdict_failed(source.provenance)
+    if failed:
+        print(f"warning: exporting {args.source} whose verdict failed ({failed}), as --force asks; the file's first "
+              "line says so", file=sys.stderr)
     text = EXPORT_FORMATS[fmt].text(source, doc)
     out.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(out, text)

@@ -38,6 +38,7 @@ from graph_calib.compensation.table import TABLE_FORMAT
 from graph_calib.constants import MPS2_TO_UG, RS_TO_DH
 from graph_calib.errors import InputError
 from graph_calib.solvers.joint.result import read_joint_result
+from graph_calib.design.prediction import PREDICTION_SOLVER
 from graph_calib.solvers.joint.solver import JOINT
 
 #: Root attribute of a corrected experiment file: the provenance of its correction, JSON.
@@ -91,6 +92,10 @@ def read_compensation(path, *, solver=None, model=None):
     prov = {"kind": kind, "file": str(path.resolve()), "sha256": _sha256(path)}
     if kind == "result":
         result = io.read_result(path)
+        if result.solver == PREDICTION_SOLVER:
+            raise InputError("is a prediction (graph-calib predict): the sigmas a calibration of the record would "
+                             "reach, every value 0; apply or export a result of calibrate, diagnose or campaign",
+                             path=path)
         # a joint result (docs/joint-result.md): its curves with their bands, like a stitched calibration
         comp = (JointCalibration.from_result(read_joint_result(path), source=str(path.resolve()))
                 if isinstance(result.extra.get(JOINT), dict) else Calibration.from_result(result))

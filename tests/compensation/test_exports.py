@@ -287,3 +287,39 @@ def test_a_table_of_a_campaign_that_failed_its_checks_needs_force(sources, campa
     assert "verdict: its verdict failed (validation v.h5: not met)" in capsys.readouterr().err
     assert not corrected.exists()
     assert cli.main(["apply", str(out), str(record), "--out", str(corrected), "--force"]) == 0
+
+
+def test_a_failed_result_exported_with_force_says_so_in_its_file(sources, tmp_path, capsys):
+    """The file goes to an autopilot: its first line names the failed verdict, and a warning says it."""
+    result = tmp_path / "factor-graph.json"
+    doc = json.loads(sources["result"].read_text())
+    doc["verdict"] = {"passed": False, "text": "verdict: FAIL: made up", "failed": ["made up"]}
+    result.write_text(json.dumps(doc))
+    out = tmp_path / "x.params"
+    assert cli.main(["export", str(result), "--format", "px4", "--out", str(out)]) == 2
+    assert cli.main(["export", str(result), "--format", "px4", "--out", str(out), "--force"]) == 0
+    captured = capsys.readouterr()
+    assert "warning: exporting" in captured.err and "whose verdict failed" in captured.err
+    first = out.read_text().splitlines()[0]
+    assert first.startswith("# PX4") and "WHOSE VERDICT FAILED" in first and "exported with --force" in first
+
+
+def test_export_never_writes_over_the_file_it_exports_from(sources, tmp_path, capsys):
+    camp = tmp_path / "camp"
+    shutil.copytree(sources["campaign"], camp)
+    before = (camp / "campaign.json").read_bytes()
+    for source in (camp, camp / "campaign.json"):
+        assert cli.main(["export", str(source), "--out", str(camp / "campaign.json"), "--force"]) == 2
+        assert "--out: is the file being exported from" in capsys.readouterr().err
+    assert (camp / "campaign.json").read_bytes() == before
+
+
+def test_a_prediction_is_not_a_calibration(sources, campaign, tmp_path, capsys):
+    pred = tmp_path / "pred.json"
+    assert cli.main(["predict", str(campaign[0] / "sub2_0_10.h5"), "--out", str(pred)]) == 0
+    capsys.readouterr()
+    assert cli.main(["export", str(pred), "--format", "px4", "--out", str(tmp_path / "p.params")]) == 2
+    assert "is a prediction (graph-calib predict)" in capsys.readouterr().err
+    assert cli.main(["apply", str(pred), str(campaign[0] / "sub2_0_10.h5"), "--out", str(tmp_path / "p.h5")]) == 2
+    assert "is a prediction (graph-calib predict)" in capsys.readouterr().err
+    assert not (tmp_path / "p.params").exists() and not (tmp_path / "p.h5").exists()

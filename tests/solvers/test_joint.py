@@ -235,6 +235,18 @@ def test_result_file_round_trip_and_its_bad_input(curved, tmp_path):
         read_joint_result(tmp_path / "plain.json")
 
 
+def test_a_joint_result_apart_from_its_campaign_names_the_export_that_takes_it(curved, tmp_path, capsys):
+    sim, runs, problems, _, out = curved
+    res = joint_result(out, source="campaign.toml", experiments=[f"e{i}" for i in range(len(runs))],
+                       t_refs=[p.model.t_ref_degC for p in problems], sensor_ranges=_ranges(runs))
+    path = tmp_path / "joint.json"
+    write_joint_result(res, path)
+    assert main(["export", str(path), "--format", "px4", "--out", str(tmp_path / "j.params")]) == 2
+    assert ("a joint result exports from its campaign: graph-calib export CAMPAIGN --solver joint (no campaign.json "
+            "beside it") in capsys.readouterr().err
+    assert not (tmp_path / "j.params").exists()
+
+
 def test_validation_and_export_accept_the_joint_calibration(curved, tmp_path):
     sim, runs, problems, _, out = curved
     res = joint_result(out, source="campaign.toml", experiments=[f"e{i}" for i in range(len(runs))],
@@ -302,6 +314,12 @@ def test_campaign_runs_the_joint_solver_beside_the_graph_and_caches_it(tmp_path)
     assert isinstance(comp, JointCalibration) and prov["solver"] == "joint"
     comp2, _ = read_compensation(tmp_path / "out" / "joint.json")
     assert isinstance(comp2, JointCalibration) and set(comp2.curves) == set(comp.curves)
+    # joint.json itself exports as its campaign's joint calibration (it ended in an AttributeError, exit 1)
+    for source, name in ((tmp_path / "out" / "joint.json", "a.params"), (tmp_path / "out", "b.params")):
+        argv = ["export", str(source), "--format", "px4", "--out", str(tmp_path / name)]
+        assert main(argv + (["--solver", "joint"] if source.is_dir() else [])) == 0
+    assert [ln for ln in (tmp_path / "a.params").read_text().splitlines() if not ln.startswith("#")] == \
+        [ln for ln in (tmp_path / "b.params").read_text().splitlines() if not ln.startswith("#")]
     again = run_campaign(tmp_path / "data" / "campaign.toml", tmp_path / "out", options=opts)
     assert again.document["joint"]["joint"]["status"] == "cached"
 

@@ -12,7 +12,7 @@ through the one sensor model (:func:`graph_calib.compensation.calibration.triad_
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -21,6 +21,7 @@ from graph_calib import io
 from graph_calib.compensation.apply import read_compensation, verdict_failed
 from graph_calib.compensation.calibration import Calibration, triad_errors
 from graph_calib.errors import InputError
+from graph_calib.solvers.joint.solver import JOINT
 
 
 @dataclass(frozen=True)
@@ -101,7 +102,8 @@ def _experiment_rate(candidates):
 
 
 def load_source(path, *, solver=None, model=None, force=False):
-    """The :class:`ExportSource` of a result file or a campaign folder.
+    """The :class:`ExportSource` of a result file or a campaign folder; a failed verdict exported with ``force`` says
+    so in its label (the first line of every exported file and of the command's summary).
 
     Raises
     ------
@@ -114,11 +116,26 @@ def load_source(path, *, solver=None, model=None, force=False):
     if failed and not force:
         raise InputError(f"its verdict failed ({failed}); export it anyway with --force", path=path,
                          dataset="verdict")
+    source = _source(comp, prov, path, force=force)
+    if failed and not source.label.endswith("--force"):
+        source = replace(source, label=f"{source.label}, WHOSE VERDICT FAILED ({failed}), exported with --force")
+    return source
+
+
+def _source(comp, prov, path, *, force):
+    """:func:`load_source`'s source before its label says a failed verdict."""
     kind = prov["kind"]
     if kind == "table":
         raise InputError("a compensation table holds values on a grid, not the model: export from the campaign "
                          "folder or the result file it came from", path=path)
     path = Path(path)
+    if kind == "result" and not isinstance(comp, Calibration):
+        # a joint result (docs/joint-result.md): curves over temperature, exported as its campaign's joint calibration
+        campaign = path.parent / "campaign.json"
+        if not campaign.is_file():
+            raise InputError("a joint result exports from its campaign: graph-calib export CAMPAIGN --solver joint "
+                             f"(no campaign.json beside it in {path.parent})", path=path)
+        return load_source(path.parent, solver=JOINT, force=force)
     if kind in ("result", "calibration"):
         doc = json.loads(path.read_text(encoding="utf-8"))
         rng = tuple(doc.get("temperature_range_degC") or (comp.t_ref_degC, comp.t_ref_degC))
