@@ -502,6 +502,8 @@ def _connect(scheduler):
         return Client(scheduler, timeout="10s")
     except (OSError, TimeoutError) as exc:
         raise InputError(f"cannot connect to the Dask scheduler: {exc}", dataset="--scheduler") from None
+    except ValueError as exc:        # distributed's parsing of the address: 'missing port number in address ...'
+        raise InputError(f"not a scheduler address (tcp://HOST:PORT): {exc}", dataset="--scheduler") from None
 
 
 def _run_dask(tasks, *, finish, bar, pool):

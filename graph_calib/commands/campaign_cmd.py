@@ -45,6 +45,9 @@ def options_from_args(args):
 
     if args.workers is not None and args.workers < 0:
         raise InputError(f"must be 0 or more, got {args.workers}", dataset="--workers")
+    if args.workers == 0 and args.scheduler:
+        raise InputError("--workers 0 runs without Dask, --scheduler on a Dask cluster: give one of them",
+                         dataset="--workers")
     return CampaignOptions(workers=args.workers, scheduler=args.scheduler, solvers=args.solver,
                            stitch_model=args.stitch, validate=tuple(args.validate),
                            diagnose=False if args.no_diagnose else None, force=args.force,

@@ -476,6 +476,14 @@ def test_unreachable_scheduler_is_an_input_error(simulated, tmp_path, capsys, mo
     err = capsys.readouterr().err
     assert rc == 2 and "--scheduler: cannot connect to the Dask scheduler" in err
     assert not warmed   # the address is tried first: a wrong one does not wait for a warm-up (minutes when cold)
+    assert not (tmp_path / "out").exists()      # and the refused run leaves no empty output folder
+    rc = main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--scheduler", "notanaddress", "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--scheduler: not a scheduler address (tcp://HOST:PORT)" in err and "internal error" not in err
+    rc = main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--scheduler", "tcp://127.0.0.1:9",
+               "--workers", "0", "--quiet"])
+    assert rc == 2 and "--workers 0 runs without Dask, --scheduler on a Dask cluster" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
 
 
 def test_validation_record_without_truth_is_checked_against_its_own_calibration(simulated, tmp_path):
