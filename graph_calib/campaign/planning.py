@@ -92,7 +92,7 @@ def plan_campaign(campaign, out, *, options):
     if options.stitch_model not in ("cubic", "linear"):
         raise InputError(f"must be 'cubic' or 'linear', got {options.stitch_model!r}", dataset="--stitch")
     out = _check_out(out)
-    records = _check_records(options.validate)
+    records = _check_records(options.validate, imu_id=campaign.imu_id)
     todo, done = plan(campaign, out, options=options)
     vtodo, vdone, refs = _validation_tasks(campaign, out, records, options=options)
     _make_out(out)              # only once every file has passed its check: a refusal leaves no empty folder
@@ -129,7 +129,7 @@ def plan(campaign, out, *, options):
     threads = 1 if (options.scheduler or options.workers != 0) else 0
     todo, done = [], []
     for e in campaign.experiments:
-        check_experiment_header(e.file)
+        check_experiment_header(e.file, imu_id=campaign.imu_id)
         copts = calibration_options(campaign, t_ref_degC=e.t_ref_degC)
         osha = options_sha256(copts, loop)
         fsha = file_sha256(e.file)
@@ -180,8 +180,9 @@ def _make_out(out):
         raise InputError(f"cannot create the output folder: {exc}", path=out, dataset="--out") from None
 
 
-def check_experiment_header(path, *, dataset=None):
-    """Cheap check that ``path`` is an experiment file (HDF5 with the right ``format``); InputError if not.
+def check_experiment_header(path, *, dataset=None, imu_id=None):
+    """Cheap check that ``path`` is an experiment file (HDF5 with the right ``format``) of the IMU ``imu_id`` (when
+    given, and when the file names its IMU); InputError if not.
 
     The full validation (every rule of data-format.md) runs where the file is
     read, on the worker; this catches a wrong file before any work starts.
@@ -192,6 +193,7 @@ def check_experiment_header(path, *, dataset=None):
     try:
         with h5py.File(path, "r") as f:
             fmt = f.attrs.get("format")
+            own = f.attrs.get("imu_id")
     except OSError:
         raise InputError("not an HDF5 file (an experiment file is HDF5, data-format.md)", path=path,
                          dataset=dataset) from None
@@ -202,16 +204,20 @@ def check_experiment_header(path, *, dataset=None):
     if fmt != io.EXPERIMENT_FORMAT:
         raise InputError(f"not an experiment file: format attribute is {fmt!r}, expected {io.EXPERIMENT_FORMAT!r}",
                          path=path, dataset=dataset)
+    own = own.decode("utf-8", "replace") if isinstance(own, bytes) else own
+    if imu_id and isinstance(own, str) and own and own != imu_id:
+        raise InputError(f"a record of IMU {own!r}; the manifest's [imu].id is {imu_id!r}: a campaign calibrates one "
+                         "IMU", path=path, dataset=dataset or "imu_id")
 
 
-def _check_records(records):
+def _check_records(records, *, imu_id):
     paths = []
     for r in records:
         p = Path(r).resolve()
         if not p.is_file():
             raise InputError("validation record not found" if not p.exists() else "not a file", path=p,
                              dataset="--validate")
-        check_experiment_header(p, dataset="--validate")
+        check_experiment_header(p, dataset="--validate", imu_id=imu_id)
         paths.append(p)
     return paths
 

@@ -51,7 +51,7 @@ def run(args):
         raise InputError(f"its verdict failed ({failed}); a calibration that failed its own checks is not applied "
                          "without --force", path=args.calibration, dataset="verdict")
     experiment = io.read_experiment(src)
-    other = provenance.get("imu_id") if provenance["kind"] == "result" else None
+    other = provenance.get("imu_id")     # a result's, a table's or a campaign's
     foreign = bool(other and experiment.imu_id and other != experiment.imu_id)
     if foreign and not args.force:
         raise InputError(f"is a record of IMU {experiment.imu_id!r}, the calibration is of IMU {other!r}: one unit's "
@@ -80,6 +80,10 @@ def run(args):
     if foreign:
         print(f"  warning: applied with --force to a record of IMU {experiment.imu_id!r}, the calibration is of IMU "
               f"{other!r}", file=sys.stderr)
+    elif not (other and experiment.imu_id):
+        unnamed = " and ".join(w for w, i in (("the calibration", other), ("the record", experiment.imu_id)) if not i)
+        print(f"  note: {unnamed} name(s) no IMU (imu_id empty): whether they are of one unit was not checked "
+              "(graph-calib import --imu-id names it)", file=sys.stderr)
     for name, r in provenance.get("unresolved_not_applied", {}).items():
         gs = {k: v for k, v in r["elements"].items() if k.startswith("gyro.g_sensitivity")}
         size = max((abs(v) for v in gs.values()), default=0.0)

@@ -568,3 +568,15 @@ def test_the_local_cluster_s_processes_leave_ctrl_c_to_this_one():
     assert inside == "True"
     assert signal.getsignal(signal.SIGINT) is before
     assert subprocess.run(probe, capture_output=True, text=True, check=True).stdout.strip() == "False"
+
+
+def test_a_record_of_another_imu_is_refused_before_any_work(simulated, tmp_path, capsys):
+    """A campaign calibrates one IMU: an experiment or validation record naming another is exit 2 (records of two
+    units were calibrated and stitched together, and passed)."""
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    manifest.write_text(manifest.read_text().replace('id = "SIM-NAV 0001"', 'id = "SIM-NAV 0009"'))
+    rc = main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "sub2_0_10.h5: imu_id: a record of IMU 'SIM-NAV 0001'; the manifest's [imu].id is " \
+                       "'SIM-NAV 0009': a campaign calibrates one IMU" in err, err
+    assert not (tmp_path / "out").exists()

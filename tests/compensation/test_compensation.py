@@ -630,3 +630,30 @@ def test_a_result_of_another_imu_is_not_applied_without_force(campaign, tmp_path
 
 def doc_id(path):
     return io.read_experiment(path).imu_id
+
+
+def test_a_campaign_or_table_of_another_imu_is_not_applied_without_force(campaign, tmp_path, capsys):
+    """The same guard for a campaign folder and its table (it read the result's imu_id alone)."""
+    src = campaign[0] / "sub2_0_10.h5"
+    camp = tmp_path / "camp"
+    shutil.copytree(campaign[1], camp)
+    doc = json.loads((camp / "campaign.json").read_text())
+    doc["imu_id"] = "SIM-MEMS 0002"
+    (camp / "campaign.json").write_text(json.dumps(doc))
+    table = tmp_path / "t.json"
+    assert _cli(["export", camp, "--out", table], capsys)[0] == 0
+    for calibration in (camp, table):
+        out = tmp_path / "out.h5"
+        code, _, err = _cli(["apply", calibration, src, "--out", out], capsys)
+        assert code == 2 and not out.exists(), err
+        assert "the calibration is of IMU 'SIM-MEMS 0002'" in err
+
+
+def test_a_record_that_names_no_imu_is_applied_with_a_note(campaign, tmp_path, capsys):
+    result = campaign[1] / "sub2_0_10" / "factor-graph.json"
+    doc = json.loads(result.read_text())
+    doc["imu_id"] = ""
+    bare = tmp_path / "bare.json"
+    bare.write_text(json.dumps(doc))
+    code, _, err = _cli(["apply", bare, campaign[0] / "sub2_0_10.h5", "--out", tmp_path / "o.h5"], capsys)
+    assert code == 0 and "note: the calibration name(s) no IMU (imu_id empty)" in err
