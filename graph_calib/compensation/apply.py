@@ -105,6 +105,12 @@ def read_compensation(path, *, solver=None, model=None):
             prov["imu_id"] = str(result.extra["imu_id"])
         if isinstance(result.extra.get("verdict"), dict):
             prov["verdict"] = result.extra["verdict"]
+        elif isinstance(result.extra.get("campaign"), dict):
+            # a campaign's task file holds no verdict (the campaign judges the experiment's solvers together and
+            # keeps the files as the workers wrote them): its experiment's verdict in campaign.json
+            verdict = experiment_verdict(path, str(result.extra["campaign"].get("experiment", "")))
+            if verdict is not None:
+                prov["verdict"] = verdict
         if result.extra.get("unresolved") and isinstance(comp, Calibration):
             comp, removed = without_unresolved(comp, result.extra["unresolved"])
             prov["unresolved_not_applied"] = removed
@@ -132,6 +138,24 @@ def read_compensation(path, *, solver=None, model=None):
         if verdict is not None:
             prov["verdict"] = verdict
     return comp, prov
+
+
+def experiment_verdict(path, name):
+    """The verdict (dict) campaign.json gives experiment ``name``, for a result file ``path`` of that campaign (in
+    ``OUT/<name>/``, or a re-solve's ``OUT/<name>/pooled/<wave>/``); None where no campaign.json above it says."""
+    for folder in list(Path(path).resolve().parents)[:4]:
+        doc_path = folder / "campaign.json"
+        if not doc_path.is_file():
+            continue
+        try:
+            doc = json.loads(doc_path.read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            return None
+        for e in doc.get("experiments") or () if isinstance(doc, dict) else ():
+            if isinstance(e, dict) and e.get("name") == name and isinstance(e.get("verdict"), dict):
+                return e["verdict"]
+        return None
+    return None
 
 
 def campaign_verdict(path):

@@ -657,3 +657,23 @@ def test_a_record_that_names_no_imu_is_applied_with_a_note(campaign, tmp_path, c
     bare.write_text(json.dumps(doc))
     code, _, err = _cli(["apply", bare, campaign[0] / "sub2_0_10.h5", "--out", tmp_path / "o.h5"], capsys)
     assert code == 0 and "note: the calibration name(s) no IMU (imu_id empty)" in err
+
+
+def test_a_campaign_task_file_carries_its_experiments_verdict(campaign, tmp_path, capsys):
+    """A campaign's per-experiment result file holds no verdict (the campaign judges the experiment's solvers
+    together): apply and export read the experiment's verdict from campaign.json and refuse a failed one."""
+    camp = tmp_path / "camp"
+    shutil.copytree(campaign[1], camp)
+    doc = json.loads((camp / "campaign.json").read_text())
+    entry = next(e for e in doc["experiments"] if e["name"] == "sub2_0_10")
+    entry["verdict"] = {**entry["verdict"], "passed": False, "text": "verdict: FAIL: made up for the test"}
+    (camp / "campaign.json").write_text(json.dumps(doc))
+    result, src, out = camp / "sub2_0_10" / "factor-graph.json", campaign[0] / "sub2_0_10.h5", tmp_path / "o.h5"
+    assert "verdict" not in json.loads(result.read_text())
+    code, _, err = _cli(["apply", result, src, "--out", out], capsys)
+    assert code == 2 and "its verdict failed (verdict: FAIL: made up for the test)" in err and not out.exists()
+    code, _, err = _cli(["export", result, "--format", "px4", "--out", tmp_path / "x.params"], capsys)
+    assert code == 2 and "made up for the test" in err
+    # another experiment of the same campaign passed: applied as before
+    assert _cli(["apply", camp / "sub3_10_20" / "factor-graph.json", campaign[0] / "sub3_10_20.h5", "--out", out],
+                capsys)[0] == 0
