@@ -109,13 +109,13 @@ def run(args):
     """Import, write, print a summary; InputError on bad input (exit 2)."""
     fmt = formats()[args.format]
     out = output_file(args.out)
+    options = _options(args, fmt)
     if len(args.inputs) != len(fmt.inputs):
         raise InputError(f"format {fmt.name} takes {' '.join(fmt.inputs)}, got {len(args.inputs)} input(s)",
                          dataset="INPUT")
-    for p in args.inputs:            # before the options: a missing file is the first thing to fix
+    for p in args.inputs:            # before what the format asks of its options (a latitude): the first to fix
         if not Path(p).exists():
-            raise InputError("no such file or folder", path=p)
-    options = _options(args, fmt)
+            raise InputError("file not found", path=p)
     experiment = fmt.read([Path(p) for p in args.inputs], options)
     write_experiment(experiment, out)
     print(f"graph-calib import {args.format}: " + ", ".join(str(p) for p in args.inputs))

@@ -148,13 +148,41 @@ def regular_times(t, rate_hz, *, segment=None, source="the log", given_rate=Fals
     if not gaps:
         return t, rate_hz, ""
     first = int(np.flatnonzero(d > limit)[0])
+    where = (f"gap of {d[first]:.6g} s ({d[first] * rate_hz:.4g} nominal periods) before sample {first + 1} (at "
+             f"{t[first + 1]:.6g} s; at most {MAX_GAP_PERIODS:g} periods are accepted)")
+    # the span at the nominal period against the samples in it: what the gaps hold (late stamps hold none); stamps
+    # that arrive in bursts have a median spacing shorter than any period, so without a given rate they cannot tell
+    period = 1.0 / rate_hz if given_rate else float(np.median(d))
+    told = given_rate or float(np.mean(d)) <= 2.0 * period
+    missing = (t[-1] - t[0]) / period - (t.shape[0] - 1)
+    if told and missing >= MISSING_SAMPLES:
+        lag = (t - t[0]) / period - np.arange(t.shape[0])         # samples missing before each one
+        lost = int(np.argmax(lag > 0.5 * missing))
+        raise InputError(
+            f"{where}: about {missing:.0f} samples are missing (the span at {1.0 / period:.6g} Hz holds that many "
+            f"more than the file; half of them before sample {lost}, at {t[lost]:.6g} s). Mark where each piece "
+            f"starts with a segment "
+            f"column (segment=COLUMN in --columns, e.g. a counter that steps at each gap) and each piece is "
+            f"integrated on its own; the sample index at one rate would close the gaps and misplace every later "
+            f"sample", path=path, dataset="t", index=first + 1)
+    if told:
+        raise InputError(
+            f"{where}, and the stamps depart from the sample index by {departure:.3g} periods while the span holds "
+            f"every sample: the clock is not the sample clock. If the stamps are late (a wireless link), use the "
+            f"sample index at the nominal rate (csv: leave t= out of --columns and give --rate-hz {end_rate:.6g}); "
+            f"if pieces are missing, mark where each piece starts with a segment column (segment=COLUMN)",
+            path=path, dataset="t", index=first + 1)
     raise InputError(
-        f"gap of {d[first]:.6g} s ({d[first] * rate_hz:.4g} nominal periods) before sample {first + 1} (at "
-        f"{t[first + 1]:.6g} s; at most {MAX_GAP_PERIODS:g} periods are accepted), and the stamps depart from the sample index by {departure:.3g} periods: samples are missing, or the clock is not "
-        f"the sample clock. If every sample is there and only the stamps are late (a wireless link), use the "
-        f"sample index at the nominal rate (csv: leave t= out of --columns and give --rate-hz {end_rate:.6g}); "
-        f"if pieces are missing, mark where each piece starts with a segment column (segment=COLUMN)",
-        path=path, dataset="t", index=first + 1)
+        f"{where}, and the stamps depart from the sample index by {departure:.3g} periods: samples are missing, or "
+        f"the clock is not the sample clock (the stamps come in bursts: give the sensor's rate, --rate-hz, and the "
+        f"import tells which). If every sample is there and only the stamps are late, use the sample index at the "
+        f"nominal rate (csv: leave t= out of --columns and give --rate-hz); if pieces are missing, mark where each "
+        f"piece starts with a segment column (segment=COLUMN)", path=path, dataset="t", index=first + 1)
+
+
+#: Samples missing (the span at the median spacing less the samples in it) from which on a gap in the stamps is taken
+#: as lost samples, not late stamps (whose span holds every sample: within a period or two of the count).
+MISSING_SAMPLES = 3.0
 
 
 def message_times(t, rate_hz, *, source):

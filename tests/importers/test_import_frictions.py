@@ -124,12 +124,26 @@ def test_jittered_stamps_with_no_sample_missing_become_the_sample_index(tmp_path
     assert "follow the sample index" in exp.description and "no sample is missing" in exp.description
 
 
-def test_jittered_stamps_with_samples_missing_propose_the_sample_index(tmp_path):
+def test_jittered_stamps_with_samples_missing_propose_segments_not_the_index(tmp_path):
+    """40 samples lost: the sample index at a rate fitted to the end points would close the gap and misplace every
+    later sample (a lab user who followed that remedy got gyro scales 150 sigma off and a pass)."""
     path = _jittered(tmp_path, missing=range(100, 140))
-    with pytest.raises(InputError, match=r"samples are missing, or the clock is not the sample clock\. If every sample "
-                                         r"is there and only the stamps are late \(a wireless link\), use the sample "
-                                         r"index at the nominal rate \(csv: leave t= out of --columns and give "
-                                         r"--rate-hz"):
+    with pytest.raises(InputError, match=r"about 40 samples are missing \(.*half of them before sample 100, "
+                                         r".*Mark where each piece starts with a segment column") as info:
+        import_csv(path, columns=COLS, latitude_rad=LAT, rate_hz=RATE)
+    assert "--rate-hz" not in str(info.value)
+
+
+def test_late_stamps_with_every_sample_there_propose_the_sample_index(tmp_path):
+    """A link that stalls and then delivers the held samples at once: a gap, but the span holds every sample."""
+    n = 400
+    omega, f = _signals(n)
+    t = np.arange(n) / RATE
+    t[150:160] = t[160] - 1e-4 * np.arange(10, 0, -1)       # ten samples held back, then sent in one burst
+    path = _write(tmp_path / "late.csv", None, _rows(t, omega, f, np.full(n, 20.0)))
+    with pytest.raises(InputError, match=r"while the span holds every sample: the clock is not the sample clock\. If "
+                                         r"the stamps are late \(a wireless link\), use the sample index at the "
+                                         r"nominal rate \(csv: leave t= out of --columns and give --rate-hz"):
         import_csv(path, columns=COLS, latitude_rad=LAT, rate_hz=RATE)
 
 
@@ -293,5 +307,5 @@ def test_a_missing_input_is_named_before_any_option_it_lacks(tmp_path, capsys, f
     out = tmp_path / "out.h5"
     assert cli.main(["import", fmt, str(missing), "--out", str(out)]) == 2
     err = capsys.readouterr().err
-    assert f"{missing}: no such file or folder" in err and "latitude" not in err
+    assert f"{missing}: file not found" in err and "latitude" not in err
     assert not out.exists()

@@ -578,7 +578,12 @@ def test_cli_missing_input_file_exits_2(tmp_path, capsys):
      re.escape("--latitude-deg: required for format csv: the bench latitude in degrees (the Earth rate needs it; "
                "without --gravity, gravity is the normal gravity at that latitude)")),
 ])
-def test_cli_bad_options_exit_2(tmp_path, capsys, args, pattern):
+def test_cli_bad_options_exit_2(tmp_path, capsys, monkeypatch, args, pattern):
+    """Each option's fault with its message; the input ``a.csv`` exists but where the missing file is the fault
+    (a missing input is named before what the format asks of its options)."""
+    monkeypatch.chdir(tmp_path)
+    if "file not found" not in pattern:
+        (tmp_path / "a.csv").write_text("1,2,3,4,5,6,7\n")
     rc = main(["import", *args, "--out", str(tmp_path / "x.h5")])
     assert rc == 2
     err = capsys.readouterr().err
