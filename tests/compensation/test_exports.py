@@ -323,3 +323,15 @@ def test_a_prediction_is_not_a_calibration(sources, campaign, tmp_path, capsys):
     assert cli.main(["apply", str(pred), str(campaign[0] / "sub2_0_10.h5"), "--out", str(tmp_path / "p.h5")]) == 2
     assert "is a prediction (graph-calib predict)" in capsys.readouterr().err
     assert not (tmp_path / "p.params").exists() and not (tmp_path / "p.h5").exists()
+
+
+@pytest.mark.parametrize("fmt", ["kalibr", "openvins"])
+def test_an_estimator_file_of_a_campaign_names_the_temperature_dependence_it_leaves_out(sources, tmp_path, capsys,
+                                                                                       fmt):
+    """Its intrinsics are one temperature's: the scale curves' change over the range is named as left out (it said
+    'left out: nothing' beside a remaining error that was that change)."""
+    out = tmp_path / "imu.yaml"
+    *_, text = _export(sources["campaign"], fmt, out, capsys)
+    line = next(ln for ln in text.splitlines() if "left out:" in ln)
+    assert "over temperature (held at" in line and "accel.scale" in line, line
+    assert line.strip() in out.read_text()

@@ -83,9 +83,17 @@ def _intrinsics_and_loss(source, envelope_dps):
              "micro-g (accel), which the random walks must let the estimator follow")
     frame = (f"IMU frame of this file: the accelerometers' (rotated {intr.rotation_deg():.4g} deg from graph-calib's "
              f"body frame by R_body_to_imu = {_matrix(intr.R_body_to_imu)})")
+    # a campaign's curves: the file holds the intrinsics at one temperature, their change over the range is left out
+    curves = getattr(source.compensation, "curve_elements", lambda: ())()
+    varying = sorted({e.rsplit(".", 1)[0] for e in curves} & (set(INTRINSIC_PARAMETERS) - BIASES))
+    held_at = tuple(f"{p} over temperature (held at {source.t_ref_degC:.4g} degC)" for p in varying)
     loss = remaining(source, intrinsics_restored(source, intr), envelope_dps=envelope_dps,
-                     left_out=left_out(source, INTRINSIC_PARAMETERS), extra=(drift, frame))
+                     left_out=left_out(source, INTRINSIC_PARAMETERS) + held_at, extra=(drift, frame))
     return intr, loss
+
+
+#: The biases: not written (the estimator's online states), their drift over the range said apart.
+BIASES = {"gyro.bias", "accel.bias"}
 
 
 def _header(source, title, loss, notes):
