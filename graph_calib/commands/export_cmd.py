@@ -31,6 +31,9 @@ from graph_calib.solvers.joint.solver import JOINT
 
 #: Largest interpolation error (in sigma of the element) the export accepts without a remark.
 INTERPOLATION_REMARK_SIGMA = 0.1
+#: Largest interpolation error (in sigma) of a table written at all: beyond it the table does not follow the
+#: calibration it comes from, and a smaller ``--step-degc`` is what fixes it.
+INTERPOLATION_LIMIT_SIGMA = 1.0
 FORMATS = tuple(TABLE_FORMATS) + tuple(EXPORT_FORMATS)
 
 
@@ -101,6 +104,16 @@ def _table(args, out, fmt):
     else:
         stitched = StitchedCalibration.from_campaign(args.source, solver=args.solver, model=args.model)
     table = stitched.table(step_degC=args.step_degC)
+    if table.curves:
+        name, c = max(table.curves.items(), key=lambda kv: kv[1].interpolation_error["max_in_sigma"])
+        e = c.interpolation_error["max_in_sigma"]
+        if e > INTERPOLATION_LIMIT_SIGMA:
+            # linear interpolation's error goes with the step squared
+            suggest = args.step_degC * math.sqrt(INTERPOLATION_REMARK_SIGMA / e)
+            raise InputError(f"linear interpolation on a {args.step_degC:g} degC grid departs from the calibration by "
+                             f"{e:.3g} sigma ({name} at {c.interpolation_error['at_degC']:g} degC; at most "
+                             f"{INTERPOLATION_LIMIT_SIGMA:g}): a step of {suggest:.2g} degC or less keeps it under "
+                             f"{INTERPOLATION_REMARK_SIGMA:g} sigma", dataset="--step-degc")
     if verdict is not None:
         # the campaign's verdict travels with its table: apply refuses a failed one without --force, as it does the
         # campaign itself

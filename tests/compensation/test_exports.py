@@ -335,3 +335,16 @@ def test_an_estimator_file_of_a_campaign_names_the_temperature_dependence_it_lea
     line = next(ln for ln in text.splitlines() if "left out:" in ln)
     assert "over temperature (held at" in line and "accel.scale" in line, line
     assert line.strip() in out.read_text()
+
+
+def test_a_table_whose_grid_departs_from_the_calibration_is_refused_naming_a_step(sources, tmp_path, capsys):
+    """A 100 degC grid put the table 170 sigma off the curves with only a remark; now exit 2 with a step that fits."""
+    out = tmp_path / "t.json"
+    assert cli.main(["export", str(sources["campaign"]), "--out", str(out), "--step-degc", "100", "--force"]) == 2
+    err = capsys.readouterr().err
+    m = re.search(r"--step-degc: linear interpolation on a 100 degC grid departs from the calibration by ([0-9.e+]+) "
+                  r"sigma .*a step of ([0-9.]+) degC or less keeps it under 0.1 sigma", err)
+    assert m and float(m.group(1)) > 1.0 and not out.exists(), err
+    assert cli.main(["export", str(sources["campaign"]), "--out", str(out), "--step-degc", m.group(2),
+                     "--force"]) == 0
+    assert "remark" not in capsys.readouterr().err
