@@ -7,6 +7,9 @@ document, the per-subrange results and the joint result):
 - **validation**: every validation record named on the command line is met, by the stitched calibration of
   the primary solver (the campaign's stitch model) and by the joint calibration; a record that could not be
   validated fails too (it was asked for);
+- **boundaries**: consecutive subranges of the primary solver's stitching agree where they meet, the largest
+  ``|z|`` of every element at every boundary within the 1 % family-wise limit for that many checks
+  (docs/campaign.md, "The boundary check"; records of two units, or a subrange gone wrong, fail it);
 - **joint against subranges**: per subrange, solver and element, the joint calibration at the subrange's
   ``T_ref`` against that subrange's estimate, ``z = (joint - subrange) / sqrt(sigma_sub^2 + sigma_joint^2)``
   (their two covariances; the joint uses the subrange's data too, so the positive correlation only makes
@@ -72,6 +75,23 @@ FAMILIES = ("gyro.bias", "gyro.scale", "accel.bias", "accel.scale")
 def _check(name, passed, text, *, checked=True, details=None):
     return {"check": name, "checked": bool(checked), "passed": None if not checked else bool(passed),
             "text": text if checked else f"not checked: {text}", "details": details or {}}
+
+
+# ---------------------------------------------------------------------------
+# boundaries
+# ---------------------------------------------------------------------------
+
+
+def _boundary_check(document):
+    """The primary solver's stitching: consecutive subranges agree at their boundaries (module docstring)."""
+    primary = document.get("primary_solver")
+    bc = ((document.get("stitching") or {}).get(primary) or {}).get("boundary_check")
+    if not bc or not bc.get("checked"):
+        return [_check("boundaries", None, "no boundary between two subranges", checked=False)]
+    text = (f"{primary}: largest |z| {bc['max_abs_z']:.2f} over {bc['checks']} element(s) at the boundaries between "
+            f"subranges (1 % family-wise limit {bc['family_limit']:.2f}); {bc['beyond_limit']} beyond "
+            f"{bc['limit']:g} sigma")
+    return [_check("boundaries", bc["consistent"], text)]
 
 
 # ---------------------------------------------------------------------------
@@ -373,7 +393,7 @@ def campaign_checks(document, *, results, joint=None):
         texts of the failed ones), ``joint_against_subranges`` (z per solver, experiment, element) and
         ``curvature_bias`` (per experiment and solver, element: offset in sigma).
     """
-    checks = _validation_checks(document)
+    checks = _validation_checks(document) + _boundary_check(document)
     jc, zmap = _joint_check(joint, results)
     cc, bias = _curvature_check(document, joint, results)
     checks += [jc, cc] + _next_order_checks(joint) + _joint_verdict_check(document, joint) + _truth_checks(document)

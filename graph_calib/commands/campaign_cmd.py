@@ -10,6 +10,7 @@ from graph_calib.campaign.checks import check_lines
 from graph_calib.commands.calibrate_cmd import solver_choice
 from graph_calib.errors import InputError
 from graph_calib.solvers import registry
+from graph_calib.solvers.verdict import PRIOR_HELD_WORDS
 from graph_calib.evaluation.validation import validation_text
 
 
@@ -77,6 +78,9 @@ def print_summary(run, out=None):
         _print_loop(e.get("loop"), out)
         for problem in (verdict or {}).get("problems", []):
             print(f"    {problem}", file=out)
+        for note in (verdict or {}).get("notes", []):
+            if PRIOR_HELD_WORDS in note:      # what a pass does not say: the record informs little of the model
+                print(f"    note: {note}", file=out)
     primary = doc.get("primary_solver")
     st = run.stitched.get(primary)
     if st is not None:
@@ -113,8 +117,8 @@ def print_summary(run, out=None):
         print(f"verdict: FAIL: {len(checks['failed'])} check(s) over the whole campaign failed: "
               + " | ".join(checks["failed"]), file=out)
     if not run.failed and not failed and not (checks and not checks["passed"]):
-        print("verdict: pass: every experiment converged, its solvers agree and its residuals are consistent",
-              file=out)
+        agree = ", its solvers agree" if len(doc.get("solvers") or ()) > 1 else ""
+        print(f"verdict: pass: every experiment converged{agree} and its residuals are consistent", file=out)
 
 
 def _print_joint(doc, out):

@@ -29,6 +29,7 @@ from graph_calib.reports.campaign_figures import (
     report_unit,
 )
 from graph_calib.solvers.results import sigma_ratio_range_text
+from graph_calib.solvers.verdict import PRIOR_HELD_WORDS
 from graph_calib.solvers.joint.solver import JOINT
 from graph_calib.evaluation.validation import TruthCurves, validation_text
 
@@ -302,6 +303,10 @@ def build_report(run, *, figures_dir=None):
     for c in (doc.get("campaign_checks") or {}).get("checks", []):
         verdicts.append([f"campaign check: {c['check']}",
                          H.Raw("not checked") if not c["checked"] else H.verdict(c["passed"], "pass", "FAIL"), c["text"]])
+    held = [f"{e['name']}: {n}" for e in doc["experiments"] for n in (e.get("verdict") or {}).get("notes", ())
+            if PRIOR_HELD_WORDS in n]
+    if held:
+        verdicts.append(["elements held by their priors", H.Raw("note"), "; ".join(held)])
     if run.failed:
         verdicts.append(["tasks that failed", H.verdict(False, "", str(len(run.failed))),
                          "; ".join(f"{f['name']} {f['solver']}: {f['error']}" for f in run.failed)])

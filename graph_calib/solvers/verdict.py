@@ -63,6 +63,8 @@ VARIANCE_FACTOR_LIMIT = 4.0
 STAGED_WORDS = "the gyro model does not fit"
 #: The share of a result's elements held by their priors from which the verdict says so.
 PRIOR_HELD_SHARE = 0.5
+#: The words of that note (the campaign's summary and report pick it out by them).
+PRIOR_HELD_WORDS = "are held by their priors"
 #: Least redundancy of a kind the residual test judges (one degree of freedom).
 MIN_JUDGED_REDUNDANCY = 1.0
 #: The part of the gravity kind's figures the verdict judges where the moving keyframes' are apart (data-format.md).
@@ -352,7 +354,7 @@ def verdict_of(results, comparison=None, *, structure=()):
     for s, r in results.items():
         held = (r.extra or {}).get("prior_dominated") or {}
         if r.values and len(held) >= PRIOR_HELD_SHARE * len(r.values):
-            notes.append(f"{s}: {len(held)} of {len(r.values)} elements are held by their priors (sigma above "
+            notes.append(f"{s}: {len(held)} of {len(r.values)} elements {PRIOR_HELD_WORDS} (sigma above "
                          f"{PRIOR_DOMINATED_RATIO:g} of the prior's): the record informs little of this model, and "
                          "their values and sigmas are the priors' (prior_dominated in the result)")
         figures, kp, kn = judge_kinds(r)

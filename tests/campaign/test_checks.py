@@ -248,3 +248,20 @@ def test_curvature_adopted_in_many_experiments_is_told_once_per_effect():
     assert "accel.bias: the joint's degree 2, accel.bias_tc2 in every experiment" in text, text
     assert "gyro.bias: gyro.bias_tc3 in sub1, sub2" in text, text
     assert text.count("accel.bias_tc2") == 1, text
+
+
+@pytest.mark.parametrize("consistent, passed", [(True, True), (False, False)])
+def test_the_boundary_check_counts_in_the_campaigns_verdict(consistent, passed):
+    """Subranges that disagree where they meet (the stitching's family-wise check) fail the campaign (a campaign whose
+    boundaries were 321 sigma apart passed)."""
+    bc = {"checked": True, "consistent": consistent, "max_abs_z": 2.0 if consistent else 321.5, "checks": 42,
+          "family_limit": 3.63, "beyond_limit": 0 if consistent else 17, "limit": 3.0}
+    doc = {"primary_solver": "factor-graph", "experiments": [],
+           "stitching": {"factor-graph": {"boundary_check": bc}}}
+    checks = campaign_checks(doc, results={})
+    c = next(c for c in checks["checks"] if c["check"] == "boundaries")
+    assert c["checked"] and c["passed"] is passed and checks["passed"] is passed
+    assert "largest |z|" in c["text"] and "family-wise limit 3.63" in c["text"]
+    doc["stitching"]["factor-graph"]["boundary_check"] = {"checked": False}
+    c = next(c for c in campaign_checks(doc, results={})["checks"] if c["check"] == "boundaries")
+    assert not c["checked"] and c["passed"] is None
