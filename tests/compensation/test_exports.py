@@ -348,3 +348,13 @@ def test_a_table_whose_grid_departs_from_the_calibration_is_refused_naming_a_ste
     assert cli.main(["export", str(sources["campaign"]), "--out", str(out), "--step-degc", m.group(2),
                      "--force"]) == 0
     assert "remark" not in capsys.readouterr().err
+
+
+def test_an_export_names_the_elements_its_result_holds_at_their_priors(sources, tmp_path, capsys):
+    result = tmp_path / "factor-graph.json"
+    doc = json.loads(sources["result"].read_text())
+    doc["prior_dominated"] = {"gyro.bias_tc.x": 0.9, "accel.bias_tc.y": 0.8}
+    result.write_text(json.dumps(doc))
+    assert cli.main(["export", str(result), "--format", "px4", "--out", str(tmp_path / "x.params")]) == 0
+    assert ("note: 2 element(s) of the result are held by their priors (the record informs little of them; their "
+            "values are the priors'): accel.bias_tc.y, gyro.bias_tc.x") in capsys.readouterr().err
