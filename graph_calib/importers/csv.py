@@ -49,7 +49,8 @@ _EXACT_FLOAT_INTEGER = 2.0**53
 
 
 def _resolve_columns(columns, *, path, delimiter, header_lines):
-    """Check a column mapping; return ({key: index from 0}, [temperature keys], {key: channel name})."""
+    """Check a column mapping; return ({key: index from 0}, [temperature keys], {key: channel name}, header lines):
+    names of header columns without ``header_lines`` read the first line as the header when it holds any of them."""
     if not isinstance(columns, dict) or not columns:
         raise InputError("columns must map names (t, gx, gy, gz, ax, ay, az, segment, temp or temp:NAME) to columns",
                          dataset="columns")
@@ -73,15 +74,19 @@ def _resolve_columns(columns, *, path, delimiter, header_lines):
     for key, col in columns.items():
         if isinstance(col, str) and not col.isdigit():
             if header is None:
-                if header_lines < 1:
-                    raise InputError(f"column {key}={show(col)} names a header column, but header_lines is 0",
-                                     dataset="columns")
                 try:
                     with open(path, encoding="utf-8-sig") as fh:
-                        lines = [fh.readline() for _ in range(header_lines)]
+                        lines = [fh.readline() for _ in range(max(header_lines, 1))]
                 except UnicodeDecodeError:
                     raise InputError("not a UTF-8 text file", path=path) from None
                 header = split_cells(lines[-1].strip(), delimiter)
+                if header_lines < 1:
+                    named = [c for c in columns.values() if isinstance(c, str) and not c.isdigit()]
+                    if not any(c in header for c in named):
+                        raise InputError(f"column {key}={show(col)} names a header column, but no header line was "
+                                         "given: give --header-lines N, N the line that names the columns",
+                                         path=path, dataset="columns")
+                    header_lines = 1            # the first line names columns: it is the header
             if col not in header:
                 raise InputError(f"column {show(col)} not in the header line {header_lines} ({', '.join(header)})",
                                  path=path, dataset="columns")
@@ -101,7 +106,7 @@ def _resolve_columns(columns, *, path, delimiter, header_lines):
         if idx in seen:
             raise InputError(f"column {idx} given for both {seen[idx]} and {key}", dataset="columns")
         seen[idx] = key
-    return index, temp_keys, channel
+    return index, temp_keys, channel, header_lines
 
 
 def _text_column(path, *, delimiter, skip_lines, j):
@@ -248,7 +253,8 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
                          f"got {show(delimiter)}", dataset="delimiter")
     if rate_hz is not None:
         rate_hz = positive(rate_hz, "rate_hz")
-    index, temp_keys, channel = _resolve_columns(columns, path=path, delimiter=delimiter, header_lines=header_lines)
+    index, temp_keys, channel, header_lines = _resolve_columns(columns, path=path, delimiter=delimiter,
+                                                               header_lines=header_lines)
     if "t" in index:
         time_units = "s" if time_units is None else time_units
         if time_units == "samples" and rate_hz is None:

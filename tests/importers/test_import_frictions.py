@@ -309,3 +309,20 @@ def test_a_missing_input_is_named_before_any_option_it_lacks(tmp_path, capsys, f
     err = capsys.readouterr().err
     assert f"{missing}: file not found" in err and "latitude" not in err
     assert not out.exists()
+
+
+def test_columns_named_by_the_first_line_need_no_header_lines_option(tmp_path):
+    """``--columns t=millis,...`` on a file whose first line names them: that line is the header (it said 'but
+    header_lines is 0', the Python parameter, for a header it had just read)."""
+    omega, f = _signals(50)
+    path = _write(tmp_path / "a.csv", "millis,wx,wy,wz,fx,fy,fz,deg",
+                  _rows(np.arange(50) * 10.0, omega, f, np.full(50, 20.0)))
+    cols = {"t": "millis", "gx": "wx", "gy": "wy", "gz": "wz", "ax": "fx", "ay": "fy", "az": "fz", "temp": "deg"}
+    exp = import_csv(path, columns=cols, latitude_rad=LAT, time_units="ms")
+    assert exp.n_samples == 50
+    np.testing.assert_allclose(exp.dv[1:], f[1:] / RATE, rtol=1e-9)
+    with pytest.raises(InputError, match=r"column 'time' not in the header line 1 \(millis, wx"):
+        import_csv(path, columns={**cols, "t": "time"}, latitude_rad=LAT, time_units="ms")
+    other = {k: v.upper() for k, v in cols.items()}
+    with pytest.raises(InputError, match=r"names a header column, but no header line was given: give --header-lines N"):
+        import_csv(path, columns=other, latitude_rad=LAT, time_units="ms")
