@@ -128,14 +128,19 @@ def _whole(values, *, what, path, skip_lines):
                          dataset=f"line {line}")
 
 
-def _time_column(raw, *, time_units, rate_hz, path, skip_lines, segment=None):
+def _time_column(raw, *, time_units, rate_hz, path, skip_lines, segment=None, values=None):
     """Seconds from the time column in its units; refuses rows out of order and a sample index read as seconds.
 
     With a segment column, the order is checked inside each segment only (a group may restart its clock).
+    ``values`` (N, k), the row's other numbers: a row that repeats the one before it is named as logged twice.
     """
     if time_units == "samples":
         _whole(raw, what="sample index", path=path, skip_lines=skip_lines)
     row = within_segment_order(raw, segment)
+    if row is not None and values is not None and np.array_equal(values[row], values[row - 1]):
+        lines = data_line_numbers(path, skip_lines)
+        raise InputError(f"lines {lines[row - 1]} and {lines[row]} have the same time {show(raw[row])} {time_units}: "
+                         "a row logged twice? remove one", path=path, dataset=f"line {lines[row]}")
     if row is not None:
         line = data_line_numbers(path, skip_lines)[row]
         remedy = ("rows must be in time order inside a segment" if segment is not None else
@@ -317,8 +322,9 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
                              f"them; remove one", path=path, dataset=f"line {b}")
     timing_note = ""
     if "t" in index:
+        others = np.column_stack([v for k, v in col.items() if k != "t"]) if len(col) > 1 else None
         t = _time_column(col["t"], time_units=time_units, rate_hz=rate_hz, path=path, skip_lines=header_lines,
-                         segment=segment)
+                         segment=segment, values=others)
         given_rate = rate_hz is not None
         if rate_hz is None:
             if n < 2:

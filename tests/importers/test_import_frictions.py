@@ -326,3 +326,12 @@ def test_columns_named_by_the_first_line_need_no_header_lines_option(tmp_path):
     other = {k: v.upper() for k, v in cols.items()}
     with pytest.raises(InputError, match=r"names a header column, but no header line was given: give --header-lines N"):
         import_csv(path, columns=other, latitude_rad=LAT, time_units="ms")
+
+
+def test_a_row_logged_twice_is_named_without_sorting_too(tmp_path):
+    omega, f = _signals(50)
+    rows = _rows(np.arange(50) / RATE, omega, f, np.full(50, 20.0))
+    path = _write(tmp_path / "d.csv", None, rows[:20] + [rows[19]] + rows[20:])
+    with pytest.raises(InputError, match=r"line 21: lines 20 and 21 have the same time 0\.19 s: a row logged twice\? "
+                                         r"remove one"):
+        import_csv(path, columns=COLS, latitude_rad=LAT)
