@@ -38,6 +38,16 @@ Static rule (a record without a table, or whose table shows no turn)
     bound: quiet accelerometers are not enough, since a turn about the vertical at a constant rate leaves
     the specific force unchanged.  On a table with turns the turn rule decides alone.
 
+Tilt rule (a record without a table, or whose table shows no turn)
+    Between consecutive rests (:func:`graph_calib.navigation.static_detection.detect_static`, as the static rule's)
+    of one segment, gravity's direction in the body turns by ``theta_f``, the angle between the rests' mean specific
+    forces ``f_1`` and ``f_2``.  The gyros (their median rate over the rests taken off as a bias) say by how much:
+    ``theta_g``, the angle between ``f_1`` and ``A^T f_1``, ``A = C_nb,1^T C_nb,2`` their attitude change between
+    the rests' middles (:func:`graph_calib.navigation.strapdown.integrate_attitude`, the Earth rate in).  The ratio
+    ``theta_g / theta_f`` is near 1 for a right record; the record's is the median over the :data:`N_TURNS` largest
+    changes of at least :data:`MIN_TILT_RAD`, refused outside :data:`TURN_RATIO_RANGE` with the cause of the turn
+    rule: 0.0175 is radians taken for degrees (rad/s imported as deg/s), which the static rule cannot see.
+
 Continuity rule (every record)
     A record cut together from pieces (sections of a session with the motion between them removed)
     without ``/imu/segment`` is refused at the first cut, naming the sample
@@ -69,6 +79,7 @@ from graph_calib.sensors.params import GRADES
 from graph_calib.navigation.rotations import (
     quat_conjugate,
     quat_multiply,
+    quat_to_dcm,
     quat_to_rotvec,
     rotvec_to_quat,
 )
@@ -86,6 +97,8 @@ MIN_TURN_RAD = 1.0 * c.DEG_TO_RAD
 MATCH_TOLERANCE = 0.1
 #: Encoder turn below which the table counts as at rest between two readings (for the gyro bias), rad.
 REST_TURN_RAD = 0.2 * c.DEG_TO_RAD
+#: Smallest change of gravity's direction between two rests that the tilt rule counts, rad.
+MIN_TILT_RAD = 20.0 * c.DEG_TO_RAD
 #: Multiple of the loosest grade's gyro bias prior above which a static rate is refused.
 STATIC_RATE_FACTOR = 20.0
 #: How close (as a factor) a ratio must be to a named cause to be called that cause.
@@ -185,7 +198,8 @@ def check_continuity(experiment):
 def check_record(experiment):
     """Refuse a record cut together without ``/imu/segment``, or whose gyro increments cannot be in radians.
 
-    The module docstring's continuity rule first (:func:`check_continuity`), then its turn or static rule.
+    The module docstring's continuity rule first (:func:`check_continuity`), then its turn rule, or its static
+    and tilt rules.
 
     Parameters
     ----------
@@ -209,6 +223,15 @@ def check_record(experiment):
                 path=experiment.source or None, dataset=_DTHETA)
         return
     _check_static_rates(experiment)
+    ratio, n, typical = tilt_ratio(experiment)
+    if ratio is not None:
+        lo, hi = TURN_RATIO_RANGE
+        if not lo <= ratio <= hi:
+            raise InputError(
+                f"the gyros turn gravity's direction {ratio:.4g} times as far as the accelerometers see it turn "
+                f"between rests (median over the {n} largest changes, {typical * c.RAD_TO_DEG:.3g} deg typical; "
+                f"accepted {lo:g}..{hi:g}): {_cause(ratio, experiment.rate_hz)}",
+                path=experiment.source or None, dataset=_DTHETA)
 
 
 def _cause(ratio, rate_hz):
@@ -219,7 +242,7 @@ def _cause(ratio, rate_hz):
     if near(c.RAD_TO_DEG):
         return "degrees written for radians?"
     if near(c.DEG_TO_RAD):
-        return "radians taken for degrees and converted again (the reverse of degrees for radians)?"
+        return "radians taken for degrees and converted again (rad/s imported as deg/s: --gyro-units)?"
     if near(rate_hz):
         return "angular rates (rad/s) written for increments (rad)?"
     if near(c.RAD_TO_DEG * rate_hz):
@@ -308,6 +331,59 @@ def turn_ratio(experiment, *, details=False):
     return (r, int(order.size), float(np.median(theta_e[keep][order]))) if details else r
 
 
+def tilts(experiment):
+    """Between consecutive rests of one segment: gravity's change of direction and the gyros' ratio to it.
+
+    Returns
+    -------
+    theta_f : ndarray, shape (M,)
+        Angle between the rests' mean specific forces, rad.
+    ratio : ndarray, shape (M,)
+        The gyros' change of that direction over ``theta_f`` (module docstring's tilt rule); empty arrays with
+        fewer than two rests.
+    """
+    empty = np.zeros(0), np.zeros(0)
+    try:
+        static = detect_static(experiment, max_rate=0.5 * static_rate_bound()[0])
+    except (InputError, ValueError):
+        return empty
+    if static.shape[0] < 2:
+        return empty
+    dt = experiment.dt
+    cum_v = np.vstack([np.zeros((1, 3)), np.cumsum(experiment.dv, axis=0)])
+    cum_w = np.vstack([np.zeros((1, 3)), np.cumsum(experiment.dtheta, axis=0)])
+    cum_t = np.concatenate([[0.0], np.cumsum(dt)])
+    a, b = static[:, 0], static[:, 1]
+    f = cum_v[b] - cum_v[a]
+    f /= np.linalg.norm(f, axis=1)[:, None]
+    bias = np.median((cum_w[b] - cum_w[a]) / (cum_t[b] - cum_t[a])[:, None], axis=0)
+    q = integrate_attitude(experiment.dtheta - bias * dt[:, None], t=experiment.t, rate_hz=experiment.rate_hz,
+                           q_nb0=[1.0, 0.0, 0.0, 0.0], latitude_rad=float(experiment.latitude_rad))
+    mid = (a + b) // 2
+    C = quat_to_dcm(q[mid])
+    A = np.swapaxes(C[:-1], 1, 2) @ C[1:]                  # C_nb,1^T C_nb,2
+    predicted = np.einsum("kji,kj->ki", A, f[:-1])          # A^T f_1
+    theta_f = np.arccos(np.clip(np.sum(f[:-1] * f[1:], axis=1), -1.0, 1.0))
+    theta_g = np.arccos(np.clip(np.sum(f[:-1] * predicted, axis=1), -1.0, 1.0))
+    if experiment.segment is not None:                    # no change across a cut
+        seg = np.asarray(experiment.segment)
+        same = seg[a[:-1]] == seg[b[1:] - 1]
+        theta_f, theta_g = theta_f[same], theta_g[same]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return theta_f, theta_g / theta_f
+
+
+def tilt_ratio(experiment):
+    """``(ratio, number of changes, median change in rad)`` of the tilt rule, or ``(None, 0, 0.0)`` without a change
+    of gravity's direction of at least :data:`MIN_TILT_RAD` between two rests."""
+    theta_f, ratio = tilts(experiment)
+    keep = theta_f >= MIN_TILT_RAD
+    if not keep.any():
+        return None, 0, 0.0
+    order = np.argsort(theta_f[keep])[::-1][:N_TURNS]
+    return float(np.median(ratio[keep][order])), int(order.size), float(np.median(theta_f[keep][order]))
+
+
 def static_rate_bound():
     """``(bound in rad/s, grade named)``: the static-rule bound of the module docstring."""
     name, g = max(GRADES.items(), key=lambda kv: kv[1].prior_sigma["gyro.bias"])
@@ -350,6 +426,7 @@ def _static_cause(rate, bound, rate_hz):
 
 __all__ = [
     "MATCH_TOLERANCE",
+    "MIN_TILT_RAD",
     "MIN_TURN_RAD",
     "N_TURNS",
     "REST_TURN_RAD",
@@ -364,6 +441,8 @@ __all__ = [
     "check_continuity",
     "check_record",
     "static_rate_bound",
+    "tilt_ratio",
+    "tilts",
     "turn_ratio",
     "turns",
 ]

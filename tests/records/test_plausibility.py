@@ -67,7 +67,7 @@ def test_degrees_for_radians_on_a_table_is_refused_within_seconds_naming_the_cau
 
 
 @pytest.mark.parametrize("factor, cause", [
-    (np.pi / 180.0, "the reverse of degrees for radians"),
+    (np.pi / 180.0, "rad/s imported as deg/s"),
     (100.0, "rates (rad/s) written for increments"),          # rate_hz = 100
     (3.0, "wrong units, or increments made with a wrong sample rate"),
     (0.3, "wrong units, or increments made with a wrong sample rate"),
@@ -192,3 +192,28 @@ def test_calibrate_on_degrees_exits_2_with_one_line_and_writes_nothing(table_rec
     assert "Traceback" not in proc.stderr
     assert "sqrt-kf" not in proc.stdout and "wrote" not in proc.stdout     # (the chosen grade may be printed)
     assert list(out.iterdir()) == []
+
+
+# --------------------------------------------------------------------------- the tilt rule (no table)
+
+
+def test_a_right_hand_held_record_has_tilt_ratio_near_one(handheld_record):
+    from graph_calib.records.plausibility import tilt_ratio
+
+    ratio, n, typical = tilt_ratio(handheld_record)
+    assert n >= 5 and typical > 0.5 and abs(ratio - 1.0) < 0.05, (ratio, n, typical)
+
+
+@pytest.mark.parametrize("factor, cause", [
+    (c.DEG_TO_RAD, "radians taken for degrees and converted again (rad/s imported as deg/s: --gyro-units)?"),
+    (0.2, "wrong units, or increments made with a wrong sample rate?"),
+])
+def test_a_hand_held_record_whose_gyros_turn_too_little_is_refused(handheld_record, factor, cause):
+    """rad/s imported as deg/s leaves every static rate under the static rule's bound: the gyros' turns between the
+    rests, against gravity's, tell (a lab user got a calibration blaming four missing effects instead)."""
+    with pytest.raises(InputError, match=r"/imu/dtheta: the gyros turn gravity's direction ([0-9.e-]+) times as far "
+                                         r"as the accelerometers see it turn between rests") as info:
+        check_record(_scaled(handheld_record, factor))
+    assert str(info.value).endswith(cause)
+    assert float(re.search(r"direction ([0-9.e-]+) times", str(info.value)).group(1)) == pytest.approx(factor,
+                                                                                                      rel=0.1)
