@@ -94,6 +94,24 @@ def test_an_order_the_test_does_not_see_stays_in_the_curve_when_it_costs_little(
     assert c.next_order["order"] == 4 and c.next_order["passed"]
 
 
+def test_a_cheap_top_order_does_not_keep_a_dear_one_below_it():
+    """accel.bias: order 5 held tight (by priors over a narrow range) but order 4 loose: the curve holds neither (it
+    held both, and order 4's widening with them: two subranges kept degree 5 over a widening of 17-118)."""
+    u = _unknowns()
+    thr = stats.chi2.isf(DEGREE_ALPHA, 3)
+    th, C = _plant(u, {"accel.bias": {3: 2.0 * thr, 4: 0.5 * thr, 5: 0.3 * thr}}, sd={("accel.bias", 5): 1e-11})
+    reduced, keep, th_c, C_c, choices = choose_degrees(u, th, C, sensor_spans=SPANS)
+    c = {c.family: c for c in choices}["accel.bias"]
+    t = {t["order"]: t for t in c.tests}
+    assert t[5]["rho"] <= RHO_MAX < t[4]["rho"]
+    assert (c.degree, c.significant_degree, c.widening) == (3, 3, 1.0)
+    assert not t[5]["kept"] and not t[4]["kept"] and reduced.degrees["accel.bias"] == 3
+    idx = u.z_index()
+    for f in [f for f in u.curve_elements() if f.startswith("accel.bias.")]:
+        for k in (4, 5):
+            assert not keep[idx[curve_label(f, k)]] and th_c[idx[curve_label(f, k)]] == 0.0
+
+
 def test_the_next_order_past_the_significant_one_is_tested_for_every_family():
     u = _unknowns()
     thr = stats.chi2.isf(DEGREE_ALPHA, 3)

@@ -31,8 +31,10 @@ sensor's temperature span,
     \rho = \max_T \frac{\sigma_{d}(T)}{\sigma_{d-1}(T)} > \rho_{max},
 
 (``sigma_d`` the curve's sigma holding orders up to ``d``, ``sigma_{d-1}`` with order ``d`` conditioned to
-zero).  The first order kept ends the descent: the curve holds every order up to its ``degree``, and never
-fewer than the significant ones.  Where the data (or, over a short record's narrow span, the priors)
+zero, both with every higher order conditioned out).  The curve holds every order up to its ``degree``, never
+fewer than the significant ones: from the significant degree up, each order whose step costs at most
+``RHO_MAX``, up to the first that costs more, which goes with every order above it (a top order the priors
+hold cheaply does not keep a loose one below it).  Where the data (or, over a short record's narrow span, the priors)
 constrain every order, the curve keeps the registry's full degree: on the six-subrange campaigns each step's
 ``rho`` was 1.25-1.37, and the total price, the curve's sigma over the significant curve's (``widening``,
 recorded), 1.27-2.27 at the range's edges.  An order whose step costs more than ``RHO_MAX`` goes, and so the
@@ -70,10 +72,11 @@ RHO_POINTS = 21
 
 #: The rule in words (result file, campaign.json, report).
 DEGREE_RULE = ("per family, from the highest order down: the order's coefficients (three axes) tested against zero "
-               "by their Wald statistic from the joint covariance (significant above chi2.isf(alpha, 3)); an order "
-               f"not significant is dropped from the curve only when holding it widens the curve's sigma by more "
-               f"than {RHO_MAX:g} somewhere over the sensor's span, and the dropped order conditions the estimate "
-               "on its coefficients being zero")
+               "by their Wald statistic from the joint covariance (significant above chi2.isf(alpha, 3)); from the "
+               "significant degree up, the curve holds each order not significant while holding it widens the "
+               f"curve's sigma by at most {RHO_MAX:g} everywhere over the sensor's span, up to the first that widens "
+               "it more, which is dropped with every order above it; a dropped order conditions the estimate on its "
+               "coefficients being zero")
 
 
 @dataclass(frozen=True)
@@ -206,8 +209,9 @@ def choose_degrees(unknowns, theta, covariance, *, sensor_spans, alpha=DEGREE_AL
     degrees, choices = dict(unknowns.degrees), []
     for base, d_max in unknowns.degrees.items():
         elements = [f for f in unknowns.curve_elements() if split_element_name(f)[0] == base]
-        tests, degree, significant = [], None, 1
+        tests, significant = [], 1
         th_e, C_e = th, C                    # the evidence's descent: every order not significant conditioned out
+        held = {d_max: (th, C)}              # the estimate holding the orders up to each degree
         for d in range(d_max, 1, -1):
             D = [idx[curve_label(f, d)] for f in elements]
             cD, CD = th_e[D], C_e[np.ix_(D, D)]
@@ -220,15 +224,19 @@ def choose_degrees(unknowns, theta, covariance, *, sensor_spans, alpha=DEGREE_AL
                 significant = d
                 break
             th_next, C_next = _condition(th_e, C_e, D)
-            if degree is None:
-                test["rho"] = _widening(unknowns, elements, spans, high=(C_e, d), low=(C_next, d - 1))
-                if test["rho"] <= rho_max:
-                    degree = d                   # the curve holds this order and every lower one
-                else:
-                    th, C = th_next, C_next      # the reported curve drops it too
-                    keep[D] = False
+            test["rho"] = _widening(unknowns, elements, spans, high=(C_e, d), low=(C_next, d - 1))
             th_e, C_e = th_next, C_next
-        degree = max(significant, degree or 1)
+            held[d - 1] = (th_e, C_e)
+        # from the significant degree up, each order while holding it costs at most rho_max: an order that costs
+        # more goes, and every order above it (a cheap top order does not keep a dear one below it)
+        rho = {t["order"]: t["rho"] for t in tests}
+        degree = significant
+        while degree < d_max and rho.get(degree + 1) is not None and rho[degree + 1] <= rho_max:
+            degree += 1
+        if degree < d_max:
+            th, C = held[degree]
+            for d in range(degree + 1, d_max + 1):
+                keep[[idx[curve_label(f, d)] for f in elements]] = False
         for t in tests:
             t["kept"] = t["order"] <= degree
         widening = (_widening(unknowns, elements, spans, high=(C, degree), low=(C_e, significant))
