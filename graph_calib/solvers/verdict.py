@@ -379,9 +379,21 @@ def verdict_of(results, comparison=None, *, structure=()):
             problems.append(f"the residuals carry {t['effect']}: score statistic {t['statistic']:.3g} > threshold "
                             f"{t['threshold']:.3g} ({t['dof']} dof): the model lacks it or an effect that shares its "
                             "signature")
+    constant = [s for s, r in results.items() if _constant_temperature(r)]
+    if problems and constant:
+        T = results[constant[0]].temperature_range_degC[0]
+        notes.append(f"the record's temperature does not change ({T:g} degC over the whole record): no temperature "
+                     "effect is estimated, and a drift the sensors show while warming up is one of time to the model "
+                     "and its tests (a constant temperature assumed at import, --temperature, hides a real warm-up)")
     return Verdict(converged=converged, agree=agree, max_difference_sigma=maxdiff, fit_chi2=fit,
                    passed=not problems, problems=tuple(problems), notes=tuple(notes), kinds=kinds,
                    structure=structure)
+
+
+def _constant_temperature(result):
+    """Whether a result's record has one temperature throughout (its ``temperature_range_degC`` ends equal)."""
+    rng = getattr(result, "temperature_range_degC", None)
+    return rng is not None and len(rng) == 2 and float(rng[1]) - float(rng[0]) == 0.0
 
 
 __all__ = ["Verdict", "verdict_of", "judge_kinds", "judged_figures", "kind_limits", "fit_chi2_per_dof", "fit_chi2_per_redundancy",

@@ -245,3 +245,16 @@ def test_a_kind_held_at_one_for_little_redundancy_is_said():
     assert v.passed
     assert ("factor-graph: rotation: chi2/redundancy 0.71 over a redundancy of 27, too few degrees of freedom to lower "
             "its variance factor below 1") in " ".join(v.notes)
+
+
+def test_a_failed_verdict_on_a_record_at_one_temperature_says_what_that_hides():
+    """An import with --temperature (one assumed value) hides a warm-up: the tests then name time, not temperature."""
+    flat = replace(_result({"rotation": (3.0, 500.0, 1.0), "gravity": (1.0, 900.0, 1.0)}),
+                   temperature_range_degC=(25.0, 25.0))
+    v = verdict_of({"factor-graph": flat})
+    assert not v.passed and any("the record's temperature does not change (25 degC over the whole record)" in n
+                                and "--temperature" in n for n in v.notes)
+    warming = _result({"rotation": (3.0, 500.0, 1.0), "gravity": (1.0, 900.0, 1.0)})
+    assert not any("does not change" in n for n in verdict_of({"factor-graph": warming}).notes)
+    passing = replace(flat, residuals=_result({"rotation": (1.0, 500.0, 1.0)}).residuals)
+    assert not any("does not change" in n for n in verdict_of({"factor-graph": passing}).notes)
