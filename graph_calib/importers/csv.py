@@ -40,6 +40,9 @@ from graph_calib.io import RATE_TOLERANCE
 #: Units of :func:`import_csv`: name -> (factor to SI, True for a rate, False for an increment).
 GYRO_UNITS = {"rad/s": (1.0, True), "deg/s": (c.DEG_TO_RAD, True), "rad": (1.0, False), "deg": (c.DEG_TO_RAD, False)}
 ACCEL_UNITS = {"m/s^2": (1.0, True), "g": (c.G0, True), "m/s": (1.0, False)}
+#: A time column read in its units that puts samples closer than this rate's period is taken as misread (MEMS
+#: IMUs sample at up to a few kHz, 32 kHz at most), unless the rate is given.
+MAX_RATE_HZ = 50_000.0
 #: Units of the time column: name -> factor to s; ``"samples"`` (None) is a sample index, ``t = index / rate_hz``.
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "ns": 1e-9, "samples": None}
 CSV_SENSOR_COLUMNS = ("gx", "gy", "gz", "ax", "ay", "az")
@@ -167,6 +170,11 @@ def _time_column(raw, *, time_units, rate_hz, path, skip_lines, segment=None, va
                              f"{show(1.0 / step)} Hz record): an IMU samples faster; if the column counts "
                              f"milliseconds or nanoseconds give --time-units ms or ns", path=path,
                              dataset="time_units")
+        if 0.0 < step < 1.0 / MAX_RATE_HZ and rate_hz is None:
+            raise InputError(f"the time column advances by {step:.4g} s per row read as {time_units} (a "
+                             f"{1.0 / step:.4g} Hz record, {seconds[-1] - seconds[0]:.4g} s long): faster than "
+                             f"an IMU samples; if the column counts coarser units give them (--time-units ms or s), "
+                             f"or confirm the rate with --rate-hz", path=path, dataset="time_units")
     return seconds
 
 

@@ -335,3 +335,13 @@ def test_a_row_logged_twice_is_named_without_sorting_too(tmp_path):
     with pytest.raises(InputError, match=r"line 21: lines 20 and 21 have the same time 0\.19 s: a row logged twice\? "
                                          r"remove one"):
         import_csv(path, columns=COLS, latitude_rad=LAT)
+
+
+def test_a_time_column_read_in_too_fine_units_is_refused(tmp_path):
+    """A millisecond log imported with --time-units us was a 0.13 s record at 100 kHz, refused only later."""
+    omega, f = _signals(50)
+    path = _write(tmp_path / "ms.csv", None, _rows(np.arange(50) * 10.0, omega, f, np.full(50, 20.0)))
+    with pytest.raises(InputError, match=r"time_units: the time column advances by 1e-05 s per row read as us \(a "
+                                         r"100000 Hz record, 0\.00049 s long\): faster than an IMU samples"):
+        import_csv(path, columns=COLS, latitude_rad=LAT, time_units="us")
+    assert import_csv(path, columns=COLS, latitude_rad=LAT, time_units="ms").n_samples == 50
