@@ -81,6 +81,7 @@ def detect_layout(path, *, delimiter):
                 break
             if _numeric(line.strip(), delimiter):
                 break
+            _refuse_decimal_comma(path, line.strip(), len(leading) + 1)
             leading.append(line.strip())
     if not leading:
         return None, {}, [], 0
@@ -131,6 +132,25 @@ def detect_layout(path, *, delimiter):
 
 #: Lines read before the data at most when looking for the header line.
 MAX_LEADING_LINES = 50
+
+
+def _refuse_decimal_comma(path, line, number):
+    """A data row whose numbers have a decimal comma (``0,49;-0,0057;...``, a European locale's export) is refused
+    naming it: read as text it would be taken for a header of unknown names."""
+    if "," not in line:
+        return
+    for name, d in DELIMITERS.items():
+        if d == ",":
+            continue
+        cells = split_cells(line.replace(",", "."), d)
+        try:
+            [float(c) for c in cells]
+        except ValueError:
+            continue
+        if len(cells) > 1:
+            raise InputError(f"the numbers have a decimal comma ({line[:40]}): this importer reads decimal points; "
+                             f"export with a decimal point, or convert the file (columns split at each {name}: "
+                             f"--delimiter {name}, then every ',' a '.')", path=path, dataset=f"line {number}")
 
 
 def _numeric(line, delimiter):

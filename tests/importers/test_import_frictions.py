@@ -345,3 +345,16 @@ def test_a_time_column_read_in_too_fine_units_is_refused(tmp_path):
                                          r"1e\+05 Hz record, 0\.00049 s long\): faster than an IMU samples"):
         import_csv(path, columns=COLS, latitude_rad=LAT, time_units="us")
     assert import_csv(path, columns=COLS, latitude_rad=LAT, time_units="ms").n_samples == 50
+
+
+@pytest.mark.parametrize("extra", [[], ["--delimiter", "semicolon"]])
+def test_numbers_with_a_decimal_comma_are_named(tmp_path, capsys, extra):
+    """A European phone export (';' between columns, ',' in the numbers) was taken for a header of unknown names."""
+    omega, f = _signals(30)
+    rows = [";".join(f"{v:.6f}".replace(".", ",") for v in [k / RATE, *omega[k], *f[k], 20.0]) for k in range(30)]
+    path = tmp_path / "eu.csv"
+    path.write_text("\n".join(rows) + "\n")
+    argv = ["import", "csv", str(path), "--latitude-deg", "45", "--out", str(tmp_path / "x.h5"), *extra]
+    assert cli.main(argv) == 2
+    err = capsys.readouterr().err
+    assert "line 1: the numbers have a decimal comma (0,000000;" in err and "--delimiter semicolon" in err, err
