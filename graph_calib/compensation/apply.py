@@ -38,8 +38,8 @@ from graph_calib.compensation.table import TABLE_FORMAT
 from graph_calib.constants import MPS2_TO_UG, RS_TO_DH
 from graph_calib.errors import InputError
 from graph_calib.solvers.joint.result import read_joint_result
-from graph_calib.design.prediction import PREDICTION_SOLVER
 from graph_calib.solvers.joint.solver import JOINT
+from graph_calib.solvers.registry import PREDICTION_SOLVER
 
 #: Root attribute of a corrected experiment file: the provenance of its correction, JSON.
 PROVENANCE_ATTRIBUTE = "corrected_by"

@@ -53,7 +53,7 @@ import numpy as np
 
 from graph_calib.compensation.calibration import triad_errors
 from graph_calib.records.problem import build_problem
-from graph_calib.solvers.registry import PRIMARY_SOLVER
+from graph_calib.solvers.registry import PREDICTION_SOLVER, PRIMARY_SOLVER
 from graph_calib.solvers.variance import estimate_variance_components, with_variance_factors
 from graph_calib.model.normal_equations import linearise
 from graph_calib.records.experiment import Result
@@ -64,9 +64,6 @@ from graph_calib.evaluation.validation import ACCEL_ACCURACY_MPS2, GYRO_ACCURACY
 #: The bound on the remaining errors is this many predicted sigmas: 95.4 % of a Gaussian error, in each
 #: window and on each axis (docs/design.md: the 1.5 h ``nav-subrange`` is at 0.0081 deg/h there, 0.0122 at 3 sigma).
 CONFIDENCE_SIGMA = 2.0
-
-#: The ``solver`` of a prediction's result file.
-PREDICTION_SOLVER = "prediction"
 
 
 @dataclass(frozen=True)

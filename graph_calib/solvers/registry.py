@@ -30,6 +30,10 @@ DEFAULT_SOLVERS = ("sqrt-kf", "factor-graph")
 #: stitches, validates and starts its joint solve from its results, reports show it first.
 PRIMARY_SOLVER = "factor-graph"
 
+#: The ``solver`` of a prediction's result file (``graph-calib predict``): sigmas a calibration would reach, no
+#: calibration (apply and export refuse it).
+PREDICTION_SOLVER = "prediction"
+
 #: What reports call the registered solvers (a solver not listed is called by its name).
 SOLVER_LABELS = {"sqrt-kf": "square-root KF", "factor-graph": "factor graph"}
 
@@ -161,6 +165,6 @@ def solve(name, problem, *, options, progress=None, initial=None):
     return output if covariance is output.covariance else replace(output, covariance=covariance)
 
 
-__all__ = ["ENTRY_POINT_GROUP", "DEFAULT_SOLVERS", "PRIMARY_SOLVER", "SOLVER_LABELS", "BOTH", "PER_SUBRANGE", "solver_names",
+__all__ = ["ENTRY_POINT_GROUP", "DEFAULT_SOLVERS", "PRIMARY_SOLVER", "PREDICTION_SOLVER", "SOLVER_LABELS", "BOTH", "PER_SUBRANGE", "solver_names",
            "get_solver", "is_campaign_solver", "experiment_solvers", "campaign_solvers", "comparison_order",
            "primary_first", "primary_of", "choice_help", "parse_choice", "solve"]
