@@ -285,6 +285,9 @@ def _curvature_check(document, joint, results):
         return _check("curvature carried", None, "curvature adopted ("
                       + _adopted_text(adopted, len(document.get("experiments", [])))
                       + ") but no joint curve to bound what the subranges without it lack", checked=False), bias
+    if not any(results.values()):
+        return _check("curvature carried", None, "no per-subrange result to carry it into (the joint solver alone)",
+                      checked=False), bias
     flagged = sorted(((abs(z), n, s, el, z) for n, per in bias.items() for s, rows in per.items()
                       for el, z in rows.items() if abs(z) >= CURVATURE_FLAG_SIGMA), reverse=True)
     failing = [f for f in flagged if f[0] >= CURVATURE_FAIL_SIGMA]

@@ -66,7 +66,8 @@ def print_summary(run, out=None):
           file=out)
     for e in doc["experiments"]:
         cmp_ = e.get("comparison")
-        line = f"  {e['name']}: T_ref {e.get('t_ref_degC') or float('nan'):.2f} degC"
+        t_ref = e.get("t_ref_degC")
+        line = f"  {e['name']}: " + (f"T_ref {t_ref:.2f} degC" if t_ref is not None else "no per-subrange result")
         if cmp_:
             line += (f", filter vs graph max {cmp_['max_abs_difference_in_sigma']:.2g} sigma "
                      f"({'agree' if cmp_['agree'] else 'DIFFER'})")
@@ -117,8 +118,11 @@ def print_summary(run, out=None):
         print(f"verdict: FAIL: {len(checks['failed'])} check(s) over the whole campaign failed: "
               + " | ".join(checks["failed"]), file=out)
     if not run.failed and not failed and not (checks and not checks["passed"]):
-        agree = ", its solvers agree" if len(doc.get("solvers") or ()) > 1 else ""
-        print(f"verdict: pass: every experiment converged{agree} and its residuals are consistent", file=out)
+        if not any(e.get("verdict") for e in doc["experiments"]):
+            print("verdict: pass: the campaign's checks pass (no per-subrange solver ran)", file=out)
+        else:
+            agree = ", its solvers agree" if len(doc.get("solvers") or ()) > 1 else ""
+            print(f"verdict: pass: every experiment converged{agree} and its residuals are consistent", file=out)
 
 
 def _print_joint(doc, out):

@@ -200,8 +200,10 @@ class StitchedCalibration(ElementCompensation):
                                  dataset=key)
         stitching = doc["stitching"]
         if not stitching:
-            raise InputError("the campaign stitched nothing (no solver finished an experiment)", path=path,
-                             dataset="stitching")
+            joint = " (its joint calibration: --solver joint)" if isinstance(doc.get("joint"), dict) and doc["joint"] \
+                else ""
+            raise InputError(f"the campaign stitched nothing (no per-subrange solver finished an experiment){joint}",
+                             path=path, dataset="stitching")
         solver = solver or doc.get("primary_solver") or next(iter(stitching))
         if solver not in stitching:
             raise InputError(f"no stitching of solver {solver!r}; the campaign stitched {', '.join(stitching)}",
