@@ -116,3 +116,32 @@ def test_bad_arguments_are_exit_2_with_one_line(argv, capsys):
     assert e.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "error:" in err[0], err
+
+
+def _summary(doc):
+    import io as _io
+    from types import SimpleNamespace
+
+    from graph_calib.commands.campaign_cmd import print_summary
+
+    base = {"imu_id": "X", "timing": {"tasks_computed": 0, "tasks_cached": 0, "tasks_failed": 0, "total_seconds": 1.0},
+            "primary_solver": "factor-graph", "stitch_model": "cubic", "validation": [], "campaign_checks": None}
+    run = SimpleNamespace(document={**base, **doc}, stitched={}, out="o", report_path=None, failed=[],
+                          verdict_failed=[])
+    buf = _io.StringIO()
+    print_summary(run, out=buf)
+    return buf.getvalue()
+
+
+def test_the_campaign_summary_says_what_ran():
+    """One per-subrange solver: no 'its solvers agree'; the joint solver alone: no T_ref nan, no per-subrange pass;
+    a note that most elements are held by their priors is shown (a pass hid it)."""
+    verdict = {"passed": True, "fit_chi2_per_dof": {"factor-graph": 1.0}, "problems": [],
+               "notes": ["factor-graph: 34 of 39 elements are held by their priors (sigma above 0.7 of the prior's)"]}
+    one = _summary({"solvers": ["factor-graph"], "experiments": [{"name": "e1", "t_ref_degC": 20.0,
+                                                                   "verdict": verdict}]})
+    assert "verdict: pass: every experiment converged and its residuals are consistent" in one
+    assert "note: factor-graph: 34 of 39 elements are held by their priors" in one
+    joint = _summary({"solvers": [], "experiments": [{"name": "e1"}]})
+    assert "e1: no per-subrange result" in joint and "nan" not in joint
+    assert "verdict: pass: the campaign's checks pass (no per-subrange solver ran)" in joint
