@@ -285,7 +285,7 @@ def _curvature_check(document, joint, results):
         return _check("curvature carried", None, "curvature adopted ("
                       + _adopted_text(adopted, len(document.get("experiments", [])))
                       + ") but no joint curve to bound what the subranges without it lack", checked=False), bias
-    if not any(results.values()):
+    if "solvers" in document and not document["solvers"]:
         return _check("curvature carried", None, "no per-subrange result to carry it into (the joint solver alone)",
                       checked=False), bias
     flagged = sorted(((abs(z), n, s, el, z) for n, per in bias.items() for s, rows in per.items()

@@ -92,7 +92,8 @@ def plan_campaign(campaign, out, *, options):
     if options.stitch_model not in ("cubic", "linear"):
         raise InputError(f"must be 'cubic' or 'linear', got {options.stitch_model!r}", dataset="--stitch")
     out = _check_out(out)
-    records = _check_records(options.validate, imu_id=campaign.imu_id)
+    records = _check_records(options.validate, imu_id=campaign.imu_id,
+                             experiments=[e.file for e in campaign.experiments])
     todo, done = plan(campaign, out, options=options)
     vtodo, vdone, refs = _validation_tasks(campaign, out, records, options=options)
     _make_out(out)              # only once every file has passed its check: a refusal leaves no empty folder
@@ -210,13 +211,17 @@ def check_experiment_header(path, *, dataset=None, imu_id=None):
                          "IMU", path=path, dataset=dataset or "imu_id")
 
 
-def _check_records(records, *, imu_id):
+def _check_records(records, *, imu_id, experiments=()):
     paths = []
+    own = {Path(e).resolve() for e in experiments}
     for r in records:
         p = Path(r).resolve()
         if not p.is_file():
             raise InputError("validation record not found" if not p.exists() else "not a file", path=p,
                              dataset="--validate")
+        if p in own:
+            raise InputError("is one of the campaign's experiments: a validation record is one the calibration did "
+                             "not use", path=p, dataset="--validate")
         check_experiment_header(p, dataset="--validate", imu_id=imu_id)
         paths.append(p)
     return paths

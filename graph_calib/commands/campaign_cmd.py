@@ -144,7 +144,8 @@ def _print_joint_one(name, j, out):
           f"{v.get('text', '')}", file=out)
     for solver, cc in (j.get("cross_check") or {}).items():
         if cc.get("rms_z") is not None:
-            print(f"    {name} at T_ref - {solver}: rms {cc['rms_z']:.2f}, max {cc['max_abs_z']:.2f} sigma", file=out)
+            print(f"    {name} at T_ref - {solver}: rms {cc['rms_z']:.2f}, max {cc['max_abs_z']:.2f} in the subrange's "
+                  "sigma alone (the check below divides by both)", file=out)
     tc = j.get("truth_check") or {}
     if tc.get("points"):
         print(f"    {name} vs truth ({tc['mode']}): {100 * tc['fraction_within_2sigma']:.0f} % within 2 sigma, "

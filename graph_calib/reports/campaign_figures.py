@@ -59,7 +59,8 @@ def fig_temperatures(run):
     ax.set_xlabel("time in the experiment, h")
     ax.set_ylabel("sensor temperature, degC")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=7, ncol=2, loc="best")
+    if ax.get_legend_handles_labels()[1]:          # no experiment's summary: no series (the joint solver alone)
+        ax.legend(fontsize=7, ncol=2, loc="best")
     ax.set_title("Sensor temperatures of each experiment (line: mean of the six sensors; band: their spread)",
                  fontsize=9)
     return fig

@@ -324,7 +324,7 @@ def _write(path, text):
 ])
 def test_bad_input_gives_one_clear_error(case, pattern, simulated, tmp_path, capsys):
     good = simulated / "sub1_m10_0.h5"
-    head = '[imu]\nid = "X"\ngrade = "navigation"\n'
+    head = '[imu]\nid = "SIM-NAV 0001"\ngrade = "navigation"\n'
     manifest = tmp_path / "campaign.toml"
     extra = []
     out = tmp_path / "out"
@@ -335,7 +335,7 @@ def test_bad_input_gives_one_clear_error(case, pattern, simulated, tmp_path, cap
     elif case == "missing-experiment":
         _write(manifest, head + '[[experiment]]\nfile = "nowhere.h5"\n')
     elif case == "unknown-grade":
-        _write(manifest, '[imu]\nid = "X"\ngrade = "strategic"\n[[experiment]]\nfile = "' + str(good) + '"\n')
+        _write(manifest, '[imu]\nid = "SIM-NAV 0001"\ngrade = "strategic"\n[[experiment]]\nfile = "' + str(good) + '"\n')
     elif case == "no-experiment":
         _write(manifest, head)
     elif case == "not-hdf5":
@@ -369,7 +369,7 @@ def test_bad_experiment_content_found_by_a_worker_is_an_input_error(simulated, t
         t[100] = t[99]  # not strictly increasing
         f["imu/t"][...] = t
     manifest = _write(tmp_path / "campaign.toml",
-                      '[imu]\nid = "X"\ngrade = "navigation"\n[solver]\nsolvers = "factor-graph"\n'
+                      '[imu]\nid = "SIM-NAV 0001"\ngrade = "navigation"\n[solver]\nsolvers = "factor-graph"\n'
                       '[[experiment]]\nfile = "bad.h5"\n')
     rc = main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--workers", "0", "--quiet"])
     err = capsys.readouterr().err
@@ -579,4 +579,13 @@ def test_a_record_of_another_imu_is_refused_before_any_work(simulated, tmp_path,
     err = capsys.readouterr().err
     assert rc == 2 and "sub2_0_10.h5: imu_id: a record of IMU 'SIM-NAV 0001'; the manifest's [imu].id is " \
                        "'SIM-NAV 0009': a campaign calibrates one IMU" in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_validation_record_that_is_one_of_the_experiments_is_refused(simulated, tmp_path, capsys):
+    manifest = _small_manifest(simulated, tmp_path / "m")
+    own = simulated / "sub3_10_20.h5"
+    rc = main(["campaign", str(manifest), "--out", str(tmp_path / "out"), "--validate", str(own), "--quiet"])
+    err = capsys.readouterr().err
+    assert rc == 2 and "--validate: is one of the campaign's experiments" in err, err
     assert not (tmp_path / "out").exists()

@@ -145,7 +145,7 @@ def small(tmp_path_factory):
     write_simulation(simulate("nav-campaign", rng=np.random.default_rng(4), hours=0.05), other)
     shutil.copy(d / "sub3_10_20.h5", d / "sweep.h5")
     shutil.copy(other / "sub3_10_20.truth.json", d / "sweep.truth.json")
-    (d / "two.toml").write_text('[imu]\nid = "X"\ngrade = "navigation"\n[solver]\nsolvers = "factor-graph"\n'
+    (d / "two.toml").write_text('[imu]\nid = "SIM-NAV 0001"\ngrade = "navigation"\n[solver]\nsolvers = "factor-graph"\n'
                                 '[[experiment]]\nfile = "sub1_m10_0.h5"\n[[experiment]]\nfile = "sub2_0_10.h5"\n',
                                 encoding="utf-8")
     return d
@@ -171,7 +171,7 @@ def test_every_input_is_checked_before_the_first_experiment_starts(small, tmp_pa
         del f["imu/dv"]
     shutil.copy(small / "sub1_m10_0.h5", tmp_path / "first.h5")
     manifest = tmp_path / "m.toml"
-    manifest.write_text('[imu]\nid = "X"\ngrade = "navigation"\n[solver]\nsolvers = "factor-graph"\n'
+    manifest.write_text('[imu]\nid = "SIM-NAV 0001"\ngrade = "navigation"\n[solver]\nsolvers = "factor-graph"\n'
                         '[[experiment]]\nfile = "first.h5"\n[[experiment]]\nfile = "no_dv.h5"\n', encoding="utf-8")
     finished = []
     with pytest.raises(InputError, match=r"no_dv\.h5.*imu/dv"):

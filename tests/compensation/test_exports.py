@@ -358,3 +358,15 @@ def test_an_export_names_the_elements_its_result_holds_at_their_priors(sources, 
     assert cli.main(["export", str(result), "--format", "px4", "--out", str(tmp_path / "x.params")]) == 0
     assert ("note: 2 element(s) of the result are held by their priors (the record informs little of them; their "
             "values are the priors'): accel.bias_tc.y, gyro.bias_tc.x") in capsys.readouterr().err
+
+
+def test_an_estimator_export_of_a_campaign_task_takes_the_rate_from_its_summary(sources, tmp_path, capsys):
+    """The task's record lives elsewhere; its summary.json beside the result has the rate."""
+    folder = tmp_path / "sub3_10_20"
+    folder.mkdir()
+    for name in ("factor-graph.json", "summary.json"):
+        shutil.copy(sources["result"].parent / name, folder / name)
+    out = tmp_path / "imu.yaml"
+    _export(folder / "factor-graph.json", "kalibr", out, capsys)
+    rate = json.loads((folder / "summary.json").read_text())["rate_hz"]
+    assert yaml.safe_load(out.read_text())["update_rate"] == rate

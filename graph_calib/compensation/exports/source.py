@@ -91,6 +91,15 @@ def _median_noise(blocks):
     return out
 
 
+def _summary_rate(folder):
+    """The rate a campaign's ``summary.json`` beside a task's result gives (its record may live elsewhere)."""
+    try:
+        rate = json.loads((Path(folder) / "summary.json").read_text(encoding="utf-8")).get("rate_hz")
+    except (OSError, ValueError, AttributeError):
+        return None
+    return float(rate) if isinstance(rate, (int, float)) and rate > 0 else None
+
+
 def _experiment_rate(candidates):
     for p in candidates:
         if p is not None and Path(p).is_file():
@@ -141,7 +150,7 @@ def _source(comp, prov, path, *, force):
         rng = tuple(doc.get("temperature_range_degC") or (comp.t_ref_degC, comp.t_ref_degC))
         folder = path.parent
         src = doc.get("source") or ""
-        rate = _experiment_rate([folder / src, folder.parent / src] if src else [])
+        rate = _experiment_rate([folder / src, folder.parent / src] if src else []) or _summary_rate(folder)
         return ExportSource(compensation=comp, range_degC=(float(rng[0]), float(rng[1])),
                             t_ref_degC=float(comp.t_ref_degC), noise=doc.get("noise"), grade=doc.get("grade"),
                             rate_hz=rate, imu_id=str(doc.get("imu_id", "")),
