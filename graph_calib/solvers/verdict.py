@@ -100,6 +100,15 @@ def judged_figures(kinds, kind):
     return static if static and static.get("chi2_per_redundancy") is not None else k
 
 
+def _overstated(kind, sensor, noise):
+    """What an overstated noise of ``kind`` is: the sensor's, or with a sway term the gravity factors' noise and it."""
+    sway = noise.get("sway_mps2")
+    if kind == "gravity" and sway:
+        return (f"{sensor} noise or the sway term ({float(sway):.2g} m/s^2: rests that sway less than their specific "
+                "force's scatter says, or no hand at all: drop --sway-sigma)")
+    return f"{sensor} noise"
+
+
 def judge_kinds(result):
     """``(figures, problems, notes)`` of one result's per-kind residual test.
 
@@ -138,8 +147,9 @@ def judge_kinds(result):
                             f"{v ** 0.5:.2g}x")
         elif v < lo:
             text = (f"{what} < {lo:.3g}: the {kind} residuals are smaller than their noise model; the "
-                    f"{sensor} noise is overstated; " + (f"sigmas pessimistic by about {v ** -0.5:.2g}x" if v > 0 else
-                                                          "the residuals are zero (no noise at all)"))
+                    f"{_overstated(kind, sensor, noise)} is overstated; "
+                    + (f"sigmas pessimistic by about {v ** -0.5:.2g}x" if v > 0 else
+                       "the residuals are zero (no noise at all)"))
             # without variance factors the kinds' approximations (module doc) keep a right model below 1: said
             (problems if scaled else notes).append(text + ("" if scaled else " (no variance components estimated)"))
         if vf != 1.0:
@@ -151,7 +161,8 @@ def judge_kinds(result):
                                 f"the {kind} measurements see")
             elif vf < 1.0 / VARIANCE_FACTOR_LIMIT:
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} < 1/{VARIANCE_FACTOR_LIMIT:g} on "
-                                f"the {source.get(sensor, 'assumed')} {sensor} noise: that noise is overstated")
+                                f"the {source.get(sensor, 'assumed')} {sensor} noise: the "
+                                f"{_overstated(kind, sensor, noise)} is overstated")
     for kind in ((result.residuals or {}).get("variance_iteration") or {}).get("held") or ():
         if kind in figures:
             f = figures[kind]

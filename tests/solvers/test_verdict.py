@@ -258,3 +258,15 @@ def test_a_failed_verdict_on_a_record_at_one_temperature_says_what_that_hides():
     assert not any("does not change" in n for n in verdict_of({"factor-graph": warming}).notes)
     passing = replace(flat, residuals=_result({"rotation": (1.0, 500.0, 1.0)}).residuals)
     assert not any("does not change" in n for n in verdict_of({"factor-graph": passing}).notes)
+
+
+def test_an_overstated_gravity_noise_with_a_sway_term_names_the_sway():
+    """--sway-sigma estimate on rests that do not sway (a bench): the gravity residuals are small against the noise
+    with the sway in it, and the words blamed the accelerometer noise alone."""
+    res = _result({"gravity": (0.5, 900.0, 0.23), "rotation": (1.0, 60.0, 1.0)})
+    res.extra["noise"]["sway_mps2"] = 0.0083
+    v = verdict_of({"factor-graph": res})
+    assert not v.passed
+    assert any("accel noise or the sway term (0.0083 m/s^2" in p and "drop --sway-sigma" in p for p in v.problems)
+    bare = _result({"gravity": (0.5, 900.0, 0.23), "rotation": (1.0, 60.0, 1.0)})
+    assert not any("sway" in p for p in verdict_of({"factor-graph": bare}).problems)
