@@ -562,12 +562,17 @@ def test_the_local_cluster_s_processes_leave_ctrl_c_to_this_one():
     from graph_calib.campaign import execution
 
     probe = [sys.executable, "-c", "import signal; print(signal.getsignal(signal.SIGINT) is signal.SIG_IGN)"]
-    before = signal.getsignal(signal.SIGINT)
-    with execution._children_ignore_interrupt():
-        inside = subprocess.run(probe, capture_output=True, text=True, check=True).stdout.strip()
-    assert inside == "True"
-    assert signal.getsignal(signal.SIGINT) is before
-    assert subprocess.run(probe, capture_output=True, text=True, check=True).stdout.strip() == "False"
+    # as an interactive run has it (a test run started in the background inherits SIGINT ignored)
+    outer = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        before = signal.getsignal(signal.SIGINT)
+        with execution._children_ignore_interrupt():
+            inside = subprocess.run(probe, capture_output=True, text=True, check=True).stdout.strip()
+        assert inside == "True"
+        assert signal.getsignal(signal.SIGINT) is before
+        assert subprocess.run(probe, capture_output=True, text=True, check=True).stdout.strip() == "False"
+    finally:
+        signal.signal(signal.SIGINT, outer)
 
 
 def test_a_record_of_another_imu_is_refused_before_any_work(simulated, tmp_path, capsys):
