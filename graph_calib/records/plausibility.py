@@ -214,24 +214,25 @@ def check_record(experiment):
     check_continuity(experiment)
     ratio, n, typical = turn_ratio(experiment, details=True)
     if ratio is not None:
-        lo, hi = TURN_RATIO_RANGE
-        if not lo <= ratio <= hi:
-            raise InputError(
-                f"the gyros turn {ratio:.4g} times as far as the encoders (median over the {n} largest turns "
-                f"between valid /table readings, {typical * c.RAD_TO_DEG:.3g} deg typical; accepted "
-                f"{lo:g}..{hi:g}): {_cause(ratio, experiment.rate_hz)}",
-                path=experiment.source or None, dataset=_DTHETA)
+        _refuse_ratio(experiment, ratio, f"the gyros turn {ratio:.4g} times as far as the encoders (median over the "
+                                         f"{n} largest turns between valid /table readings, "
+                                         f"{typical * c.RAD_TO_DEG:.3g} deg typical")
         return
     _check_static_rates(experiment)
     ratio, n, typical = tilt_ratio(experiment)
     if ratio is not None:
-        lo, hi = TURN_RATIO_RANGE
-        if not lo <= ratio <= hi:
-            raise InputError(
-                f"the gyros turn gravity's direction {ratio:.4g} times as far as the accelerometers see it turn "
-                f"between rests (median over the {n} largest changes, {typical * c.RAD_TO_DEG:.3g} deg typical; "
-                f"accepted {lo:g}..{hi:g}): {_cause(ratio, experiment.rate_hz)}",
-                path=experiment.source or None, dataset=_DTHETA)
+        _refuse_ratio(experiment, ratio, f"the gyros turn gravity's direction {ratio:.4g} times as far as the "
+                                         f"accelerometers see it turn between rests (median over the {n} largest "
+                                         f"changes, {typical * c.RAD_TO_DEG:.3g} deg typical")
+
+
+def _refuse_ratio(experiment, ratio, what):
+    """InputError on ``/imu/dtheta`` when a turn or tilt ``ratio`` is outside :data:`TURN_RATIO_RANGE`, naming it in
+    ``what`` and its likely cause."""
+    lo, hi = TURN_RATIO_RANGE
+    if not lo <= ratio <= hi:
+        raise InputError(f"{what}; accepted {lo:g}..{hi:g}): {_cause(ratio, experiment.rate_hz)}",
+                         path=experiment.source or None, dataset=_DTHETA)
 
 
 def _cause(ratio, rate_hz):
