@@ -1,6 +1,7 @@
 """Cross-validation of a calibration on held-out poses (graph_calib.evaluation.crossval, ``graph-calib crossval``)."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -153,3 +154,19 @@ def test_crossval_by_transitions_writes_null_for_the_figures_it_does_not_hold_ou
         assert f["calibrated"]["transitions_rms_deg"] > 0
     assert doc["pooled"]["calibrated"]["static_norm_std_mps2"] is None
     assert doc["pooled"]["raw"]["transitions_rms_deg"] > doc["pooled"]["calibrated"]["transitions_rms_deg"]
+
+
+def test_a_figure_equal_to_the_raw_one_in_its_last_digits_is_not_worse():
+    """A navigation-grade turntable record: its rests' rate is the Earth rate's (or a slow turn's) raw and calibrated
+    alike; 3.8784 against 3.8782 deg/s failed a good calibration."""
+    from graph_calib.evaluation.crossval import FIGURES, WORSE_FACTOR, FoldResult, HeldOutFigures
+
+    def figs(rate):
+        return HeldOutFigures(n_rests=16, static_norm_std_mps2=5e-6, transitions_rms_deg=0.03,
+                              transitions_median_deg=0.02, transitions_max_deg=0.05, static_rate_rms_dps=rate)
+
+    assert "static_rate_rms_dps" in FIGURES and 1.0 < WORSE_FACTOR <= 1.05
+    same = FoldResult(fold=None, calibrated=figs(3.8784), raw=replace(figs(3.8782), static_norm_std_mps2=5e-4))
+    assert same.worse_than_raw() == ()
+    worse = FoldResult(fold=None, calibrated=figs(4.2), raw=replace(figs(3.8782), static_norm_std_mps2=5e-4))
+    assert worse.worse_than_raw() == ("static_rate_rms_dps",)
