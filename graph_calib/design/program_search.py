@@ -57,6 +57,11 @@ from graph_calib.simulation.program import BenchProgram, Dwell, Move, Setpoint, 
 
 #: Gyro channels' time constants of the simulated unit, s (x, y, z): the thermal lag a program must beat.
 GYRO_TAU_S = tuple(ch[1] * 60.0 for ch in NAV_CHANNELS[:3])
+#: What a thermal chamber reaches, degC: a design whose setpoints leave it is refused.
+CHAMBER_RANGE_DEGC = (-70.0, 150.0)
+#: Longest program the search predicts in full, s: a target that asks for more is refused naming it (the full
+#: prediction of a program years long asked for 202 GiB and ended in an out-of-memory message).
+MAX_PROGRAM_S = 12 * 3600.0
 
 
 @dataclass(frozen=True)
@@ -136,7 +141,16 @@ def read_spec(path):
             raise InputError(f"must be a {'finite' if k == 'start_degC' else 'positive'} number, got {v!r}",
                              path=path, dataset=f"spec.{k}")
         kw[k] = v
-    return DesignSpec(**kw)
+    spec = DesignSpec(**kw)
+    if spec.encoder_rate_hz > spec.rate_hz:
+        raise InputError(f"the table is read at {spec.encoder_rate_hz:g} Hz, faster than the IMU samples "
+                         f"({spec.rate_hz:g} Hz): at most rate_hz", path=path, dataset="spec.encoder_rate_hz")
+    lo, hi = CHAMBER_RANGE_DEGC
+    top = spec.start_degC + spec.span_degC + spec.max_overshoot_degC
+    if not (lo <= spec.start_degC and top <= hi):
+        raise InputError(f"the chamber would run from {spec.start_degC:g} to {top:g} degC (start, span and overshoot): "
+                         f"beyond a thermal chamber's {lo:g}..{hi:g} degC", path=path, dataset="spec.span_degC")
+    return spec
 
 
 # ---------------------------------------------------------------------------
@@ -385,6 +399,11 @@ def design_structure(spec, n_stations, *, rounds=6, progress=None):
     best = last = None
     for r in range(rounds):
         red = optimise(spec, n_stations, eta=eta)
+        if red.duration_s > MAX_PROGRAM_S:
+            raise InputError(f"the targets ask for a program of {red.duration_s / 3600:.3g} h ({n_stations} stations, "
+                             f"the reduced model), beyond the {MAX_PROGRAM_S / 3600:g} h this search predicts: relax "
+                             f"the gyro target ({spec.gyro_target_radps * c.RS_TO_DH:.3g} deg/h) or the accelerometer "
+                             f"target ({spec.accel_target_mps2:.3g} m/s^2)", dataset="spec.gyro_target_radps")
         prog = build_program(spec, red.stations_s, red.ramp_degC_per_s)
         problem, pred = full_prediction(prog, spec)
         b = pred.bound.summary()

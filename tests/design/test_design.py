@@ -112,6 +112,8 @@ def test_design_command_on_a_relaxed_spec(tmp_path):
     ("[spec]\nspeed = 1.0\n", "spec.speed", "unknown key"),
     ("[other]\nx = 1\n", "", "one [spec] table"),
     ("[spec\n", "", "not valid TOML"),
+    ("[spec]\nencoder_rate_hz = 1000\nrate_hz = 10\n", "spec.encoder_rate_hz", "faster than the IMU samples"),
+    ("[spec]\nspan_degC = 500\n", "spec.span_degC", "beyond a thermal chamber's -70..150 degC"),
 ])
 def test_bad_spec_refused(tmp_path, text, key, words):
     path = tmp_path / "spec.toml"
@@ -128,3 +130,14 @@ def test_design_command_refuses_a_bad_spec(tmp_path, capsys):
     out = tmp_path / "d"
     assert main(["design", "--out", str(out), "--spec", str(path)]) == 2
     assert "spec.stations" in capsys.readouterr().err and not out.exists()
+
+
+def test_a_target_no_program_can_meet_is_refused_naming_it(tmp_path, capsys):
+    """A target of 2e-5 deg/h asked for a program of years, whose full prediction ended in an out-of-memory message."""
+    path = tmp_path / "spec.toml"
+    path.write_text("[spec]\ngyro_target_radps = 1e-10\nstations = [2]\n")
+    out = tmp_path / "d"
+    assert main(["design", "--out", str(out), "--spec", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "spec.gyro_target_radps: the targets ask for a program of" in err and "relax the gyro target" in err
+    assert "memory" not in err and not out.exists()
