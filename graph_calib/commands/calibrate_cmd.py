@@ -13,7 +13,7 @@ from graph_calib.constants import RS_TO_DH
 from graph_calib.commands.model_options import (add_moving, add_still, add_sway, finite_float, moving_of, still_of,
                                                  sway_of)
 from graph_calib.errors import InputError
-from graph_calib.records.grade_choice import choose_grade
+from graph_calib.records.grade_choice import choose_grade, grade_warning
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions, GraphOptions
 from graph_calib.sensors.effects import FURTHER_EFFECTS
@@ -77,6 +77,8 @@ def run(args):
     if args.grade is None:
         choice = choose_grade(exp, keyframe_s=args.keyframe)
         print(f"grade: {choice.reason}")
+    elif warning := grade_warning(exp, args.grade, keyframe_s=args.keyframe):
+        print(warning, file=sys.stderr)
     options = options_from_args(args, grade=choice.grade if choice else None)
     out = Path(args.out)
     solvers, _ = registry.parse_choice(args.solver)

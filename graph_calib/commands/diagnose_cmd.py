@@ -18,7 +18,7 @@ from graph_calib.commands.model_options import (add_moving, add_still, add_sway,
                                                  sway_of)
 from graph_calib.commands.paths import make_output_folder
 from graph_calib.errors import InputError
-from graph_calib.records.grade_choice import choose_grade
+from graph_calib.records.grade_choice import choose_grade, grade_warning
 from graph_calib.commands.calibrate_cmd import solver_choice
 from graph_calib.solvers import registry
 
@@ -113,6 +113,8 @@ def run(args):
     if args.grade is None:
         choice = choose_grade(exp, keyframe_s=args.keyframe)
         print(f"grade: {choice.reason}")
+    elif warning := grade_warning(exp, args.grade, keyframe_s=args.keyframe):
+        print(warning, file=sys.stderr)
     calibration_options, diagnosis_options = _options(args, grade=choice.grade if choice else "navigation")
     truth, tp = _truth(args, path)
     out = Path(args.out)

@@ -17,7 +17,7 @@ from graph_calib import io
 from graph_calib.constants import RS_TO_DH
 from graph_calib.sensors.effects import FURTHER_EFFECTS
 from graph_calib.errors import InputError
-from graph_calib.records.grade_choice import choose_grade
+from graph_calib.records.grade_choice import choose_grade, grade_warning
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 from graph_calib.design.prediction import expected_variance_factors, predict, prediction_result
@@ -73,6 +73,8 @@ def run(args):
         if args.grade is None:
             choice = choose_grade(exp, keyframe_s=args.keyframe)
             print(f"grade: {choice.reason}")
+        elif warning := grade_warning(exp, args.grade, keyframe_s=args.keyframe):
+            print(warning, file=sys.stderr)
     options = options_from_args(args, grade=choice.grade if choice else None)
     problem = build_problem(exp, options=options)
     m = problem.model

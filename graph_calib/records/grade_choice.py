@@ -147,4 +147,26 @@ def choose_grade(experiment, *, identification=None, keyframe_s=1.0):
                        **figures)
 
 
-__all__ = ["GradeChoice", "choose_grade", "NOISE_FACTOR", "PRIOR_FACTOR"]
+def named_grade_misfit(experiment, name, *, keyframe_s=1.0):
+    """Why the rests of ``experiment`` contradict the grade ``name`` a user named (``--grade``), in words: the checks
+    :func:`choose_grade` makes of each grade; ``""`` when they fit, or when the record has no rest to tell."""
+    try:
+        choice = choose_grade(experiment, keyframe_s=keyframe_s)
+    except InputError:
+        return ""
+    return "; ".join(_misfit(name, gravity=float(experiment.gravity_mps2), gyro_noise=choice.gyro_noise,
+                             accel_noise=choice.accel_noise, rate_offset=choice.rate_offset,
+                             force_offset=choice.force_offset))
+
+
+def grade_warning(experiment, name, *, keyframe_s=1.0):
+    """The warning line of a command given ``--grade name`` that the record's rests contradict (``""`` when not)."""
+    why = named_grade_misfit(experiment, name, keyframe_s=keyframe_s)
+    if not why:
+        return ""
+    return (f"warning: --grade {name}: the record's rests do not fit its priors ({why}): the sigmas, and the "
+            "verdict's words on what the residuals lack, rest on priors the data contradict (without --grade the "
+            "grade is chosen from the rests)")
+
+
+__all__ = ["GradeChoice", "choose_grade", "named_grade_misfit", "grade_warning", "NOISE_FACTOR", "PRIOR_FACTOR"]

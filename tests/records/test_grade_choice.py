@@ -133,3 +133,16 @@ def test_the_python_api_says_so_where_the_rests_cannot_tell():
     options = build_problem(exp, options=CalibrationOptions()).model.options
     assert options.grade == "navigation"
     assert options.grade_choice["reason"].startswith("navigation, the default: the record has no rest of 2 s")
+
+
+def test_a_named_grade_the_rests_contradict_is_warned_of():
+    """--grade navigation on a consumer unit: the verdict then blamed a missing effect; the command now says the rests
+    contradict the priors (a looser grade named is no contradiction)."""
+    from graph_calib.records.grade_choice import grade_warning, named_grade_misfit
+
+    exp = _sim("consumer-handheld")
+    why = named_grade_misfit(exp, "navigation")
+    assert "static rate" in why and "off the Earth rate" in why
+    assert named_grade_misfit(exp, "consumer") == "" and grade_warning(exp, "consumer") == ""
+    assert grade_warning(exp, "navigation").startswith(f"warning: --grade navigation: the record's rests do not fit "
+                                                       f"its priors ({why})")
