@@ -10,6 +10,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
+from graph_calib.commands.paths import earlier_results
 from graph_calib.commands.model_options import (add_moving, add_still, add_sway, finite_float, moving_of, still_of,
                                                  sway_of)
 from graph_calib.errors import InputError
@@ -103,8 +104,7 @@ def run(args):
         io.atomic_write_json(out / "comparison.json", calibration.comparison)
         print(f"  comparison: {comparison_text(calibration.comparison['summary'])} -> {out / 'comparison.json'}")
     written = {f"{s}.json" for s in calibration.results} | ({"comparison.json"} if calibration.comparison else set())
-    earlier = sorted(p.name for p in out.iterdir() if p.name not in written and p.suffix == ".json"
-                     and (p.stem in registry.solver_names() or p.name == "comparison.json"))
+    earlier = earlier_results(out, written, solver_names=registry.solver_names())
     if earlier:
         print(f"  note: {out} also holds {', '.join(earlier)} of an earlier run, not this one's", file=sys.stderr)
     verdict = calibration.verdict

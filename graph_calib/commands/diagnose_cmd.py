@@ -16,7 +16,7 @@ from pathlib import Path
 
 from graph_calib.commands.model_options import (add_moving, add_still, add_sway, finite_float, moving_of, still_of,
                                                  sway_of)
-from graph_calib.commands.paths import make_output_folder
+from graph_calib.commands.paths import earlier_results, make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade, grade_warning
 from graph_calib.commands.calibrate_cmd import solver_choice
@@ -164,6 +164,9 @@ def run(args):
         print(f"  {label}: largest whitened residual RMS per kind: {line}{err}")
     print(f"  -> {out / 'diagnosis.json'}, {out / 'report.html'}, the final calibration "
           f"{', '.join(js['calibration']['files'])} ({diag.seconds:.0f} s)")
+    earlier = earlier_results(out, set(js["calibration"]["files"]), solver_names=registry.solver_names())
+    if earlier:
+        print(f"  note: {out} also holds {', '.join(earlier)} of an earlier run, not this one's", file=sys.stderr)
     for problem in verdict.problems:
         print(f"  {problem}")
     print(verdict.text())

@@ -79,4 +79,11 @@ def make_output_folder(path, *, option="--out"):
     return path
 
 
-__all__ = ["output_file", "output_folder", "make_output_folder"]
+def earlier_results(folder, written, *, solver_names):
+    """The result files in ``folder`` that this run did not write (``written``: names): a solver's ``<name>.json`` or
+    ``comparison.json`` of an earlier run, which a reader would take for this one's; sorted names."""
+    return sorted(p.name for p in Path(folder).iterdir() if p.name not in written and p.suffix == ".json"
+                  and (p.stem in solver_names or p.name == "comparison.json"))
+
+
+__all__ = ["output_file", "output_folder", "make_output_folder", "earlier_results"]

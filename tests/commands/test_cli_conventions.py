@@ -174,6 +174,10 @@ def test_files_of_an_earlier_run_in_the_output_folder_are_named(tmp_path, capsys
     assert cli.main(["calibrate", str(h5), "--out", str(out), "--solver", "factor-graph"]) in (0, 3)
     err = capsys.readouterr().err
     assert f"note: {out} also holds comparison.json, sqrt-kf.json of an earlier run, not this one's" in err
+    # diagnose names them too (it left another record's files beside its own without a word)
+    assert cli.main(["diagnose", str(h5), "--out", str(out), "--solver", "factor-graph", "--max-added", "0"]) in (0, 3)
+    err = capsys.readouterr().err
+    assert f"note: {out} also holds comparison.json, sqrt-kf.json of an earlier run, not this one's" in err
 
 
 def test_a_reference_temperature_far_from_the_data_is_refused(tmp_path, capsys):
