@@ -15,6 +15,11 @@ import numpy as np
 from graph_calib.errors import InputError
 
 
+#: The scenario options a command-line flag sets (the scenarios that do not take one refuse the flag by name).
+FLAG_OF = {"--cut": "cut", "--hand-accel": "hand_accel_mps2", "--pivot": "pivot_m", "--cubic-scale": "cubic_scale",
+           "--effect": "effects", "--effect-scale": "effect_scale", "--hours": "hours"}
+
+
 def add_arguments(parser):
     parser.add_argument("scenario", nargs="?", metavar="SCENARIO", help="scenario name (see --list)")
     parser.add_argument("--program", metavar="PROGRAM.toml",
@@ -53,7 +58,8 @@ def _print_list(out):
 
 
 def run(args):
-    from graph_calib.simulation import SCENARIOS, simulate, write_simulation
+    from graph_calib.simulation import SCENARIOS, get_scenario, simulate, write_simulation
+    from graph_calib.simulation.scenarios import scenario_names
     from graph_calib.simulation.program import program_simulation, read_program
 
     if args.list:
@@ -92,6 +98,12 @@ def run(args):
             options.pop("effect_scale")
         sim = program_simulation(program, rng=rng, **options)
     else:
+        known = get_scenario(args.scenario).options() if args.scenario in scenario_names() else None
+        for flag, key in FLAG_OF.items():
+            if known is not None and key in options and key not in known:
+                takes = ", ".join(n for n in scenario_names() if key in get_scenario(n).options())
+                raise InputError(f"scenario {args.scenario!r} does not take {flag} (it takes: {takes})",
+                                 dataset=flag)
         sim = simulate(args.scenario, rng=rng, **options)
 
     def progress(msg):

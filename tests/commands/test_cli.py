@@ -145,3 +145,12 @@ def test_the_campaign_summary_says_what_ran():
     joint = _summary({"solvers": [], "experiments": [{"name": "e1"}]})
     assert "e1: no per-subrange result" in joint and "nan" not in joint
     assert "verdict: pass: the campaign's checks pass (no per-subrange solver ran)" in joint
+
+
+@pytest.mark.parametrize("flag", [["--hand-accel", "0.1"], ["--cut"], ["--pivot", "0.1"]])
+def test_a_hand_held_flag_on_a_table_scenario_is_refused_by_its_name(tmp_path, capsys, flag):
+    """It named the scenario's keyword (hand_accel_mps2) and listed keywords that are no flags."""
+    assert main(["simulate", "nav-subrange-short", "--out", str(tmp_path / "s"), *flag]) == 2
+    err = capsys.readouterr().err
+    assert f"{flag[0]}: scenario 'nav-subrange-short' does not take {flag[0]} (it takes: consumer-handheld" in err
+    assert "_mps2" not in err and not (tmp_path / "s").exists()
