@@ -18,7 +18,7 @@ from graph_calib import io
 from graph_calib.commands.paths import output_file
 from graph_calib.compensation import PROVENANCE_ATTRIBUTE, STITCH_MODELS, apply, correction_of, read_compensation
 from graph_calib.compensation import write_corrected
-from graph_calib.compensation.apply import verdict_failed
+from graph_calib.compensation.apply import superseded, verdict_failed
 from graph_calib.constants import RAD_TO_DEG
 from graph_calib.errors import InputError
 
@@ -50,6 +50,9 @@ def run(args):
     if failed and not args.force:
         raise InputError(f"its verdict failed ({failed}); a calibration that failed its own checks is not applied "
                          "without --force", path=args.calibration, dataset="verdict")
+    later = superseded(provenance)
+    if later and not args.force:
+        raise InputError(later, path=args.calibration, dataset="campaign")
     experiment = io.read_experiment(src)
     other = provenance.get("imu_id")     # a result's, a table's or a campaign's
     foreign = bool(other and experiment.imu_id and other != experiment.imu_id)

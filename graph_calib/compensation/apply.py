@@ -108,9 +108,12 @@ def read_compensation(path, *, solver=None, model=None):
         elif isinstance(result.extra.get("campaign"), dict):
             # a campaign's task file holds no verdict (the campaign judges the experiment's solvers together and
             # keeps the files as the workers wrote them): its experiment's verdict in campaign.json
-            verdict = experiment_verdict(path, str(result.extra["campaign"].get("experiment", "")))
+            verdict, final = experiment_entry(path, str(result.extra["campaign"].get("experiment", "")),
+                                              solver=result.solver)
             if verdict is not None:
                 prov["verdict"] = verdict
+            if final is not None and final != path.resolve():
+                prov["superseded_by"] = str(final)
         if result.extra.get("unresolved") and isinstance(comp, Calibration):
             comp, removed = without_unresolved(comp, result.extra["unresolved"])
             prov["unresolved_not_applied"] = removed
@@ -140,9 +143,11 @@ def read_compensation(path, *, solver=None, model=None):
     return comp, prov
 
 
-def experiment_verdict(path, name):
-    """The verdict (dict) campaign.json gives experiment ``name``, for a result file ``path`` of that campaign (in
-    ``OUT/<name>/``, or a re-solve's ``OUT/<name>/pooled/<wave>/``); None where no campaign.json above it says."""
+def experiment_entry(path, name, *, solver):
+    """``(verdict, final result file)`` campaign.json gives experiment ``name`` and ``solver``, for a result file
+    ``path`` of that campaign (in ``OUT/<name>/``, or a re-solve's ``OUT/<name>/pooled/<wave>/``); None for what no
+    campaign.json above it says.  A final file other than ``path`` means ``path`` was superseded (a re-solve wave's
+    result is the campaign's)."""
     for folder in list(Path(path).resolve().parents)[:4]:
         doc_path = folder / "campaign.json"
         if not doc_path.is_file():
@@ -150,12 +155,15 @@ def experiment_verdict(path, name):
         try:
             doc = json.loads(doc_path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
-            return None
+            return None, None
         for e in doc.get("experiments") or () if isinstance(doc, dict) else ():
-            if isinstance(e, dict) and e.get("name") == name and isinstance(e.get("verdict"), dict):
-                return e["verdict"]
-        return None
-    return None
+            if isinstance(e, dict) and e.get("name") == name:
+                verdict = e.get("verdict") if isinstance(e.get("verdict"), dict) else None
+                entry = (e.get("results") or {}).get(solver)
+                file = entry.get("file") if isinstance(entry, dict) else None
+                return verdict, ((folder / file).resolve() if isinstance(file, str) and file else None)
+        return None, None
+    return None, None
 
 
 def campaign_verdict(path):
@@ -168,6 +176,15 @@ def campaign_verdict(path):
     except (OSError, ValueError, AttributeError):
         return None
     return verdict if isinstance(verdict, dict) else None
+
+
+def superseded(provenance):
+    """The words for a campaign task file the campaign re-solved (its final result another file), or None."""
+    final = provenance.get("superseded_by")
+    if not final:
+        return None
+    return (f"a re-solve wave of its campaign superseded it: the campaign's result of this experiment is {final} "
+            "(--force takes this one anyway)")
 
 
 def verdict_failed(provenance):
@@ -327,4 +344,4 @@ def correction_of(path):
         return {"text": str(value)}
 
 
-__all__ = ["PROVENANCE_ATTRIBUTE", "read_compensation", "verdict_failed", "without_unresolved", "apply", "note_of", "write_corrected", "correction_of"]
+__all__ = ["PROVENANCE_ATTRIBUTE", "read_compensation", "superseded", "verdict_failed", "without_unresolved", "apply", "note_of", "write_corrected", "correction_of"]

@@ -677,3 +677,24 @@ def test_a_campaign_task_file_carries_its_experiments_verdict(campaign, tmp_path
     # another experiment of the same campaign passed: applied as before
     assert _cli(["apply", camp / "sub3_10_20" / "factor-graph.json", campaign[0] / "sub3_10_20.h5", "--out", out],
                 capsys)[0] == 0
+
+
+def test_a_task_file_a_re_solve_wave_superseded_is_refused_naming_the_final_one(campaign, tmp_path, capsys):
+    """After a pooled wave the experiment's first-wave file stays beside the final one (pooled/<wave>/): apply and
+    export named neither and took the first."""
+    camp = tmp_path / "camp"
+    shutil.copytree(campaign[1], camp)
+    final = camp / "sub2_0_10" / "pooled" / "2" / "factor-graph.json"
+    final.parent.mkdir(parents=True)
+    shutil.copy(camp / "sub2_0_10" / "factor-graph.json", final)
+    doc = json.loads((camp / "campaign.json").read_text())
+    entry = next(e for e in doc["experiments"] if e["name"] == "sub2_0_10")
+    entry["results"]["factor-graph"]["file"] = "sub2_0_10/pooled/2/factor-graph.json"
+    (camp / "campaign.json").write_text(json.dumps(doc))
+    src, out = campaign[0] / "sub2_0_10.h5", tmp_path / "o.h5"
+    code, _, err = _cli(["apply", camp / "sub2_0_10" / "factor-graph.json", src, "--out", out], capsys)
+    assert code == 2 and "a re-solve wave of its campaign superseded it" in err and str(final) in err
+    code, _, err = _cli(["export", camp / "sub2_0_10" / "factor-graph.json", "--format", "px4", "--out",
+                         tmp_path / "x.params"], capsys)
+    assert code == 2 and "superseded" in err
+    assert _cli(["apply", final, src, "--out", out], capsys)[0] == 0

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from graph_calib import io
-from graph_calib.compensation.apply import read_compensation, verdict_failed
+from graph_calib.compensation.apply import read_compensation, superseded, verdict_failed
 from graph_calib.compensation.calibration import Calibration, triad_errors
 from graph_calib.errors import InputError
 from graph_calib.solvers.joint.solver import JOINT
@@ -125,6 +125,9 @@ def load_source(path, *, solver=None, model=None, force=False):
     if failed and not force:
         raise InputError(f"its verdict failed ({failed}); export it anyway with --force", path=path,
                          dataset="verdict")
+    later = superseded(prov)
+    if later and not force:
+        raise InputError(later, path=path, dataset="campaign")
     source = _source(comp, prov, path, force=force)
     if failed and not source.label.endswith("--force"):
         source = replace(source, label=f"{source.label}, WHOSE VERDICT FAILED ({failed}), exported with --force")
