@@ -265,3 +265,19 @@ def test_the_boundary_check_counts_in_the_campaigns_verdict(consistent, passed):
     doc["stitching"]["factor-graph"]["boundary_check"] = {"checked": False}
     c = next(c for c in campaign_checks(doc, results={})["checks"] if c["check"] == "boundaries")
     assert not c["checked"] and c["passed"] is None
+
+
+@pytest.mark.parametrize("kind", ["estimate", "truth"])
+def test_a_failed_validation_against_the_records_own_calibration_says_so(kind):
+    """Without a truth file the reference is the record's own calibration, whose errors count in the figures: a
+    failure said nothing of it."""
+    doc = _document(validation_passed=False)
+    doc["validation"][0]["reference_kind"] = kind
+    c = next(c for c in campaign_checks(doc, results={"sub1": {}})["checks"] if c["check"].startswith("validation"))
+    assert c["passed"] is False
+    said = "the reference is the record's own factor-graph calibration, no truth" in c["text"]
+    assert said is (kind == "estimate")
+    doc = _document(validation_passed=True)
+    doc["validation"][0]["reference_kind"] = kind
+    c = next(c for c in campaign_checks(doc, results={"sub1": {}})["checks"] if c["check"].startswith("validation"))
+    assert c["passed"] and "own factor-graph calibration" not in c["text"]
