@@ -16,7 +16,6 @@ a suffix that belongs to another format is refused (never JSON under a YAML name
 
 from __future__ import annotations
 
-import json
 import math
 import sys
 from pathlib import Path
@@ -195,7 +194,7 @@ def run(args):
         print(f"  {line}")
     for note in doc.get("notes", ()):
         print(f"  note: {note}")
-    held = _prior_held(source)
+    held = source.prior_held
     if held:
         print(f"  note: {len(held)} element(s) of the result are held by their priors (the record informs little of "
               f"them; their values are the priors'): {', '.join(held[:8])}{', ...' if len(held) > 8 else ''}",
@@ -203,14 +202,3 @@ def run(args):
     print(f"  -> {out} ({fmt})")
     return 0
 
-
-def _prior_held(source):
-    """The elements a result marks prior-dominated (``prior_dominated``), sorted; none for a campaign."""
-    if source.provenance.get("kind") != "result":
-        return []
-    try:
-        doc = json.loads(Path(source.provenance["file"]).read_text(encoding="utf-8"))
-    except (OSError, ValueError, KeyError):
-        return []
-    held = doc.get("prior_dominated") if isinstance(doc, dict) else None
-    return sorted(held) if isinstance(held, dict) else []

@@ -43,6 +43,8 @@ class ExportSource:
     imu_id, label : str
         Identity and a one-line description of where it came from.
     provenance : dict
+    prior_held : tuple of str
+        The elements a result marks held by their priors (``prior_dominated``), sorted; empty for a campaign.
     """
 
     compensation: object
@@ -54,6 +56,7 @@ class ExportSource:
     imu_id: str = ""
     label: str = ""
     provenance: dict = field(default_factory=dict)
+    prior_held: tuple = ()
 
     def errors(self, T_degC, omega_b, f_b):
         """Sensor errors of the full model, ``(e_gyro, e_accel)`` (N, 3), rad/s and m/s^2.
@@ -128,26 +131,25 @@ def load_source(path, *, solver=None, model=None, force=False):
     later = superseded(prov)
     if later and not force:
         raise InputError(later, path=path, dataset="campaign")
-    source = _source(comp, prov, path, force=force)
-    if failed and not source.label.endswith("--force"):
+    path = Path(path)
+    if prov["kind"] == "result" and not isinstance(comp, Calibration):
+        # a joint result (docs/joint-result.md): curves over temperature, exported as its campaign's joint calibration
+        if not (path.parent / "campaign.json").is_file():
+            raise InputError("a joint result exports from its campaign: graph-calib export CAMPAIGN --solver joint "
+                             f"(no campaign.json beside it in {path.parent})", path=path)
+        return load_source(path.parent, solver=JOINT, force=force)
+    source = _source(comp, prov, path)
+    if failed:
         source = replace(source, label=f"{source.label}, WHOSE VERDICT FAILED ({failed}), exported with --force")
     return source
 
 
-def _source(comp, prov, path, *, force):
-    """:func:`load_source`'s source before its label says a failed verdict."""
+def _source(comp, prov, path):
+    """:func:`load_source`'s source of a result, calibration or campaign, before its label says a failed verdict."""
     kind = prov["kind"]
     if kind == "table":
         raise InputError("a compensation table holds values on a grid, not the model: export from the campaign "
                          "folder or the result file it came from", path=path)
-    path = Path(path)
-    if kind == "result" and not isinstance(comp, Calibration):
-        # a joint result (docs/joint-result.md): curves over temperature, exported as its campaign's joint calibration
-        campaign = path.parent / "campaign.json"
-        if not campaign.is_file():
-            raise InputError("a joint result exports from its campaign: graph-calib export CAMPAIGN --solver joint "
-                             f"(no campaign.json beside it in {path.parent})", path=path)
-        return load_source(path.parent, solver=JOINT, force=force)
     if kind in ("result", "calibration"):
         doc = json.loads(path.read_text(encoding="utf-8"))
         rng = tuple(doc.get("temperature_range_degC") or (comp.t_ref_degC, comp.t_ref_degC))
@@ -157,7 +159,8 @@ def _source(comp, prov, path, *, force):
         return ExportSource(compensation=comp, range_degC=(float(rng[0]), float(rng[1])),
                             t_ref_degC=float(comp.t_ref_degC), noise=doc.get("noise"), grade=doc.get("grade"),
                             rate_hz=rate, imu_id=str(doc.get("imu_id", "")),
-                            label=f"{prov.get('solver', 'result')} result of {src or path.name}", provenance=prov)
+                            label=f"{prov.get('solver', 'result')} result of {src or path.name}", provenance=prov,
+                            prior_held=tuple(sorted(doc.get("prior_dominated") or ())))
     # a campaign: its curves' common range, its results' noise
     ranges = [comp.valid_range(n) for n in comp.curve_elements()]
     if not ranges:
