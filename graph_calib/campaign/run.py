@@ -24,7 +24,6 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
 import sys
 import time
@@ -140,18 +139,12 @@ def run_campaign(manifest, out, *, options=CampaignOptions(), on_done=None):
         A bad manifest, a missing experiment or validation file, a bad option.
     """
     t_start = time.perf_counter()
-    made = not Path(out).exists()
-    planned = _read_and_plan(manifest, out, options=options)
     pool = Pool(options)        # one cluster for the first wave, the pooled test's waves and the joint's
-    try:
+    with io.no_empty_folder_if_refused(out):
+        planned = _read_and_plan(manifest, out, options=options)
         check_inputs(planned)       # every input file read and checked before the first experiment starts
         if options.scheduler:
             pool.connect()          # a cluster that cannot be reached is refused before any work too
-    except InputError:
-        if made:                    # a refused campaign leaves no empty output folder
-            with contextlib.suppress(OSError):
-                Path(out).rmdir()
-        raise
     try:
         outcomes, compute_timing = _compute(planned, options=options, on_done=on_done, pool=pool)
         # the joint curves before the pooled waves: a wave that solves an experiment again carries them too

@@ -7,15 +7,12 @@ CasADi/IPOPT on a reduced model, every candidate verified with the full predicti
 
 from __future__ import annotations
 
-import contextlib
 import sys
-from pathlib import Path
 
 import numpy as np
 
 from graph_calib import io
 from graph_calib.constants import RS_TO_DH
-from graph_calib.errors import InputError
 from graph_calib.commands.paths import make_output_folder
 from graph_calib.design.prediction import prediction_result
 from graph_calib.design.program_search import DesignSpec, design, design_document, read_spec
@@ -40,19 +37,13 @@ def run(args):
         baseline = read_program(args.baseline)
     else:
         baseline = scenario_program(simulate("nav-subrange", rng=np.random.default_rng(7)), name="nav-subrange")
-    made = not Path(args.out).exists()
-    out = make_output_folder(args.out)
 
     def progress(msg):
         print(msg, file=sys.stderr, flush=True)
 
-    try:
+    with io.no_empty_folder_if_refused(args.out):
+        out = make_output_folder(args.out)
         result = design(spec, baseline=baseline, progress=progress)
-    except InputError:
-        if made:                      # a refused design leaves no empty output folder
-            with contextlib.suppress(OSError):
-                out.rmdir()
-        raise
     doc = design_document(result, spec)
     best = result.best
     io.atomic_write_text(out / "program.toml", program_text(best.program))

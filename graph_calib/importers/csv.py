@@ -415,8 +415,6 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
 # the command line's csv format
 # ---------------------------------------------------------------------------
 
-#: Names of delimiters on the command line.
-
 
 def parse_columns(text):
     """``"t=0,gx=1,temp:case=7,ax=Acc X"`` -> ``{"t": 0, "gx": 1, "temp:case": 7, "ax": "Acc X"}``."""

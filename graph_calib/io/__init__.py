@@ -26,7 +26,8 @@ io; io.read_experiment(path)``.
 """
 
 from graph_calib.errors import InputError
-from graph_calib.io.atomic import atomic_path, atomic_write_json, atomic_write_text, dumps_json, to_json_builtin
+from graph_calib.io.atomic import (atomic_path, atomic_write_json, atomic_write_text, dumps_json,
+                                   no_empty_folder_if_refused, to_json_builtin)
 from graph_calib.io.experiment_file import (
     EXPERIMENT_FORMAT, EXPERIMENT_VERSION, GRAVITY_RANGE_MPS2, MAX_ANGULAR_RATE_RADPS, MAX_GAP_PERIODS,
     MAX_SPECIFIC_FORCE_MPS2, MEDIAN_SPECIFIC_FORCE_RANGE_G, QUATERNION_NORM_TOL, RATE_TOLERANCE,
@@ -42,6 +43,7 @@ from graph_calib.io.result_file import (
 __all__ = [
     # atomic writing
     "atomic_path", "atomic_write_text", "atomic_write_json", "dumps_json", "to_json_builtin",
+    "no_empty_folder_if_refused",
     # experiment file
     "read_experiment", "write_experiment", "validate_experiment", "EXPERIMENT_FORMAT", "EXPERIMENT_VERSION",
     "GRAVITY_RANGE_MPS2", "MAX_GAP_PERIODS", "RATE_TOLERANCE", "MAX_ANGULAR_RATE_RADPS", "MAX_SPECIFIC_FORCE_MPS2",

@@ -6,6 +6,7 @@ leaves a half-written file: readers see the old file or the complete new one.
 
 * :func:`atomic_path`: a context manager yielding the temporary path;
 * :func:`atomic_write_text`, :func:`atomic_write_json`: text and JSON;
+* :func:`no_empty_folder_if_refused`: a refused command leaves no empty output folder;
 * :func:`dumps_json`, :func:`to_json_builtin`: the JSON text itself (numpy-safe,
   floats that read back exactly).
 """
@@ -54,6 +55,20 @@ def regular_target(path):
         raise InputError("is not a regular file (a device, a pipe or a socket): name a file to write; the file is "
                          "written whole and then renamed into place", path=path)
     return path
+
+
+@contextlib.contextmanager
+def no_empty_folder_if_refused(folder):
+    """Within the block, an :class:`~graph_calib.errors.InputError` removes ``folder`` when the block made it and left
+    it empty: a refused command leaves no output folder behind (the error is raised on)."""
+    made = not Path(folder).exists()
+    try:
+        yield
+    except InputError:
+        if made:
+            with contextlib.suppress(OSError):
+                Path(folder).rmdir()
+        raise
 
 
 @contextlib.contextmanager
