@@ -218,8 +218,11 @@ def check_record(experiment):
                                          f"{n} largest turns between valid /table readings, "
                                          f"{typical * c.RAD_TO_DEG:.3g} deg typical")
         return
-    _check_static_rates(experiment)
-    ratio, n, typical = tilt_ratio(experiment)
+    # at rest: quiet accelerometers, and a mean rate within half the static bound of the first seconds' (a turn about
+    # the vertical at a constant rate leaves the specific force unchanged); the static and tilt rules' rests
+    static = detect_static(experiment, max_rate=0.5 * static_rate_bound()[0])
+    _check_static_rates(experiment, static)
+    ratio, n, typical = tilt_ratio(experiment, static=static)
     if ratio is not None:
         _refuse_ratio(experiment, ratio, f"the gyros turn gravity's direction {ratio:.4g} times as far as the "
                                          f"accelerometers see it turn between rests (median over the {n} largest "
@@ -332,8 +335,10 @@ def turn_ratio(experiment, *, details=False):
     return (r, int(order.size), float(np.median(theta_e[keep][order]))) if details else r
 
 
-def tilts(experiment):
+def tilts(experiment, *, static=None):
     """Between consecutive rests of one segment: gravity's change of direction and the gyros' ratio to it.
+
+    ``static``: the rests, ``[start, stop)`` (P, 2); default those of the static rule (detected here).
 
     Returns
     -------
@@ -344,10 +349,11 @@ def tilts(experiment):
         fewer than two rests.
     """
     empty = np.zeros(0), np.zeros(0)
-    try:
-        static = detect_static(experiment, max_rate=0.5 * static_rate_bound()[0])
-    except (InputError, ValueError):
-        return empty
+    if static is None:
+        try:
+            static = detect_static(experiment, max_rate=0.5 * static_rate_bound()[0])
+        except (InputError, ValueError):
+            return empty
     if static.shape[0] < 2:
         return empty
     dt = experiment.dt
@@ -374,10 +380,10 @@ def tilts(experiment):
         return theta_f, theta_g / theta_f
 
 
-def tilt_ratio(experiment):
+def tilt_ratio(experiment, *, static=None):
     """``(ratio, number of changes, median change in rad)`` of the tilt rule, or ``(None, 0, 0.0)`` without a change
-    of gravity's direction of at least :data:`MIN_TILT_RAD` between two rests."""
-    theta_f, ratio = tilts(experiment)
+    of gravity's direction of at least :data:`MIN_TILT_RAD` between two rests (``static``: as :func:`tilts`)."""
+    theta_f, ratio = tilts(experiment, static=static)
     keep = theta_f >= MIN_TILT_RAD
     if not keep.any():
         return None, 0, 0.0
@@ -391,11 +397,8 @@ def static_rate_bound():
     return STATIC_RATE_FACTOR * float(g.prior_sigma["gyro.bias"]) + c.OMEGA_E, name
 
 
-def _check_static_rates(experiment):
+def _check_static_rates(experiment, static):
     bound, name = static_rate_bound()
-    # at rest: quiet accelerometers, and a mean rate within half the bound of the first seconds' (a turn about
-    # the vertical at a constant rate leaves the specific force unchanged)
-    static = detect_static(experiment, max_rate=0.5 * bound)
     if static.shape[0] == 0:
         return
     dt = experiment.dt
