@@ -123,6 +123,10 @@ class CalibrationModel:
         return CalibrationModel.from_record(self.record,
                                             options=replace(self.options, extra_effects=tuple(extra_effects)))
 
+    def with_options(self, **changes):
+        """The same record with its :class:`ModelOptions` changed as ``changes`` say."""
+        return CalibrationModel.from_record(self.record, options=replace(self.options, **changes))
+
     def _setup(self, record, options):
         self.record = record
         self.options = options

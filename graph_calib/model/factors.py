@@ -33,7 +33,8 @@ Gravity measurement
     where ``S = sum dR_{j-1} u_j`` and ``S1 = sum (t_{j-1} + h_j/2 - t_k) dR_{j-1} u_j``
     are preintegrated once per calibration.  Covariance
     ``q_a^2 / T_k`` per axis plus ``g^2 q_g^2 T_k / 3`` on the horizontal axes
-    (attitude noise inside the interval), plus ``2/3 |l|^2 (s_k^2 + s_{k+1}^2) / T_k^2`` on every axis,
+    (attitude noise inside the interval, the rotation factor's noise too: made independent in the residual list,
+    :mod:`graph_calib.model.gravity_gyro_noise`), plus ``2/3 |l|^2 (s_k^2 + s_{k+1}^2) / T_k^2`` on every axis,
     ``s`` the boundary rates' scatter (:func:`graph_calib.model.local_rates.local_rates`) and ``l`` the lever
     arm at the preintegration's linearisation point.
 

@@ -71,6 +71,14 @@ class ModelOptions:
         ``{kind: factor}``: each measurement kind's (``rotation``, ``gravity``, ``encoder``) covariance
         multiplied by its factor (variance components, :mod:`graph_calib.solvers.variance`); a kind not
         named keeps 1.
+    gravity_gyro_shared : bool
+        A keyframe's rotation factor made independent of its gravity factor, with which it shares the gyros' noise
+        (:mod:`graph_calib.model.gravity_gyro_noise`); False: the two taken as independent, the start a cold solve
+        passes through (:func:`graph_calib.solvers.registry.solve`).
+    heading_axes : bool
+        The static keyframes' gravity factors and the conditioned rotation factors given to the solvers in body axes,
+        which a heading common to every attitude does not turn (:mod:`graph_calib.model.heading_axes`); False: in
+        level axes, as a cold start's first solve takes them (their turn's Jacobian term grows with the residual).
     """
 
     keyframe_s: float = 1.0
@@ -92,3 +100,5 @@ class ModelOptions:
     noise_identified: dict = field(default_factory=dict)
     variance_factors: dict = field(default_factory=dict)
     grade_choice: dict = field(default_factory=dict)
+    gravity_gyro_shared: bool = True
+    heading_axes: bool = True

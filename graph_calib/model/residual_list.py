@@ -7,8 +7,9 @@ from here; a new kind is one entry (its residual function in ``factors`` and a m
 
 The residual list (:func:`residual_list`) gives every kind as the solvers use it: the rotation and encoder
 factors of a keyframe interval share gyro noise, which :mod:`graph_calib.model.shared_gyro_noise` makes
-independent (one linear map of their residuals and Jacobians), so that every component is then independent
-of every other; a rest's rotation and still factors, which tie the same two attitudes, become one process
+independent (one linear map of their residuals and Jacobians), a keyframe's rotation factor without readings
+is made independent of its gravity factor, with which it shares gyro noise too
+(:mod:`graph_calib.model.gravity_gyro_noise`), so that every component is then independent of every other; a rest's rotation and still factors, which tie the same two attitudes, become one process
 factor and one measurement of the rest's first keyframe (:mod:`graph_calib.model.still_fusion`).
 
 Whitening (:func:`whiten`): a factor's rows divided by its one-sigma noise (the model's
@@ -27,6 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from graph_calib.model.factors import encoder_columns
+from graph_calib.model.gravity_gyro_noise import condition_on_gravity
+from graph_calib.model.heading_axes import to_body_axes
 from graph_calib.model.shared_gyro_noise import decorrelate
 from graph_calib.model.still_fusion import fuse_still
 
@@ -151,7 +154,8 @@ def residual_list(model, R, preint, x):
     """``{kind name: Residuals}`` of every factor kind at ``(R, x)``, in :data:`FACTOR_KINDS` order.
 
     The rotation and encoder factors come out with the gyro noise they share made independent
-    (:func:`graph_calib.model.shared_gyro_noise.decorrelate`), so that every whitened component is
+    (:func:`graph_calib.model.shared_gyro_noise.decorrelate`), a rotation factor without readings independent of its
+    keyframe's gravity factor (:func:`graph_calib.model.gravity_gyro_noise.condition_on_gravity`), so that every whitened component is
     independent of every other, and a rest's rotation and still factors as one process factor and one
     measurement of a keyframe (:func:`graph_calib.model.still_fusion.fuse_still`): evaluate the kinds through
     this list, not one by one.
@@ -160,6 +164,19 @@ def residual_list(model, R, preint, x):
     factors["rotation"], factors["encoder"] = decorrelate(
         model.record, preint, model.noise, factors["rotation"], factors["encoder"],
         columns=encoder_columns(model.layout, preint), overwrite_input=True)
+    if model.options.gravity_gyro_shared:
+        factors["rotation"] = condition_on_gravity(model.record, preint, x, R, factors["rotation"], factors["gravity"],
+                                                   variance_factors=model.noise.variance_factors,
+                                                   body_axes=model.options.heading_axes)
+    # the gravity factors in their keyframe's body axes, which a common heading does not turn (its start attitude
+    # R_k moves as R_k Exp(delta_k)): graph_calib.model.heading_axes
+    if model.options.heading_axes:
+        grav = factors["gravity"]
+        rows = np.arange(grav.key.size)
+        if model.options.moving_sigma is not None:          # the moving keyframes' large residuals stay level
+            rows = rows[np.asarray(model.record.static_key, dtype=bool)[grav.key]]
+        factors["gravity"] = to_body_axes(grav, R[grav.key[rows]], rows=rows,
+                                          C_jacobians=(("H_R", np.broadcast_to(np.eye(3), (rows.size, 3, 3))),))
     factors["rotation"], factors["still"] = fuse_still(factors["rotation"], factors["still"])
     return factors
 

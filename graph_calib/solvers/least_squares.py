@@ -320,6 +320,9 @@ class LeastSquares:
         systems = [self.linearise(c, c.preint, c.R, theta) for c in self.exps]
         cost = self.prior(theta).cost + sum(s.cost for s in systems)
         history, lam, it, converged = [cost], o.lambda_initial, 0, False
+        # a trial that raises the cost by no more than this is a step at convergence: rounding, or within the
+        # tolerance a solve that only starts another is given (graph_calib.solvers.registry.loose)
+        flat = max(ROUNDING_REL, o.rel_tol)
         mixing = _Mixing(1.0 / self.prior_sigma**2)
         accelerate = False
         heading_pending = any(c.search_heading for c in self.exps)
@@ -348,7 +351,7 @@ class LeastSquares:
                         mixing.reset()
                 new_cost, judged = self.cost_at(*trial, cost)
                 # at convergence a step may change the cost only by rounding: stop damping then
-                if new_cost <= cost or lam > DAMPING_MAX or new_cost - cost <= ROUNDING_REL * cost:
+                if new_cost <= cost or lam > DAMPING_MAX or new_cost - cost <= flat * cost:
                     break
                 self.restore(held)
                 lam *= DAMPING_FACTOR
@@ -399,7 +402,7 @@ class LeastSquares:
                              and np.all(np.abs(dtheta) < o.step_tol_sigma * self.prior_sigma)):
                 converged = True
                 break
-            if not accepted and (lam > DAMPING_MAX or new_cost - cost <= ROUNDING_REL * cost):
+            if not accepted and (lam > DAMPING_MAX or new_cost - cost <= flat * cost):
                 converged = True
                 break
             accelerate = accepted and rel < ACCELERATE_BELOW_REL

@@ -136,6 +136,39 @@ def parse_choice(value, *, campaign=False):
     return comparison_order(per), tuple(whole)
 
 
+#: A solve whose solution only starts another (a cold start's first solve, :func:`_solve_cold`; the variance
+#: components' solves before the final one) stops once a factor-graph iteration lowers the cost by less than this
+#: fraction ...
+LOOSE_REL_TOL = 1e-4
+#: ... or a filter pass moves every calibration element by less than this fraction of its sigma.
+LOOSE_X_TOL = 0.1
+
+
+def loose(options):
+    """``options`` with the tolerances of a solve whose solution only starts another (:data:`LOOSE_REL_TOL`)."""
+    return replace(options, graph=replace(options.graph, rel_tol=max(options.graph.rel_tol, LOOSE_REL_TOL)),
+                   filter=replace(options.filter, x_tol=max(options.filter.x_tol, LOOSE_X_TOL),
+                                  attitude_tol=max(options.filter.attitude_tol, 10 * LOOSE_X_TOL)))
+
+
+def _solve_cold(solver, problem, *, options, progress):
+    """``solver`` on ``problem`` from its own start.
+
+    A model whose keyframe gravity and rotation factors share the gyros' noise (``ModelOptions.gravity_gyro_shared``)
+    is solved first with the two independent, then from that solution: far from the solution the conditioned
+    rotation factor carries the gravity factor's misfit at the gyro's small sigma (:mod:`graph_calib.model.
+    gravity_gyro_noise`), and from a dead-reckoned start the factor graph crept for hundreds of iterations and the
+    filter stopped in another minimum (the Xsens hold-out record); the two models' solutions lie within a fraction
+    of a sigma of each other.
+    """
+    model = getattr(problem, "model", None)
+    if model is None or not model.options.gravity_gyro_shared:
+        return solver.solve(problem, options=options, progress=progress, initial=None)
+    first = solver.solve(replace(problem, model=model.with_options(gravity_gyro_shared=False, heading_axes=False)),
+                         options=loose(options), progress=progress, initial=None)
+    return solver.solve(problem, options=options, progress=progress, initial=(first.attitudes, first.x))
+
+
 def solve(name, problem, *, options, progress=None, initial=None):
     """Calibrate ``problem`` with the solver ``name``.
 
@@ -148,7 +181,7 @@ def solve(name, problem, *, options, progress=None, initial=None):
     progress : callable, optional
         Called with a :class:`graph_calib.solvers.interface.ProgressEvent` after each iteration.
     initial : tuple (R, x), optional
-        Starting keyframe attitudes (K+1, 3, 3) and calibration (P,).
+        Starting keyframe attitudes (K+1, 3, 3) and calibration (P,); None: the solver's own start (:func:`_solve_cold`).
 
     Returns
     -------
@@ -157,7 +190,11 @@ def solve(name, problem, *, options, progress=None, initial=None):
         the record cannot resolve (``problem.model.resolved_covariance``: a heading drift that looks
         like a g-sensitivity on a hand-held consumer record; docs/model.md), one place for every solver.
     """
-    output = get_solver(name).solve(problem, options=options, progress=progress, initial=initial)
+    solver = get_solver(name)
+    if initial is None:
+        output = _solve_cold(solver, problem, options=options, progress=progress)
+    else:
+        output = solver.solve(problem, options=options, progress=progress, initial=initial)
     model = getattr(problem, "model", None)
     if model is None or output.layout.names != model.layout.names:
         return output

@@ -49,7 +49,7 @@ import numpy as np
 from graph_calib.model import CalibrationModel
 from graph_calib.model.redundancy import FLOORED, MOVING, fit_statistics, static_gravity
 from graph_calib.records.problem import MOVING_ESTIMATED
-from graph_calib.solvers.registry import PRIMARY_SOLVER, solve
+from graph_calib.solvers.registry import PRIMARY_SOLVER, loose, solve
 
 #: The kinds that get a factor.
 KINDS = ("rotation", "gravity", "encoder")
@@ -181,7 +181,7 @@ def estimate_variance_components(problem, *, options, solver=PRIMARY_SOLVER, fix
         max_solves += MOVING_EXTRA_SOLVES
     n = 0
     for n in range(1, max_solves + 1):
-        out = solve(solver, problem, options=options, progress=progress, initial=initial)
+        out = solve(solver, problem, options=loose(options), progress=progress, initial=initial)
         initial = (out.attitudes, out.x)
         st = fit_statistics(problem.model, out.attitudes, out.x)
         # the moving rows have a sigma of their own (a guess, or estimated as MOVING): the gravity kind's factor is

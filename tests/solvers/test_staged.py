@@ -80,7 +80,10 @@ def test_verdict_says_the_gyro_model_does_not_fit():
 @pytest.mark.slow
 def test_gyro_misfit_no_longer_spoils_the_accelerometer_held_out():
     """Seed 2 of scripts/triad_misfit_holdout.py: the product's held-out |f| spread was 10 times the gravity-only
-    fit's; staged, it is within 1.2 times, and the fold whose gyro misfit pulled the accelerometer says so."""
+    fit's; it is within 1.2 times, and the fold whose gyro misfit pulled the accelerometer says so.  With a keyframe's
+    gravity and rotation factors sharing the gyro's noise (graph_calib.model.gravity_gyro_noise) the rotation kind
+    takes the misfit (variance factor 561, gravity 0.90) and the accelerometer is a gravity-only fit's without the
+    stage; where the accelerometer is pulled the stage pins it (the tests above)."""
     exp = simulate("consumer-handheld", rng=np.random.default_rng(2), n_poses=30, effects=("gyro.g_sensitivity",),
                    effect_scale=1e4).plans[0].make().experiment
     product = CalibrationOptions(model=ModelOptions(grade="consumer"))
@@ -97,16 +100,15 @@ def test_gyro_misfit_no_longer_spoils_the_accelerometer_held_out():
     rests = record_rests(exp)
     train = training_record(exp, make_folds(exp, folds=2, by="pairs", rests=rests)[0], rests=rests)
     run = calibrate(train, options=product)
-    staged = run.results["factor-graph"].extra["staged"]
-    assert staged["staged"] and staged["statistic"] > staged["threshold"]
-    assert run.comparison["summary"]["agree"]
-    assert "THE GYRO MODEL DOES NOT FIT" in run.verdict.text() and not run.verdict.passed
-    # the accelerometer's values and sigmas are a gravity-only fit's, not the pin's sigmas
+    assert not run.verdict.passed and "gyro.g_sensitivity" in run.verdict.text()
     r = run.results["factor-graph"]
+    assert r.residuals["kinds"]["rotation"]["variance_factor"] > 100
+    assert 0.8 < r.residuals["kinds"]["gravity"]["variance_factor"] < 1.25
+    # the accelerometer's values and sigmas are a gravity-only fit's
     go = calibrate(train, options=gravity_only, solvers=("factor-graph",)).results["factor-graph"]
-    for name in staged["pinned"]:
-        assert abs(r.values[name] - go.values[name]) < 0.1 * go.sigmas[name], name
-        assert r.sigmas[name] == pytest.approx(go.sigmas[name], rel=0.1), name
+    for name in (n for n in go.values if n.startswith("accel.") and n not in go.extra.get("prior_dominated", {})):
+        assert abs(r.values[name] - go.values[name]) < 0.5 * go.sigmas[name], name
+        assert r.sigmas[name] == pytest.approx(go.sigmas[name], rel=0.25), name
 
 
 def test_screen_gives_the_solved_statistic_to_first_order(monkeypatch):
