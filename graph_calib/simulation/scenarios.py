@@ -302,7 +302,7 @@ def effect_scenario(effect, *, rng, hours=0.3, noise=True, errors=True, rate_hz=
 def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                       n_poses=30, initial_static_s=20.0, hold_s=(3.0, 10.0), turn_s=(1.0, 2.5), translation_m=0.05,
                       latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2, cut=False, pivot_m=0.0,
-                      hand_accel_mps2=0.0, tag="", noise_factor=1.0):
+                      hand_accel_mps2=0.0, tag="", noise_factor=1.0, gyro_noise_factor=1.0):
     """A consumer MEMS IMU turned by hand, no table: 20 s static, then 30 poses of 3-10 s.
 
     Between poses the hand turns the unit smoothly (1-2.5 s, to a random
@@ -314,9 +314,13 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
     the session before the cut.  A hand holds no pivot still: ``hand_accel_mps2``
     (rms of the acceleration, m/s^2, at rest and in motion) sways the rotation centre,
     and ``pivot_m`` puts the sensor that far from it (m, a random body direction), so
-    that every turn also accelerates the sensor.
+    that every turn also accelerates the sensor.  ``noise_factor`` multiplies both densities of the grade,
+    ``gyro_noise_factor`` the gyro's further (a unit whose gyro is noisy against its accelerometer, as the Xsens
+    MTi's: 6.6 gives its 5.7e-4 rad/sqrt(s) beside 2e-3 m/s/sqrt(s)).
     """
     _check_common(hours, rate_hz, effect_scale, effects)
+    if not (np.isfinite(gyro_noise_factor) and gyro_noise_factor >= 0):
+        raise InputError(f"gyro_noise_factor must be a non-negative number, got {gyro_noise_factor!r}")
     if hours is None and not (isinstance(n_poses, (int, np.integer)) and n_poses >= 1):
         raise InputError(f"n_poses must be a positive integer, got {n_poses!r}")
     exclude = ("mount", "lever_arm", "time_lag.table")
@@ -334,6 +338,7 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
         gravity_mps2=float(gravity_mps2), noise=noise, description=desc, tag=tag, cut=bool(cut),
         pivot_m=float(pivot_m), hand_accel_mps2=float(hand_accel_mps2),
         noise_factor=_noise_keywords(noise_factor=noise_factor)["noise_factor"],
+        gyro_noise_factor=float(gyro_noise_factor),
     )
     plan = ExperimentPlan(file_name="handheld.h5", make=make, summary="hand-held poses, no table"
                           + (", every second turn cut out" if cut else ""))
