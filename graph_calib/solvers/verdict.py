@@ -59,6 +59,9 @@ RESIDUAL_CHI2_LOW = 0.25
 RESIDUAL_ALPHA = 1e-3
 #: A kind's variance factor beyond this (or below its inverse) fails the verdict.
 VARIANCE_FACTOR_LIMIT = 4.0
+#: A kind's variance factor within the limit but outside this band gets a note naming the kind and what the factor says
+#: (issue #21's bar for the measured sessions: within it, or the verdict says which kind does not fit and why).
+NOTE_FACTOR_BAND = (0.8, 1.25)
 #: The words of a staged solve's problem (:mod:`graph_calib.solvers.staged`), which the verdict line repeats.
 STAGED_WORDS = "the gyro model does not fit"
 #: The share of a result's elements held by their priors from which the verdict says so.
@@ -73,6 +76,8 @@ STATIC_PART = "static"
 JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder", "still": "gyro"}
 #: What a kind's residuals measure, where its name does not say (the verdict's words).
 KIND_WORDS = {"still": "still (the rests' gyro integrals against the Earth's turn)"}
+#: A sensor's name in the verdict's words.
+SENSOR_WORDS = {"accel": "accelerometer", "encoder": "table-reading"}
 #: What beside a lacking effect makes a kind's residuals too large, where the sensor's noise is not all of it.
 KIND_CAUSES = {"still": "the unit turned while it rested (declare the rests still only where it sits on a surface), "
                         "or the gyro noise is larger than assumed"}
@@ -163,6 +168,8 @@ def judge_kinds(result):
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} < 1/{VARIANCE_FACTOR_LIMIT:g} on "
                                 f"the {source.get(sensor, 'assumed')} {sensor} noise: the "
                                 f"{_overstated(kind, sensor, noise)} is overstated")
+            elif not NOTE_FACTOR_BAND[0] <= vf <= NOTE_FACTOR_BAND[1]:
+                notes.append(_factor_note(kind, sensor, vf, source.get(sensor, "assumed")))
     for kind in ((result.residuals or {}).get("variance_iteration") or {}).get("held") or ():
         if kind in figures:
             f = figures[kind]
@@ -179,6 +186,21 @@ def judge_kinds(result):
     if staged:
         problems.append(staged)
     return figures, problems, notes
+
+
+def _factor_note(kind, sensor, factor, source):
+    """The note of a kind whose variance factor lies within the limit but outside :data:`NOTE_FACTOR_BAND`."""
+    what = KIND_WORDS.get(kind, kind)
+    sensor = SENSOR_WORDS.get(sensor, sensor)
+    if factor > 1.0:
+        cause = (f"a small effect the model lacks (below the structure tests' thresholds), or {sensor} noise beyond "
+                 "white over a keyframe (a bias instability)")
+    else:
+        cause = (f"the {sensor} noise over a keyframe is less than the rests' Allan fit gives (noise that is not white "
+                 "between the samples and the keyframes, or a sway or vibration at rest)")
+    return (f"{kind}: variance factor {factor:.2g}: the {what} residuals scatter {factor:.2g} times, in variance, what "
+            f"the {source} {sensor} noise explains: {cause}; the sigmas it governs are scaled by "
+            f"{factor ** 0.5:.2g}, as the residuals ask")
 
 
 def _unsettled_text(iteration):
@@ -408,4 +430,4 @@ def _constant_temperature(result):
 
 
 __all__ = ["Verdict", "verdict_of", "judge_kinds", "judged_figures", "kind_limits", "fit_chi2_per_dof", "fit_chi2_per_redundancy",
-           "RESIDUAL_CHI2_LIMIT", "RESIDUAL_CHI2_LOW", "RESIDUAL_ALPHA", "VARIANCE_FACTOR_LIMIT", "JUDGED_KINDS"]
+           "RESIDUAL_CHI2_LIMIT", "RESIDUAL_CHI2_LOW", "RESIDUAL_ALPHA", "VARIANCE_FACTOR_LIMIT", "NOTE_FACTOR_BAND", "JUDGED_KINDS"]
