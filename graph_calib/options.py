@@ -36,6 +36,9 @@ class GraphOptions:
         uses ``robust_k * sqrt(m)``, GTSAM applying the loss to a factor's whole residual.
     repreintegrate_tol : float
         Largest first-order keyframe rotation change (rad) before re-preintegration.
+    covariance : bool
+        False: a solve whose solution only starts another (:func:`graph_calib.solvers.registry.loose`): no
+        covariance (NaN), and the residuals those of the last linearisation.
     """
 
     max_iterations: int = 500
@@ -45,6 +48,7 @@ class GraphOptions:
     robust: str | None = None
     robust_k: float = 3.0
     repreintegrate_tol: float = REPREINTEGRATE_TOL
+    covariance: bool = True
 
 
 @dataclass(frozen=True)

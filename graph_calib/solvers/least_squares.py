@@ -408,8 +408,13 @@ class LeastSquares:
             accelerate = accepted and rel < ACCELERATE_BELOW_REL
             if not accelerate:
                 mixing.reset()
-        systems = None
-        cov, whitened = self.covariance(theta)
+        if o.covariance:
+            systems = None
+            cov, whitened = self.covariance(theta)
+        else:
+            # a solve that only starts another: the last accepted linearisation's residuals, no covariance
+            whitened = [s.whitened for s in systems]
+            cov = np.full((theta.size, theta.size), np.nan)
         return Solution(theta=theta, covariance=cov, whitened=whitened, iterations=it, converged=converged,
                         cost_history=history)
 

@@ -20,6 +20,8 @@ from dataclasses import replace
 from functools import lru_cache
 from importlib.metadata import entry_points
 
+import numpy as np
+
 #: The entry-point group solvers register in.
 ENTRY_POINT_GROUP = "graph_calib.solvers"
 
@@ -146,7 +148,8 @@ LOOSE_X_TOL = 0.1
 
 def loose(options):
     """``options`` with the tolerances of a solve whose solution only starts another (:data:`LOOSE_REL_TOL`)."""
-    return replace(options, graph=replace(options.graph, rel_tol=max(options.graph.rel_tol, LOOSE_REL_TOL)),
+    return replace(options, graph=replace(options.graph, rel_tol=max(options.graph.rel_tol, LOOSE_REL_TOL),
+                                          covariance=False),
                    filter=replace(options.filter, x_tol=max(options.filter.x_tol, LOOSE_X_TOL),
                                   attitude_tol=max(options.filter.attitude_tol, 10 * LOOSE_X_TOL)))
 
@@ -196,7 +199,7 @@ def solve(name, problem, *, options, progress=None, initial=None):
     else:
         output = solver.solve(problem, options=options, progress=progress, initial=initial)
     model = getattr(problem, "model", None)
-    if model is None or output.layout.names != model.layout.names:
+    if model is None or output.layout.names != model.layout.names or not np.all(np.isfinite(output.covariance)):
         return output
     covariance = model.resolved_covariance(output.x, output.covariance)
     return output if covariance is output.covariance else replace(output, covariance=covariance)
