@@ -25,7 +25,7 @@ LAYERS = {
     "graph_calib.solvers.registry": 2,        # solver names and the dispatch: imports nothing of the package
     "graph_calib.io": 3, "graph_calib.navigation.strapdown": 3, "graph_calib.navigation.static_detection": 3, "graph_calib.navigation.alignment": 3,
     "graph_calib.model": 4, "graph_calib.records.plausibility": 4, "graph_calib.noise": 4,
-    "graph_calib.options": 5, "graph_calib.records.problem": 5, "graph_calib.compensation.calibration": 5, "graph_calib.records.grade_choice": 5,
+    "graph_calib.options": 5, "graph_calib.records.problem": 5, "graph_calib.records.saturation": 5, "graph_calib.compensation.calibration": 5, "graph_calib.records.grade_choice": 5,
     "graph_calib.solvers": 6,
     "graph_calib.solvers.factor_graph": 7, "graph_calib.solvers.joint": 7, "kf_reference": 7,
     "graph_calib.calibrate": 8, "graph_calib.diagnosis": 8, "graph_calib.stitching": 8, "graph_calib.evaluation": 8,

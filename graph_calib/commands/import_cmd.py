@@ -19,6 +19,7 @@ from graph_calib.commands.paths import output_file
 from graph_calib.errors import InputError
 from graph_calib.importers.registry import formats
 from graph_calib.io import write_experiment
+from graph_calib.records.saturation import cut_at_saturation, saturated_rates, saturation_note
 
 
 def _format_options():
@@ -48,6 +49,10 @@ def add_arguments(parser):
     site.add_argument("--temperature", type=float, metavar="DEGC",
                       help="assumed constant temperature, degC, for logs without one (default 20 for xsens and "
                            "mpu6050)")
+    site.add_argument("--gyro-range-dps", type=float, metavar="DPS",
+                      help="the gyros' full-scale range, deg/s: the record is cut (/imu/segment) after each run of "
+                           "samples at it that has a rest after it, so that no rotation factor spans the angle a "
+                           "saturated turn lost (mpu6050 finds its runs from the counts without it)")
     site.add_argument("--imu-id", help="IMU model and serial number")
     site.add_argument("--description", help="free text (default: provenance and conversion)")
     own = parser.add_argument_group("options of some formats (each says which)")
@@ -116,12 +121,22 @@ def run(args):
     for p in args.inputs:            # before what the format asks of its options (a latitude): the first to fix
         if not Path(p).exists():
             raise InputError("file not found", path=p)
+    if args.gyro_range_dps is not None and not (math.isfinite(args.gyro_range_dps) and args.gyro_range_dps > 0.0):
+        raise InputError(f"must be a positive number of deg/s, got {args.gyro_range_dps!r}", dataset="--gyro-range-dps")
+    if args.gyro_range_dps is not None:
+        options["keep_saturated"] = True      # the declared range, not a format's own limits, says where to cut
     experiment = fmt.read([Path(p) for p in args.inputs], options)
+    if args.gyro_range_dps is not None:
+        experiment = cut_at_saturation(experiment, saturated_rates(
+            experiment, gyro_range_rps=args.gyro_range_dps * c.DEG_TO_RAD)).experiment
     write_experiment(experiment, out)
     print(f"graph-calib import {args.format}: " + ", ".join(str(p) for p in args.inputs))
     for line in summary(experiment):
         print("  " + line)
     for line in (fmt.notes(experiment, options) if fmt.notes else ()):
         print(f"note: {line}")
+    note = saturation_note(experiment.description)
+    if note:
+        print(f"note: {note}")
     print(f"wrote {out}")
     return 0

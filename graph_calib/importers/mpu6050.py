@@ -13,6 +13,7 @@ import numpy as np
 from graph_calib import constants as c
 from graph_calib.errors import InputError
 from graph_calib.importers.registry import ImportFormat, Option
+from graph_calib.records.saturation import cut_at_saturation
 from graph_calib.importers.common import (
     ASSUMED_TEMPERATURE_NAME,
     build_experiment,
@@ -66,7 +67,8 @@ def _read_mpu6050_header(path):
 def import_mpu6050(csv_path, *, latitude_rad=MPU6050_LATITUDE_RAD, gravity_mps2=MPU6050_GRAVITY_MPS2,
                    temperature_degC=20.0, accel_counts_per_g=MPU6050_ACCEL_COUNTS_PER_G,
                    gyro_counts_per_dps=MPU6050_GYRO_COUNTS_PER_DPS,
-                   imu_id="InvenSense MPU-6050 (UNCuyo ImuCalibration sample data)", description=None):
+                   imu_id="InvenSense MPU-6050 (UNCuyo ImuCalibration sample data)", description=None,
+                   cut_saturated=True):
     """Import an MPU-6050 log of UNCuyo's ImuCalibration (CSV of raw int16 counts).
 
     Layout: four header lines (``Fs,100``, logging type, initialisation time,
@@ -92,11 +94,15 @@ def import_mpu6050(csv_path, *, latitude_rad=MPU6050_LATITUDE_RAD, gravity_mps2=
     imu_id : str
     description : str or None
         Default: provenance, header values, conversion, licence notice.
+    cut_saturated : bool
+        Cut the record after each run of samples at which a gyro count sits at the int16 limits
+        (:func:`graph_calib.records.saturation.cut_at_saturation`; the sentence it adds to the description
+        says where). False: keep the record whole, the angle the saturated turns lost included.
 
     Returns
     -------
     Experiment
-        No table, one temperature channel.
+        No table, one temperature channel; segments where the gyros saturated (``cut_saturated``).
 
     Raises
     ------
@@ -131,10 +137,14 @@ def import_mpu6050(csv_path, *, latitude_rad=MPU6050_LATITUDE_RAD, gravity_mps2=
             f"{MPU6050_GRAVITY_MPS2} m/s^2). {MPU6050_NOTICE}"
         )
     dt = 1.0 / fs
-    return build_experiment(t=t, dtheta=omega_b * dt, dv=f_b * dt, temperature=temperature, names=names,
-                  temperature_map=np.zeros(6), rate_hz=fs, latitude_rad=latitude_rad,
-                  gravity_mps2=gravity_mps2, imu_id=imu_id, description=description, source=path,
-                  skip_lines=5)
+    exp = build_experiment(t=t, dtheta=omega_b * dt, dv=f_b * dt, temperature=temperature, names=names,
+                           temperature_map=np.zeros(6), rate_hz=fs, latitude_rad=latitude_rad,
+                           gravity_mps2=gravity_mps2, imu_id=imu_id, description=description, source=path,
+                           skip_lines=5)
+    if not cut_saturated:
+        return exp
+    gyro = data[:, 3:]
+    return cut_at_saturation(exp, np.any((gyro <= -32768) | (gyro >= 32767), axis=1)).experiment
 
 
 def mpu6050_reference_calibration(params_path):
@@ -177,7 +187,8 @@ def _read(inputs, options):
     keys = {"latitude_rad": "latitude_rad", "gravity_mps2": "gravity_mps2", "temperature_degC": "temperature_degC",
             "accel_scale": "accel_counts_per_g", "gyro_scale": "gyro_counts_per_dps", "imu_id": "imu_id",
             "description": "description"}
-    return import_mpu6050(inputs[0], **{k: options[o] for o, k in keys.items() if o in options})
+    return import_mpu6050(inputs[0], **{k: options[o] for o, k in keys.items() if o in options},
+                          cut_saturated=not options.get("keep_saturated", False))
 
 
 FORMAT = ImportFormat(
@@ -188,6 +199,9 @@ FORMAT = ImportFormat(
     options=(
         Option("--accel-scale", "nominal accelerometer scale, counts per g (16384)", {"type": float, "metavar": "COUNTS"}),
         Option("--gyro-scale", "nominal gyro scale, counts per deg/s (131)", {"type": float, "metavar": "COUNTS"}),
+        Option("--keep-saturated", "do not cut the record after the runs of samples at which a gyro count sits at "
+               "the int16 limits (by default each is followed by a segment boundary, so that no rotation factor "
+               "spans the angle the saturated turn lost)", {"action": "store_true"}),
     ),
 )
 

@@ -148,6 +148,27 @@ def segment_thresholds(experiment):
     return [(a, b, p, v) for (a, b), p, v in zip(bounds, pieces, th)]
 
 
+def segment_rests(experiment):
+    """The static intervals the calibration takes, segment by segment (:func:`segment_thresholds`).
+
+    Returns
+    -------
+    list of tuple
+        ``(start, stop, piece, long, short)`` per segment: its samples ``start:stop``, the segment as an
+        experiment, and, in the piece's own sample indices, ``detect_static``'s intervals with its threshold and
+        the short rests the short pass adds (:func:`segment_static_parts`; a segment without a threshold:
+        ``detect_static``'s defaults, no short rests), each shape (P, 2).
+    """
+    out = []
+    for a, b, piece, th in segment_thresholds(experiment):
+        if th is None:
+            long, short = np.asarray(detect_static(piece), dtype=np.int64).reshape(-1, 2), np.zeros((0, 2), np.int64)
+        else:
+            long, short = segment_static_parts(piece, threshold=th)
+        out.append((a, b, piece, long, short))
+    return out
+
+
 def white_windows(x, *, rate_hz, window_s=WINDOW_S, ratio=WHITE_RATIO):
     """Sample centres whose window scatter of ``x`` (N, 3) is at most ``ratio`` times the white level (module doc)."""
     h = max(1, int(round(window_s * float(rate_hz) / 2.0)))
@@ -207,5 +228,5 @@ def find_rests(experiment, *, min_duration_s=2.0, use_gyro=True):
     return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
 
 
-__all__ = ["find_rests", "segment_static", "segment_static_parts", "short_window_s", "SHORT_REST_WINDOWS", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
+__all__ = ["find_rests", "segment_rests", "segment_static", "segment_static_parts", "short_window_s", "SHORT_REST_WINDOWS", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
            "START_LOUDER"]

@@ -14,14 +14,13 @@ from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
 from graph_calib.model.options import SWAY_SEEN_KEY
 from graph_calib.noise import find_rests, identify_noise, table_noise
 from graph_calib.noise.identify import ENCODER_NOISE_FLOOR, MIN_DWELL_DOF, TERMS
-from graph_calib.noise.rests import segment_static_parts, segment_thresholds
+from graph_calib.noise.rests import segment_rests
 from graph_calib.options import CalibrationOptions
 from graph_calib.sensors.params import DEFAULT_GRADE, grade
 from graph_calib.navigation.alignment import Alignment, alignment
 from graph_calib.errors import InputError
 from graph_calib.records.plausibility import check_record
 from graph_calib.records.grade_choice import MIN_STATIC_S, choose_grade
-from graph_calib.navigation.static_detection import detect_static
 
 
 @dataclass(frozen=True)
@@ -104,13 +103,12 @@ def build_problem(experiment, *, options=CalibrationOptions(), check=True):
         check_t_ref(experiment, options.t_ref_degC)
     model_options = options.model
     # each segment its own threshold: its first seconds' unless they are loud (graph_calib.noise.rests)
-    segs = segment_thresholds(experiment)
-    bounds = [(a, b) for a, b, _, _ in segs]
-    pieces = [p for _, _, p, _ in segs]
     # the rests as a hand makes them: detect_static's, and the short rests (0.5-2 s) between them, each of which
     # then gets a static keyframe of its own (PreparedRecord)
-    parts = [segment_static_parts(p, threshold=th) if th is not None else (detect_static(p), np.zeros((0, 2), int))
-             for _, _, p, th in segs]
+    segs = segment_rests(experiment)
+    bounds = [(a, b) for a, b, _, _, _ in segs]
+    pieces = [p for _, _, p, _, _ in segs]
+    parts = [(long, short) for _, _, _, long, short in segs]
     static_per = [np.concatenate(lp) for lp in parts]
     static_per = [st[np.argsort(st[:, 0], kind="stable")] for st in static_per]
     static = np.concatenate([np.asarray(st, dtype=np.int64).reshape(-1, 2) + a

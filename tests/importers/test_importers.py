@@ -74,7 +74,21 @@ def test_mpu6050_import(real_data, name, rows):
     assert np.mean(_specific_force(exp)) == pytest.approx(exp.gravity_mps2, rel=0.10)
     assert exp.latitude_rad == pytest.approx(math.radians(-32.89))
     assert "MIT licence" in exp.description
-    assert exp.segment is None
+    # only the calibration session's fast turns reach the gyros' int16 limits (tests below)
+    assert (exp.segment is None) == (name != "example_data_calibration.csv")
+
+
+def test_mpu6050_import_cuts_the_record_after_each_saturated_run(real_data):
+    """18 samples at the int16 limits in three runs (x at +-250.1 deg/s twice, z once): a boundary on the first
+    sample after each, every piece with a rest of its own; ``cut_saturated=False`` keeps the record whole."""
+    path = real_data / "mpu6050_uncuyo" / "example_data_calibration.csv"
+    exp = importers.import_mpu6050(path)
+    assert exp.segment_bounds() == [(0, 3912), (3912, 6672), (6672, 8772), (8772, 10245)]
+    assert "The gyros are saturated in 18 samples (3 episodes, first samples 3910, 6662, 8766): the record is cut after " \
+        "3 of them" in exp.description
+    whole = importers.import_mpu6050(path, cut_saturated=False)
+    assert whole.segment is None and "saturated in 18" not in whole.description
+    np.testing.assert_array_equal(whole.dtheta, exp.dtheta)
 
 
 def test_mpu6050_calibration_session_duration_and_gravity(real_data):
@@ -517,10 +531,31 @@ def test_cli_import_mpu6050(real_data, tmp_path, capsys):
                "--out", str(out), "--latitude-deg", "-32.9", "--temperature", "22.5"])
     assert rc == 0
     text = capsys.readouterr().out
-    assert "10245 samples, 102.45 s at 100 Hz" in text and "mean |f| = 9.41" in text and f"wrote {out}" in text
+    assert "10245 samples in 4 segments, 102.45 s at 100 Hz" in text and "mean |f| = 9.41" in text
+    assert "note: The gyros are saturated in 18 samples (3 episodes" in text and f"wrote {out}" in text
     exp = read_experiment(out)
     assert exp.n_samples == 10245 and exp.latitude_rad == pytest.approx(math.radians(-32.9))
     assert np.all(exp.temperature == 22.5)
+    assert exp.n_segments == 4 and "saturated in 18 samples" in exp.description
+
+
+def test_cli_import_keep_saturated_and_a_declared_gyro_range(real_data, tmp_path, capsys):
+    path = str(real_data / "mpu6050_uncuyo" / "example_data_calibration.csv")
+    assert main(["import", "mpu6050", path, "--out", str(tmp_path / "whole.h5"), "--keep-saturated"]) == 0
+    assert "10245 samples, 102.45 s" in capsys.readouterr().out
+    assert read_experiment(tmp_path / "whole.h5").segment is None
+    # a declared range replaces the counts' limits: at 200 deg/s one more fast turn reaches it
+    assert main(["import", "mpu6050", path, "--out", str(tmp_path / "r200.h5"), "--gyro-range-dps", "200"]) == 0
+    assert "saturated in 82 samples (4 episodes" in capsys.readouterr().out
+    assert read_experiment(tmp_path / "r200.h5").n_segments == 4
+
+
+@pytest.mark.parametrize("value", ["0", "-250", "nan"])
+def test_cli_import_refuses_a_gyro_range_that_is_not_positive(real_data, tmp_path, capsys, value):
+    path = str(real_data / "mpu6050_uncuyo" / "imu_90_x_rot.csv")
+    assert main(["import", "mpu6050", path, "--out", str(tmp_path / "x.h5"), f"--gyro-range-dps={value}"]) == 2
+    assert "--gyro-range-dps: must be a positive number of deg/s" in capsys.readouterr().err
+    assert not (tmp_path / "x.h5").exists()
 
 
 def test_cli_import_xsens(real_data, tmp_path, capsys):
