@@ -52,7 +52,7 @@ from graph_calib.calibrate import calibrate, calibrate_with_effects  # noqa: E40
 from graph_calib.sensors import effects  # noqa: E402
 from graph_calib.options import CalibrationOptions  # noqa: E402
 from graph_calib.diagnosis import DiagnosisOptions, diagnose, residual_rms  # noqa: E402
-from graph_calib.importers import import_mpu6050, import_xsens  # noqa: E402
+from graph_calib.importers import import_mpu6050, import_xsens, mpu6050_reference_calibration  # noqa: E402
 from graph_calib.io import atomic_write_json, atomic_write_text  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
 from graph_calib.reports import diagnosis_report as rep  # noqa: E402
@@ -330,6 +330,7 @@ def main():
                      f"{a['mismatch_rms_deg']:.3f} | {b['whitened_rms']:.3f} -> {a['whitened_rms']:.3f} | "
                      f"{_short(vb)} -> {_short(va)} |")
     lines += [""] + _findings(results)
+    lines += _saturation_section(next(s for s in results if s["key"] == "mpu6050_calibration"))
     if len(sys.argv) > 1:
         effect = json.loads(Path(sys.argv[2]).read_text()) if len(sys.argv) > 2 else None
         lines += _imu_tk_section(json.loads(Path(sys.argv[1]).read_text()), results[0], effect)
@@ -338,6 +339,53 @@ def main():
     atomic_write_text(DOCS / "measured-data.md", "\n".join(lines) + "\n")
     print("\n".join(lines))
     print(f"wrote {DOCS / 'measured-data.md'}; loop outputs under {OUT}", file=sys.stderr)
+
+
+def _saturation_section(cut):
+    """The MPU-6050 calibration session kept whole against cut after its saturated turns (the importer's default,
+    ``graph_calib.records.saturation``): verdicts, the loop, the figures of merit on every transition and on those
+    without a saturated sample, and the accelerometer against the authors' reference calibration."""
+    path = REAL / "mpu6050_uncuyo" / "example_data_calibration.csv"
+    whole_exp = import_mpu6050(path, cut_saturated=False)
+    options = options_for(cut["choice"].grade)
+    whole = diagnose(whole_exp, options=options, diagnosis=DiagnosisOptions())
+    poses = cut["poses"]
+    sat = np.any(np.degrees(np.abs(whole_exp.dtheta / whole_exp.dt[:, None])) >= 249.9, axis=1)
+    hit = np.array([sat[poses[k][1]:poses[k + 1][0] + 1].any() for k in range(len(poses) - 1)])
+    ref = mpu6050_reference_calibration(REAL / "mpu6050_uncuyo" / "reference_params_acc.csv")
+    rows = []
+    for name, diag, exp in (("kept whole", whole, whole_exp), ("cut (the importer's default)", cut["diag"],
+                                                                cut["exp"])):
+        v = verdicts(exp, options, diag.added)
+        for stage, label, verdict in ((diag.before, "declared", v[0]), (diag.after, "after the loop", v[1])):
+            if label != "declared" and not diag.added:
+                continue
+            m = stage_metrics(whole_exp, poses, stage)
+            ang = np.degrees(m["mismatch"])
+            x = stage.solution.x
+            layout = stage.problem.model.layout
+            acc = [x[layout.index(f"accel.{q}.{a}")] - ref[f"accel.{q}.{a}"] for q in ("scale", "bias") for a in "xyz"]
+            added = ", ".join(f"`{e}`" for e in diag.added) if label != "declared" else ""
+            rows.append(
+                f"| {name}, {label} ({added or 'nothing added'}) | {_short(verdict)} | {_factors(verdict)} | "
+                f"{m['f_spread']:.5f} | "
+                f"{np.sqrt(np.mean(ang**2)):.3f} | {np.sqrt(np.mean(ang[~hit]**2)):.3f} | "
+                f"{np.sqrt(np.mean(ang[hit]**2)):.3f} | {np.sqrt(np.mean(np.square(acc[:3]))):.5f} / "
+                f"{np.sqrt(np.mean(np.square(acc[3:]))):.4f} |")
+    runs = np.flatnonzero(np.diff(np.concatenate([[0], sat.astype(int), [0]])))
+    return ["## The MPU-6050 session's saturated turns", "",
+            f"The session's gyros reach their int16 limits (+-250.1 deg/s) in {int(sat.sum())} samples, in "
+            f"{runs.size // 2} fast turns ({', '.join(str(int(a)) for a in runs[::2])}); the angle beyond the range is "
+            "lost, so a rotation factor over those samples measures a rotation the unit did not make. "
+            "`graph-calib import mpu6050` cuts the record after each such turn (`graph_calib.records.saturation`; "
+            "`--keep-saturated` keeps it whole), so that no rotation factor spans it. The figures below are IMU-TK's "
+            f"transitions over the {len(poses) - 1} transitions between the poses, split into the "
+            f"{int((~hit).sum())} without a saturated sample and the {int(hit.sum())} with one (whose lost angle no "
+            "calibration can predict), and the accelerometer against the authors' own calibration of this session "
+            "(`reference_params_acc.csv`: scale errors and biases, RMS over the axes).", "",
+            "| record, model | verdict | variance factors | static \\|f\\| spread, m/s^2 | transitions RMS, deg: all "
+            "| without a saturated sample | with one | accelerometer against the authors': scale / bias (m/s^2) |",
+            "| --- | --- | --- | --- | --- | --- | --- | --- |"] + rows + [""]
 
 
 def _short(v):
@@ -505,11 +553,16 @@ def _findings(results):
             else:
                 txt.append("No single element is determined to better than a fifth of its size: the poses "
                            "pin down combinations of the nine, not each one (the joint test is what is significant).")
-        txt.append(f"With {', '.join('`' + x + '`' for x in d.added) or 'nothing'} added, IMU-TK's transition angle "
-                   f"goes from {b['mismatch_rms_deg']:.3f} to {a['mismatch_rms_deg']:.3f} deg RMS "
-                   f"({'down' if a['mismatch_rms_deg'] < b['mismatch_rms_deg'] else 'up'}), the whitened residual "
-                   f"RMS from {b['whitened_rms']:.3f} to {a['whitened_rms']:.3f}, the static |f| spread from "
-                   f"{b['f_spread']:.5f} to {a['f_spread']:.5f} m/s^2.")
+        if d.added:
+            txt.append(f"With {', '.join('`' + x + '`' for x in d.added)} added, IMU-TK's transition angle "
+                       f"goes from {b['mismatch_rms_deg']:.3f} to {a['mismatch_rms_deg']:.3f} deg RMS "
+                       f"({'down' if a['mismatch_rms_deg'] < b['mismatch_rms_deg'] else 'up'}), the whitened residual "
+                       f"RMS from {b['whitened_rms']:.3f} to {a['whitened_rms']:.3f}, the static |f| spread from "
+                       f"{b['f_spread']:.5f} to {a['f_spread']:.5f} m/s^2.")
+        else:
+            txt.append(f"Nothing is added: IMU-TK's transition angle is {b['mismatch_rms_deg']:.3f} deg RMS, the "
+                       f"whitened residual RMS {b['whitened_rms']:.3f}, the static |f| spread {b['f_spread']:.5f} "
+                       "m/s^2.")
         later = []
         for rnd in d.rounds[1:]:
             if rnd.added:
