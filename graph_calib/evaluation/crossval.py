@@ -356,7 +356,8 @@ def _cut(experiment, fold, pieces):
 
 
 def held_out_figures(experiment, fold, calibration=None):
-    """IMU-TK's figures on the fold's rests and the rotations between them (``calibration`` None: raw)."""
+    """IMU-TK's figures on the fold's rests and the rotations between them (``calibration`` None: raw); a rotation
+    between two rests of different segments (``/imu/segment``: attitude not continuous) is not judged."""
     norms, angles, rates = [], [], []
     for (start, stop), rests in zip(fold.spans, fold.rests):
         if not rests.shape[0]:
@@ -368,7 +369,10 @@ def held_out_figures(experiment, fold, calibration=None):
         iv = np.column_stack([iv[:, 0], iv[:, 1] - 1])               # IMU-TK's [a, e], both included
         fig = transition_figures(part, calibration, intervals=iv)
         norms.append(np.asarray(fig.static_norm, dtype=float))
-        angles.append(np.asarray(fig.angles_rad, dtype=float) * RAD_TO_DEG)
+        # no transition across a segment boundary: attitude is not continuous there (a cut, a saturated turn)
+        seg = _segments_of(part)
+        same = seg[iv[:-1, 1]] == seg[iv[1:, 0]]
+        angles.append(np.asarray(fig.angles_rad, dtype=float)[same] * RAD_TO_DEG)
         omega = (part.dtheta / part.dt[:, None]) if calibration is None else calibration.correct(part)[0]
         c = np.vstack([np.zeros((1, 3)), np.cumsum(omega, axis=0)])
         mean_rate = (c[iv[:, 1] + 1] - c[iv[:, 0]]) / (iv[:, 1] + 1 - iv[:, 0])[:, None]

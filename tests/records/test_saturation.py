@@ -104,3 +104,20 @@ def test_a_mask_of_another_length_is_refused(clipped):
 def test_a_range_that_is_not_positive_is_refused(clipped, value):
     with pytest.raises(InputError, match="the gyro range must be a positive number"):
         saturated_rates(clipped[0], gyro_range_rps=value)
+
+
+def test_held_out_transitions_skip_the_one_across_a_saturated_turn(clipped):
+    """IMU-TK's transition across the cut compares attitudes the record no longer links: not judged. The true
+    calibration then predicts every judged transition; on the record kept whole the lost angle dominates."""
+    from graph_calib.compensation.calibration import Calibration
+    from graph_calib.evaluation.crossval import Fold, held_out_figures, record_rests
+
+    exp, truth = clipped
+    cut = cut_at_saturation(exp, saturated_rates(exp, gyro_range_rps=RANGE_RPS)).experiment
+    true = Calibration.from_result(truth)
+    fig = {}
+    for name, e in (("whole", exp), ("cut", cut)):
+        rests = record_rests(e)
+        fig[name] = held_out_figures(e, Fold(index=0, spans=((0, e.n_samples),), rests=(rests,)), true)
+    assert fig["whole"].transitions_max_deg > 5.0
+    assert fig["cut"].transitions_max_deg < 0.2
