@@ -7,6 +7,9 @@ from dataclasses import dataclass, field
 #: ``ModelOptions.noise_identified`` key of the sway (m/s^2) a table-less record's rests show when no sway term models
 #: it (:func:`graph_calib.records.problem.sway_from_static`); the verdict notes it.
 SWAY_SEEN_KEY = "sway_seen_mps2"
+#: ``ModelOptions.noise_identified`` key of gyro outputs that sit at their extreme in runs with no cut after them
+#: (:func:`graph_calib.records.saturation.flat_tops`: a saturated gyro the record was not cut for).
+SATURATION_SEEN_KEY = "gyro_flat_tops"
 
 
 @dataclass(frozen=True)
@@ -63,7 +66,8 @@ class ModelOptions:
         "grade"}`` (:func:`graph_calib.records.problem.noise_options`); empty: not said.
     noise_identified : dict
         What the record showed of its noise (JSON-ready figures for the result's ``noise`` block); under
-        :data:`SWAY_SEEN_KEY` the sway its rests show when ``sway_sigma`` is None (m/s^2; absent when none is seen).
+        :data:`SWAY_SEEN_KEY` the sway its rests show when ``sway_sigma`` is None (m/s^2; absent when none is seen);
+        under :data:`SATURATION_SEEN_KEY` the gyro flat tops the record was not cut for (absent when none).
     grade_choice : dict
         How ``build_problem`` chose the grade when none was given
         (:meth:`graph_calib.records.grade_choice.GradeChoice.to_json`; empty: given).

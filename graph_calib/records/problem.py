@@ -11,7 +11,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.model import CalibrationModel, gyrocompass_attitude_sigma
-from graph_calib.model.options import SWAY_SEEN_KEY
+from graph_calib.model.options import SATURATION_SEEN_KEY, SWAY_SEEN_KEY
 from graph_calib.noise import find_rests, identify_noise, table_noise
 from graph_calib.noise.identify import ENCODER_NOISE_FLOOR, MIN_DWELL_DOF, TERMS
 from graph_calib.noise.rests import segment_rests
@@ -20,6 +20,7 @@ from graph_calib.sensors.params import DEFAULT_GRADE, grade
 from graph_calib.navigation.alignment import Alignment, alignment
 from graph_calib.errors import InputError
 from graph_calib.records.plausibility import check_record
+from graph_calib.records.saturation import flat_tops
 from graph_calib.records.grade_choice import MIN_STATIC_S, choose_grade
 
 
@@ -148,6 +149,11 @@ def build_problem(experiment, *, options=CalibrationOptions(), check=True):
         if seen > 0.0:
             model_options = replace(model_options, noise_identified={**model_options.noise_identified,
                                                                      SWAY_SEEN_KEY: seen})
+    # a gyro that sits at its extreme in runs the record was not cut for (records/saturation.py): the verdict notes it
+    tops = flat_tops(experiment, rests=static)
+    if tops is not None:
+        model_options = replace(model_options, noise_identified={**model_options.noise_identified,
+                                                                 SATURATION_SEEN_KEY: tops})
     method = "table" if (experiment.table is not None and np.any(experiment.table.valid)) else "gyrocompass"
     aligned = []
     for i, (piece, st, (a, b)) in enumerate(zip(pieces, static_per, bounds)):

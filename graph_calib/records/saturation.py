@@ -121,6 +121,70 @@ def saturated_rates(experiment, *, gyro_range_rps):
     return np.any(w >= r * (1.0 - RANGE_TOLERANCE), axis=1)
 
 
+#: A flat top below this rate, rad/s (57 deg/s), is not taken for saturation: no gyro's range is that small.
+FLAT_TOP_MIN_RPS = 1.0
+#: A flat top holding more than this fraction of the samples, in more than FLAT_TOP_MAX_RUNS runs, or in a run longer
+#: than FLAT_TOP_MAX_RUN_S, s, is a plateau (a table turning at a constant rate), not a saturated turn.
+FLAT_TOP_MAX_FRACTION = 0.05
+FLAT_TOP_MAX_RUNS = 20
+FLAT_TOP_MAX_RUN_S = 2.0
+
+
+def flat_tops(experiment, *, rests):
+    """Where a gyro sits at its largest output in runs, as a saturated gyro does, and no boundary follows.
+
+    For each gyro axis and sign, the samples whose rate equals the record's extreme to the last bits
+    (``1e-9`` relative) when that extreme exceeds :data:`FLAT_TOP_MIN_RPS`, some of them consecutive, in at
+    most :data:`FLAT_TOP_MAX_RUNS` runs none longer than :data:`FLAT_TOP_MAX_RUN_S`, and at most
+    :data:`FLAT_TOP_MAX_FRACTION` of the record (else a plateau: a table turning at a constant rate). An episode (:data:`EPISODE_GAP_S`) that a
+    segment boundary follows before the next rest is not counted (the record was cut there), nor one after its
+    segment's last rest (no rotation factor ties it to a later attitude that gravity fixes).
+
+    Parameters
+    ----------
+    experiment : Experiment
+    rests : array_like of int, shape (P, 2)
+        The static intervals the calibration takes, ``[start, stop)`` samples of the record.
+
+    Returns
+    -------
+    dict or None
+        ``{"samples": int, "episodes": int, "axes": {"x": [extreme rate, rad/s, per sign seen], ...}}``, or None.
+    """
+    w = experiment.dtheta / experiment.dt[:, None]
+    n = w.shape[0]
+    mask = np.zeros(n, dtype=bool)
+    axes = {}
+    for j, ax in enumerate("xyz"):
+        for v in (w[:, j], -w[:, j]):
+            top = float(np.max(v))
+            if top <= FLAT_TOP_MIN_RPS:
+                continue
+            at = v >= top * (1.0 - 1e-9)
+            runs = _episodes(at, 1)
+            length = runs[:, 1] - runs[:, 0]
+            if (at.sum() > FLAT_TOP_MAX_FRACTION * n or length.max() < 2 or runs.shape[0] > FLAT_TOP_MAX_RUNS
+                    or length.max() > FLAT_TOP_MAX_RUN_S * experiment.rate_hz):
+                continue
+            mask |= at
+            axes.setdefault(ax, []).append(float(w[np.flatnonzero(at)[0], j]))
+    if not mask.any():
+        return None
+    seg = np.zeros(n, dtype=np.int64) if experiment.segment is None else np.asarray(experiment.segment)
+    starts = set((np.flatnonzero(np.diff(seg)) + 1).tolist())
+    rest_starts = np.sort(np.asarray(rests, dtype=np.int64).reshape(-1, 2)[:, 0])
+
+    def tied(b):                 # a rest of the same segment after it, and no boundary right after it
+        later = rest_starts[rest_starts >= b]
+        return b not in starts and later.size > 0 and seg[later[0]] == seg[b - 1]
+
+    open_ = [(a, b) for a, b in _episodes(mask, max(1, int(round(EPISODE_GAP_S * experiment.rate_hz))))
+             if b < n and tied(b)]
+    if not open_:
+        return None
+    return {"samples": int(sum(int(mask[a:b].sum()) for a, b in open_)), "episodes": len(open_), "axes": axes}
+
+
 def _episodes(mask, gap):
     """``[start, stop)`` of the runs of ``mask``, runs fewer than ``gap`` samples apart joined."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
@@ -187,5 +251,6 @@ def _labels(own, cuts, n):
     return np.cumsum(mark).astype(np.int32)
 
 
-__all__ = ["SaturationCuts", "saturated_rates", "cut_at_saturation", "saturation_note", "RANGE_TOLERANCE",
-           "EPISODE_GAP_S", "EPISODE_INSIDE_S", "NOTE_START"]
+__all__ = ["SaturationCuts", "saturated_rates", "cut_at_saturation", "saturation_note", "flat_tops", "RANGE_TOLERANCE",
+           "EPISODE_GAP_S", "EPISODE_INSIDE_S", "NOTE_START", "FLAT_TOP_MIN_RPS", "FLAT_TOP_MAX_FRACTION",
+           "FLAT_TOP_MAX_RUNS", "FLAT_TOP_MAX_RUN_S"]

@@ -31,7 +31,9 @@ a note with each kind's last ``chi2 / redundancy``: the final solve's per-kind t
 
 A record without a table whose rests scatter beyond white noise while no sway term models it (the result's
 ``noise.identified.sway_seen_mps2``) gets a note naming the sway and ``--sway-sigma estimate``: a short record's
-residual test does not see it (docs/model.md, "A hand").
+residual test does not see it (docs/model.md, "A hand").  One whose gyros sit at their largest output in runs that
+no segment boundary follows (``noise.identified.gyro_flat_tops``: a saturated gyro the record was not cut for) gets a
+note naming the axes and ``--gyro-range-dps`` (docs/model.md, "A saturated gyro").
 
 Without variance factors (``residuals.variance_components`` false: a campaign's tasks) a kind below
 its lower limit is a note, not a failure: the kinds' own approximations keep a right model's rotation
@@ -46,8 +48,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
-from graph_calib.constants import RAD_TO_ARCSEC
-from graph_calib.model.options import SWAY_SEEN_KEY
+from graph_calib.constants import RAD_TO_ARCSEC, RAD_TO_DEG
+from graph_calib.model.options import SATURATION_SEEN_KEY, SWAY_SEEN_KEY
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
 from graph_calib.solvers.results import PRIOR_DOMINATED_RATIO
 
@@ -182,6 +184,9 @@ def judge_kinds(result):
     seen = (noise.get("identified") or {}).get(SWAY_SEEN_KEY)
     if seen and not noise.get("sway_mps2"):
         notes.append(_sway_text(seen))
+    tops = (noise.get("identified") or {}).get(SATURATION_SEEN_KEY)
+    if tops:
+        notes.append(_flat_top_text(tops))
     staged = _staged_text((result.extra or {}).get("staged"))
     if staged:
         problems.append(staged)
@@ -233,6 +238,17 @@ def _sway_text(seen_mps2):
     return (f"gravity: the rests' keyframe means scatter {seen_mps2:.2g} m/s^2 beyond the accelerometer's white noise "
             f"(a hand's sway, or a bias instability), which the gravity factors take for white noise: the sigmas of "
             f"what the rests inform may be optimistic (--sway-sigma estimate models it)")
+
+
+def _flat_top_text(tops):
+    """The verdict's note on gyro outputs that sit at their extreme in runs the record was not cut for."""
+    where = ", ".join(f"{ax} at {' and '.join(f'{v * RAD_TO_DEG:+.5g}' for v in vs)} deg/s"
+                      for ax, vs in tops["axes"].items())
+    return (f"rotation: the gyros sit at their largest output ({where}) in {tops['samples']} samples "
+            f"({tops['episodes']} episode{'s' if tops['episodes'] > 1 else ''}) and the record is not cut after them: "
+            "a saturated gyro loses the angle beyond its range, which the rotation factors take for an error of the "
+            "model (import with --gyro-range-dps to cut the record after each saturated turn; docs/model.md, "
+            "\"A saturated gyro\")")
 
 
 def _quiet_readings_text(what, floor_rad):

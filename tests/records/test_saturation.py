@@ -10,7 +10,7 @@ from graph_calib.errors import InputError
 from graph_calib.model import ModelOptions
 from graph_calib.model.record import PreparedRecord
 from graph_calib.options import CalibrationOptions
-from graph_calib.records.saturation import cut_at_saturation, saturated_rates, saturation_note
+from graph_calib.records.saturation import cut_at_saturation, flat_tops, saturated_rates, saturation_note
 from graph_calib.simulation.scenarios import simulate
 
 CONSUMER = CalibrationOptions(model=ModelOptions(grade="consumer"))
@@ -121,3 +121,36 @@ def test_held_out_transitions_skip_the_one_across_a_saturated_turn(clipped):
         fig[name] = held_out_figures(e, Fold(index=0, spans=((0, e.n_samples),), rests=(rests,)), true)
     assert fig["whole"].transitions_max_deg > 5.0
     assert fig["cut"].transitions_max_deg < 0.2
+
+
+def test_flat_tops_find_a_saturated_gyro_the_record_was_not_cut_for(clipped):
+    """The clipped record kept whole: its gyro sits at the range in a run the verdict notes (with the option that
+    cuts it); cut, or never clipped, nothing is seen."""
+    from graph_calib.evaluation.crossval import record_rests
+
+    exp, _ = clipped
+    tops = flat_tops(exp, rests=record_rests(exp))
+    assert tops["episodes"] == 1 and list(tops["axes"]) == ["z"]
+    assert abs(tops["axes"]["z"][0]) == pytest.approx(RANGE_RPS)
+    cut = cut_at_saturation(exp, saturated_rates(exp, gyro_range_rps=RANGE_RPS)).experiment
+    assert flat_tops(cut, rests=record_rests(cut)) is None
+    run = calibrate(exp, options=CONSUMER, solvers=("factor-graph",))
+    assert any("sit at their largest output" in n and "--gyro-range-dps" in n for n in run.verdict.notes)
+    se = simulate("consumer-ferraris", rng=np.random.default_rng(2)).plans[0].make()
+    assert flat_tops(se.experiment, rests=record_rests(se.experiment)) is None
+
+
+def test_the_measured_sessions_show_flat_tops_only_where_the_mpu6050_saturates(real_data):
+    """The MPU-6050 session kept whole: its 18 samples at the int16 limits; cut, none. The Xsens session's gyro creeps
+    at about 381 deg/s in its last motion, after its last rest: no rotation factor ties that to a later rest."""
+    from graph_calib.evaluation.crossval import record_rests
+    from graph_calib.importers import import_mpu6050, import_xsens
+
+    mpu = real_data / "mpu6050_uncuyo" / "example_data_calibration.csv"
+    whole = import_mpu6050(mpu, cut_saturated=False)
+    tops = flat_tops(whole, rests=record_rests(whole))
+    assert tops["samples"] == 18 and tops["episodes"] == 3 and sorted(tops["axes"]) == ["x", "z"]
+    cut = import_mpu6050(mpu)
+    assert flat_tops(cut, rests=record_rests(cut)) is None
+    xs = import_xsens(real_data / "imu_tk_xsens" / "xsens_acc.mat", real_data / "imu_tk_xsens" / "xsens_gyro.mat")
+    assert flat_tops(xs, rests=record_rests(xs)) is None

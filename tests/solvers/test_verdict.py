@@ -176,6 +176,20 @@ def test_a_sway_the_rests_show_and_no_term_models_is_a_note_naming_the_option():
     assert verdict_of({"factor-graph": _result(kinds)}).notes == ()
 
 
+def test_gyro_flat_tops_the_record_was_not_cut_for_are_a_note_naming_the_option():
+    """A saturated gyro the record was not cut for (docs/model.md, "A saturated gyro"): the axes, their extremes and
+    ``--gyro-range-dps`` in words, beside whatever the rotation kind's test says; none without flat tops."""
+    kinds = {"rotation": (31.2, 78.0, 1.0), "gravity": (1.1, 64.0, 1.0)}
+    src = {"gyro": "identified", "accel": "identified", "encoder": "grade"}
+    tops = {"samples": 18, "episodes": 3, "axes": {"x": [4.36559, -4.36572], "z": [-4.36572]}}
+    seen = {"noise": {"source": src, "identified": {"gyro_flat_tops": tops}}}
+    v = verdict_of({"factor-graph": replace(_result(kinds, source=src), extra=seen)})
+    note = next(n for n in v.notes if "largest output" in n)
+    assert "(x at +250.13 and -250.14 deg/s, z at -250.14 deg/s) in 18 samples (3 episodes)" in note
+    assert "--gyro-range-dps" in note and "A saturated gyro" in note
+    assert not any("largest output" in n for n in verdict_of({"factor-graph": _result(kinds, source=src)}).notes)
+
+
 def test_disagreeing_solvers_are_told_which_stopped_at_the_lower_cost():
     """Two solvers that disagree: the words name the one at the lower batch cost (the better fit), the sigma ratio
     range to three decimals; equal costs add nothing."""
