@@ -85,11 +85,14 @@ def product_fit(train, *, options=CONSUMER):
 
 
 def diagnose_fit(train, *, options=CONSUMER):
-    """``diagnose``'s factor-graph result (the loop, its held-out guard on) on a training record, as a Calibration."""
+    """``diagnose``'s factor-graph result on a training record, as a Calibration: the final model solved as
+    ``graph-calib diagnose`` writes it (as ``calibrate`` solves it, variance components included)."""
+    from graph_calib.calibrate import calibrate_with_effects
     from graph_calib.diagnosis import DiagnosisOptions, diagnose
     diag = diagnose(train, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",)))
     print(f"  loop added: {', '.join(diag.added) or 'nothing'}", flush=True)
-    return Calibration.from_result(diag.after.results["factor-graph"])
+    return Calibration.from_result(calibrate_with_effects(train, added=diag.added, options=options,
+                                                          solvers=("factor-graph",)).results["factor-graph"])
 
 
 def compare(seed, *, folds=2, by="pairs", fit=product_fit, triads=False):

@@ -27,7 +27,7 @@ import sys
 
 import numpy as np
 
-from graph_calib.calibrate import calibrate
+from graph_calib.calibrate import calibrate, calibrate_with_effects
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.diagnosis import DiagnosisOptions, diagnose
 from graph_calib.evaluation.crossval import cross_validate
@@ -48,7 +48,9 @@ def diagnose_fitter(options, *, holdout=False):
     def fit(train):
         diag = diagnose(train, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",), holdout=holdout))
         print(f"  loop added: {', '.join(diag.added) or 'nothing'}", flush=True)
-        return Calibration.from_result(diag.after.results["factor-graph"])
+        # what graph-calib diagnose writes: the final model solved as calibrate solves it (variance components)
+        return Calibration.from_result(calibrate_with_effects(train, added=diag.added, options=options,
+                                                              solvers=("factor-graph",)).results["factor-graph"])
     return fit
 
 

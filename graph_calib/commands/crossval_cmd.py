@@ -12,7 +12,7 @@ import sys
 from pathlib import Path
 
 from graph_calib import io
-from graph_calib.calibrate import calibrate
+from graph_calib.calibrate import calibrate, calibrate_with_effects
 from graph_calib.commands.calibrate_cmd import options_from_args
 from graph_calib.commands.model_options import add_moving, add_still, add_sway, finite_float
 from graph_calib.commands.paths import make_output_folder, output_folder
@@ -67,7 +67,10 @@ def run(args):
     def fit(train):
         if args.diagnose:
             diag = diagnose(train, options=options, diagnosis=DiagnosisOptions(solvers=(solver,)))
-            result = diag.after.results[solver]
+            # what graph-calib diagnose writes: the final model solved again as calibrate solves it (variance
+            # components), not the loop's own stage, which tests on the identified noise unscaled
+            result = calibrate_with_effects(train, added=diag.added, options=options, solvers=(solver,)).results[
+                solver] if options.variance_components else diag.after.results[solver]
             print(f"  loop added: {', '.join(diag.added) or 'nothing'}", file=sys.stderr)
         else:
             run_ = calibrate(train, options=options, solvers=(solver,))

@@ -10,6 +10,8 @@ Writes ``diagnosis.json`` and ``report.html`` (docs/diagnosis.md).
 
 from __future__ import annotations
 
+import argparse
+
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -29,9 +31,10 @@ def add_arguments(p):
     add_sway(p)
     add_moving(p)
     add_still(p)
-    p.add_argument("--holdout", action="store_true",
+    p.add_argument("--holdout", action=argparse.BooleanOptionalAction, default=True,
                    help="without a table, adopt an effect only when it does not make the held-out figures (two "
-                        "folds of the rests) worse (docs/diagnosis.md)")
+                        "folds of the rests) worse (default; --no-holdout adopts on the score tests alone; "
+                        "docs/diagnosis.md)")
     p.add_argument("--grade", choices=("navigation", "tactical", "consumer"), default=None,
                    help="IMU grade for priors and noise (default: chosen from the static intervals, printed with "
                         "the reason)")

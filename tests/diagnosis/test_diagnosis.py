@@ -260,11 +260,15 @@ def test_measured_mpu6050_session_saturated_turns(real_data):
 
     path = real_data / "mpu6050_uncuyo" / "example_data_calibration.csv"
     opts = CalibrationOptions(model=ModelOptions(grade="consumer"), graph=GraphOptions(max_iterations=300))
-    d = diagnose(import_mpu6050(path, cut_saturated=False), options=opts, diagnosis=FG_ONLY)
+    whole = import_mpu6050(path, cut_saturated=False)
+    d = diagnose(whole, options=opts, diagnosis=replace(FG_ONLY, holdout=False))
     assert d.added[0] == "gyro.g_sensitivity"
     skipped = {t.name: t.skipped for t in d.rounds[0].candidates if t.skipped}
     assert "damping.stiffness" in skipped and "gyro.bias_tc2" in skipped     # no table, one constant temperature
     assert d.rounds[-1].chi2_per_dof < 0.5 * d.rounds[0].chi2_per_dof
+    # the held-out guard (the default) refuses it: held out it does not fit
+    guarded = diagnose(whole, options=opts, diagnosis=FG_ONLY)
+    assert guarded.added == [] and not guarded.rounds[0].to_json()["held_out"]["adopted"]
     cut = diagnose(import_mpu6050(path), options=opts, diagnosis=FG_ONLY)
     assert cut.added == []
     assert not any(t.significant for t in cut.rounds[0].candidates if not t.skipped)
