@@ -185,6 +185,22 @@ def flat_tops(experiment, *, rests):
     return {"samples": int(sum(int(mask[a:b].sum()) for a, b in open_)), "episodes": len(open_), "axes": axes}
 
 
+def record_static(experiment):
+    """The static intervals the calibration takes (:func:`graph_calib.noise.rests.segment_rests`), ``[start, stop)``
+    samples of the record, shape (P, 2), in order: the ``rests`` of :func:`flat_tops`."""
+    parts = [np.concatenate([long, short]) + a for a, _, _, long, short in segment_rests(experiment)]
+    out = np.concatenate(parts).astype(np.int64).reshape(-1, 2) if parts else np.zeros((0, 2), np.int64)
+    return out[np.argsort(out[:, 0], kind="stable")]
+
+
+def flat_top_text(tops):
+    """``tops`` (:func:`flat_tops`) in words: the axes, their extremes (deg/s), the samples and episodes."""
+    where = ", ".join(f"{ax} at {' and '.join(f'{np.degrees(v):+.5g}' for v in vs)} deg/s"
+                      for ax, vs in tops["axes"].items())
+    e = tops["episodes"]
+    return f"({where}) in {tops['samples']} samples ({e} episode{'s' if e > 1 else ''})"
+
+
 def _episodes(mask, gap):
     """``[start, stop)`` of the runs of ``mask``, runs fewer than ``gap`` samples apart joined."""
     d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
@@ -251,6 +267,7 @@ def _labels(own, cuts, n):
     return np.cumsum(mark).astype(np.int32)
 
 
-__all__ = ["SaturationCuts", "saturated_rates", "cut_at_saturation", "saturation_note", "flat_tops", "RANGE_TOLERANCE",
+__all__ = ["SaturationCuts", "saturated_rates", "cut_at_saturation", "saturation_note", "flat_tops", "flat_top_text",
+           "record_static", "RANGE_TOLERANCE",
            "EPISODE_GAP_S", "EPISODE_INSIDE_S", "NOTE_START", "FLAT_TOP_MIN_RPS", "FLAT_TOP_MAX_FRACTION",
            "FLAT_TOP_MAX_RUNS", "FLAT_TOP_MAX_RUN_S"]

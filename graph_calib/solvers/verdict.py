@@ -48,9 +48,10 @@ import math
 from dataclasses import dataclass, field
 from typing import Mapping
 
-from graph_calib.constants import RAD_TO_ARCSEC, RAD_TO_DEG
+from graph_calib.constants import RAD_TO_ARCSEC
 from graph_calib.model.options import SATURATION_SEEN_KEY, SWAY_SEEN_KEY
 from graph_calib.model.residual_list import MEASUREMENT_KINDS
+from graph_calib.records.saturation import flat_top_text
 from graph_calib.solvers.results import PRIOR_DOMINATED_RATIO
 
 #: Largest chi-square per measurement component of a result without redundancies (the old statistic).
@@ -242,13 +243,10 @@ def _sway_text(seen_mps2):
 
 def _flat_top_text(tops):
     """The verdict's note on gyro outputs that sit at their extreme in runs the record was not cut for."""
-    where = ", ".join(f"{ax} at {' and '.join(f'{v * RAD_TO_DEG:+.5g}' for v in vs)} deg/s"
-                      for ax, vs in tops["axes"].items())
-    return (f"rotation: the gyros sit at their largest output ({where}) in {tops['samples']} samples "
-            f"({tops['episodes']} episode{'s' if tops['episodes'] > 1 else ''}) and the record is not cut after them: "
-            "a saturated gyro loses the angle beyond its range, which the rotation factors take for an error of the "
-            "model (import with --gyro-range-dps to cut the record after each saturated turn; docs/model.md, "
-            "\"A saturated gyro\")")
+    return (f"rotation: the gyros sit at their largest output {flat_top_text(tops)} and the record is not cut after "
+            "them: a saturated gyro loses the angle beyond its range, which the rotation factors take for an error of "
+            "the model (import the log again with --gyro-range-dps to cut the record after each saturated turn; "
+            "docs/model.md, \"A saturated gyro\")")
 
 
 def _quiet_readings_text(what, floor_rad):

@@ -542,7 +542,11 @@ def test_cli_import_mpu6050(real_data, tmp_path, capsys):
 def test_cli_import_keep_saturated_and_a_declared_gyro_range(real_data, tmp_path, capsys):
     path = str(real_data / "mpu6050_uncuyo" / "example_data_calibration.csv")
     assert main(["import", "mpu6050", path, "--out", str(tmp_path / "whole.h5"), "--keep-saturated"]) == 0
-    assert "10245 samples, 102.45 s" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "10245 samples, 102.45 s" in text
+    # kept whole, the flat tops are still pointed out, with the option that cuts after them
+    assert ("note: the gyros sit at their largest output (x at +250.13 and -250.14 deg/s, z at -250.14 deg/s) in 18 "
+            "samples (3 episodes), as a saturated gyro does: --gyro-range-dps") in text
     assert read_experiment(tmp_path / "whole.h5").segment is None
     # a declared range replaces the counts' limits: at 200 deg/s one more fast turn reaches it
     assert main(["import", "mpu6050", path, "--out", str(tmp_path / "r200.h5"), "--gyro-range-dps", "200"]) == 0
