@@ -18,8 +18,9 @@ import numpy as np
 
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.errors import InputError
-from graph_calib.evaluation.crossval import cross_validate
+from graph_calib.evaluation.crossval import cross_validate, make_folds, record_rests
 from graph_calib.records.problem import build_problem
+from graph_calib.solvers.concurrent import run_both
 from graph_calib.solvers.orchestration import run_solvers
 from graph_calib.solvers.variance import weighted_problem
 
@@ -85,11 +86,14 @@ def held_out_check(experiment, *, options, grown, solver, folds=2):
     def fitter(opts):
         return lambda train: _fit(train, options=opts, solver=solver)
 
-    try:
-        cv_before = cross_validate(experiment, fit=fitter(options), folds=folds, by="pairs")
+    try:                               # a record with too few rests for the folds, or a fold it cannot fit: unguarded
+        make_folds(experiment, folds=folds, by="pairs", rests=record_rests(experiment))
+        # the two models' cross-validations at once (a forked worker for the first; one after the other without fork)
+        cv_before, cv_after = run_both(
+            lambda: cross_validate(experiment, fit=fitter(options), folds=folds, by="pairs"),
+            lambda: cross_validate(experiment, fit=fitter(grown), folds=folds, by="pairs"))
     except InputError:
         return None
-    cv_after = cross_validate(experiment, fit=fitter(grown), folds=folds, by="pairs")
     before, after = cv_before.pooled("calibrated"), cv_after.pooled("calibrated")
     worse = tuple(k for k in GUARDED if np.isfinite(before[k]) and np.isfinite(after[k]) and after[k] > before[k])
     return HoldOutCheck(effect=grown.model.extra_effects[-1], before=before, after=after, worse=worse)

@@ -19,6 +19,9 @@ threads, two per process on a 2-core machine, spin against each other (docs/perf
 
 Without ``fork`` (not on Linux), inside a daemonic worker process or with other threads running
 (:func:`fork_available`), the two run one after the other.
+
+:func:`run_both` does the same for any two tasks (the loop's held-out guard: the current model's and the grown
+model's cross-validations at once).
 """
 
 from __future__ import annotations
@@ -174,4 +177,57 @@ def solve_pair(names, problem, *, options, progress=None, initial=None, on_outpu
         recv.close()
 
 
-__all__ = ["fork_available", "solve_pair"]
+def _task_worker(conn, task):
+    """Run ``task()`` in the forked worker; send ``("done", result)`` or ``("error", exception or text)``."""
+    try:
+        with threadpool_limits(limits=1, user_api="blas"):
+            result = task()
+        conn.send(("done", result))
+    except BaseException as exc:   # every error goes back to the parent, which raises it
+        try:
+            pickle.loads(pickle.dumps(exc))
+            conn.send(("error", exc))
+        except Exception:
+            conn.send(("error", "a task failed in its worker process:\n" + "".join(traceback.format_exception(exc))))
+    finally:
+        conn.close()
+
+
+def run_both(first, second):
+    """``(first(), second())``: ``first`` in a forked worker while ``second`` runs here, as :func:`solve_pair` runs
+    two solvers (one after the other where :func:`fork_available` says no).
+
+    Both take no argument and return a picklable value; the worker is a fork of this process, so ``first()`` gives
+    there what it gives here.  An error of either is raised here, ``first``'s first.
+    """
+    if not fork_available():
+        return first(), second()
+    ctx = multiprocessing.get_context("fork")
+    recv, send = ctx.Pipe(duplex=False)
+    proc = ctx.Process(target=_task_worker, args=(send, first), daemon=True)
+    proc.start()
+    send.close()
+    try:
+        try:
+            with threadpool_limits(limits=1, user_api="blas"):
+                out_second, error_second = second(), None
+        except BaseException as exc:
+            out_second, error_second = None, exc
+        try:
+            kind, payload = recv.recv()
+        except EOFError:
+            proc.join()
+            kind, payload = "error", f"the worker process ended without a result (exit code {proc.exitcode})"
+        if kind == "error":
+            raise payload if isinstance(payload, BaseException) else RuntimeError(payload)
+        if error_second is not None:
+            raise error_second
+        return payload, out_second
+    finally:
+        if proc.is_alive():
+            proc.terminate()
+        proc.join()
+        recv.close()
+
+
+__all__ = ["fork_available", "solve_pair", "run_both"]

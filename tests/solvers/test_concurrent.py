@@ -131,3 +131,23 @@ def test_an_error_that_does_not_unpickle_comes_back_as_its_traceback(monkeypatch
     monkeypatch.setattr(concurrent, "solve", _fake("a", _Unpicklable("odd failure", code=3)))
     with pytest.raises(RuntimeError, match="(?s)a failed in its worker process:.*odd failure"):
         concurrent.solve_pair(("a", "b"), None, options=None)
+
+
+def test_run_both_runs_the_first_task_in_a_worker_and_gives_both_results():
+    """The first task runs in another process (its pid is not this one's); both results come back in order."""
+    a, b = concurrent.run_both(lambda: (os.getpid(), np.arange(3.0)), lambda: (os.getpid(), "here"))
+    assert a[0] != os.getpid() and b == (os.getpid(), "here")
+    np.testing.assert_array_equal(a[1], [0.0, 1.0, 2.0])
+
+
+def test_run_both_raises_the_first_task_s_error_before_the_second_s():
+    def bad_first():
+        raise InputError("first task refused", dataset="x")
+
+    def bad_second():
+        raise ValueError("second task failed")
+
+    with pytest.raises(InputError, match="first task refused"):
+        concurrent.run_both(bad_first, bad_second)
+    with pytest.raises(ValueError, match="second task failed"):
+        concurrent.run_both(lambda: 1, bad_second)
