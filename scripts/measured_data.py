@@ -345,6 +345,8 @@ def _refused(held_out):
     """': held out, E makes F worse (before -> after).' for a guard that refused its effect, else '.'."""
     if held_out is None or held_out["adopted"]:
         return "."
+    if held_out.get("unjudged"):
+        return f": `{held_out['effect']}` is not adopted, {held_out['unjudged']}."
     figs = ", ".join(f"{k} {held_out['before'][k]:.4g} -> {held_out['after'][k]:.4g}" for k in held_out["worse"])
     return f": held out, `{held_out['effect']}` makes {' and '.join(held_out['worse'])} worse ({figs})."
 

@@ -7,7 +7,9 @@ an effect there, it cross-validates the current model and the grown one on the s
 (:func:`graph_calib.evaluation.crossval.cross_validate`, by pairs of rests; ``calibrate`` with the primary
 solver, the variance components, no structure tests) and adopts the effect only when neither pooled held-out
 figure of IMU-TK's, the transitions' rms and the static |f| spread, is larger with it (:data:`GUARDED`).  A
-record whose rests are too few for two folds of two is not guarded (the check says so).
+record whose rests are too few for two folds of two, or whose folds cannot be calibrated, cannot show that an
+effect holds out: the effect is not adopted there, and the check says why (issue 22: an effect is kept only when
+it also improves the held-out figures).
 """
 
 from __future__ import annotations
@@ -47,12 +49,16 @@ class HoldOutCheck:
     before: dict
     after: dict
     worse: tuple
+    unjudged: str = ""
 
     @property
     def adopted(self):
-        return not self.worse
+        return not self.worse and not self.unjudged
 
     def text(self):
+        if self.unjudged:
+            return (f"not adopted: {self.unjudged}, so it cannot be judged held out (--no-holdout adopts on the "
+                    "score tests alone)")
         parts = ", ".join(f"{k} {self.before[k]:.4g} -> {self.after[k]:.4g}" for k in GUARDED
                           if np.isfinite(self.before[k]) and np.isfinite(self.after[k]))
         return (f"held out (2 folds): {parts}" if self.adopted
@@ -60,7 +66,7 @@ class HoldOutCheck:
 
     def to_json(self):
         return {"effect": self.effect, "before": self.before, "after": self.after, "worse": list(self.worse),
-                "adopted": self.adopted}
+                "adopted": self.adopted, **({"unjudged": self.unjudged} if self.unjudged else {})}
 
 
 def held_out_check(experiment, *, options, grown, solver, folds=2):
@@ -78,25 +84,33 @@ def held_out_check(experiment, *, options, grown, solver, folds=2):
     Returns
     -------
     HoldOutCheck or None
-        None for a record with a table, or with too few rests for the folds.
+        None for a record with a table (never guarded); a check with ``unjudged`` (not adopted) for a record
+        whose rests are too few for the folds, or whose folds cannot be calibrated.
     """
     if experiment.table is not None:
         return None
+    effect = grown.model.extra_effects[-1]
 
     def fitter(opts):
         return lambda train: _fit(train, options=opts, solver=solver)
 
-    try:                               # a record with too few rests for the folds, or a fold it cannot fit: unguarded
-        make_folds(experiment, folds=folds, by="pairs", rests=record_rests(experiment))
+    rests = record_rests(experiment)
+    try:
+        make_folds(experiment, folds=folds, by="pairs", rests=rests)
+    except InputError:
+        return HoldOutCheck(effect=effect, before={}, after={}, worse=(),
+                            unjudged=f"the record's {rests.shape[0]} rests are too few for {folds} folds of two")
+    try:
         # the two models' cross-validations at once (a forked worker for the first; one after the other without fork)
         cv_before, cv_after = run_both(
             lambda: cross_validate(experiment, fit=fitter(options), folds=folds, by="pairs"),
             lambda: cross_validate(experiment, fit=fitter(grown), folds=folds, by="pairs"))
-    except InputError:
-        return None
+    except InputError as exc:
+        return HoldOutCheck(effect=effect, before={}, after={}, worse=(),
+                            unjudged=f"a fold's training record cannot be calibrated ({exc})")
     before, after = cv_before.pooled("calibrated"), cv_after.pooled("calibrated")
     worse = tuple(k for k in GUARDED if np.isfinite(before[k]) and np.isfinite(after[k]) and after[k] > before[k])
-    return HoldOutCheck(effect=grown.model.extra_effects[-1], before=before, after=after, worse=worse)
+    return HoldOutCheck(effect=effect, before=before, after=after, worse=worse)
 
 
 def _fit(train, *, options, solver):

@@ -81,3 +81,20 @@ def test_the_guard_fits_each_fold_as_calibrate_does():
     for k in GUARDED:
         assert np.isfinite(check.before[k]) and check.before[k] > 0
         np.testing.assert_allclose(check.before[k], direct[k], rtol=1e-6)
+
+
+def test_a_record_too_short_to_judge_an_effect_held_out_does_not_adopt_it(real_data):
+    """The MPU-6050 90-degree record has two rests: no two folds of two, so no effect can be shown to hold out; the
+    tests' choice (gyro.g_sensitivity, score 42 against 16) is not adopted, and the round says why and how to adopt
+    on the tests alone."""
+    from dataclasses import replace
+
+    exp = import_mpu6050(real_data / "mpu6050_uncuyo" / "imu_90_x_rot.csv")
+    options = CalibrationOptions(model=ModelOptions(grade="consumer"))
+    guarded = diagnose(exp, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",)))
+    assert guarded.added == []
+    first = guarded.rounds[0].to_json()
+    assert first["held_out"]["adopted"] is False and "rests are too few for 2 folds of two" in first["held_out"]["unjudged"]
+    assert "cannot be judged held out (--no-holdout adopts on the score tests alone)" in first["decision"]
+    free = diagnose(exp, options=options, diagnosis=replace(DiagnosisOptions(solvers=("factor-graph",)), holdout=False))
+    assert free.added[:1] == ["gyro.g_sensitivity"]
