@@ -514,11 +514,15 @@ def _verdict_findings(results):
         txt = [f"**{s['title']}** (grade {s['choice'].grade}). Declared model: {_short(vb).lower()}; "
                f"after the loop: {_short(va).lower()}"
                + (f" (variance factors {_factors(va)})" if _factors(va) else "") + "."]
+        held = d.rounds[0].to_json().get("held_out") or {}
         if not vb.passed and t.significant and any(t.name in p for p in vb.problems):
             txt.append(f"The declared model's failure is honest: its residuals carry an effect the model lacks "
                        f"(`{t.name}`, score statistic {t.statistic:.0f} against a threshold of {t.threshold:.1f} in "
                        "the loop's first round). `graph-calib calibrate` exits 3 on this session, as it should; "
-                       "`graph-calib diagnose` is the command that finds what is missing.")
+                       + ("`graph-calib diagnose` is the command that finds what is missing." if d.added else
+                          f"`graph-calib diagnose` does not adopt it ({held['unjudged']}, so it cannot be judged held "
+                          "out) and exits 3 too." if held.get("unjudged") else
+                          "`graph-calib diagnose` does not adopt it either."))
         low = {k: f["variance_factor"] for k, f in _kinds(va).items() if (f.get("variance_factor") or 1.0) < 0.5}
         if low:
             txt.append("After the loop " + ", ".join(f"the {k} kind's variance factor is {f:.2f}" for k, f in
@@ -606,8 +610,9 @@ def _findings(results):
             unit, kk = sg.report
             txt.append(f"Left unexplained: `{sg.group}` as a bias on {sg.axis} (statistic {sg.statistic:.1f} "
                        f"against {sg.threshold:.1f}; fitted bias {sg.amplitude * kk:.3g} {unit} RMS over the "
-                       f"keyframes where it is seen): a slow drift that no candidate can take without a "
-                       "temperature channel (the temperature effects are skipped in these sessions).")
+                       "keyframes where it is seen)"
+                       + (": a slow drift that no candidate can take without a temperature channel (the temperature "
+                          "effects are skipped in these sessions)." if sg.group == "time" else "."))
         else:
             txt.append("Nothing is left: no generic driver test is significant at the final model.")
         lines += [" ".join(txt), ""]
