@@ -154,3 +154,14 @@ def test_the_measured_sessions_show_flat_tops_only_where_the_mpu6050_saturates(r
     assert flat_tops(cut, rests=record_rests(cut)) is None
     xs = import_xsens(real_data / "imu_tk_xsens" / "xsens_acc.mat", real_data / "imu_tk_xsens" / "xsens_gyro.mat")
     assert flat_tops(xs, rests=record_rests(xs)) is None
+
+
+def test_an_episode_at_the_record_s_start_is_not_cut(clipped):
+    """Saturated samples before the first rest: the piece before a cut would have no rest to align it, so the record
+    is kept whole there, and its description says so."""
+    exp, _ = clipped
+    sat = np.zeros(exp.n_samples, dtype=bool)
+    sat[:3] = True
+    cuts = cut_at_saturation(exp, sat)
+    assert cuts.episodes.tolist() == [[0, 3]] and cuts.cut.tolist() == [False]
+    assert cuts.experiment.segment is None and "those starting at 0 are kept" in cuts.experiment.description
