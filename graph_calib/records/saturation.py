@@ -35,8 +35,8 @@ from graph_calib.errors import InputError
 from graph_calib.noise.rests import segment_rests
 from graph_calib.records.experiment import Experiment
 
-#: A rate within this fraction of the declared range counts as at the range (a count or two below the limit
-#: of an integer output: 2e-4 of 32767 counts is 6.6 counts).
+#: A rate within this fraction of the declared range counts as at the range (a few counts below the limit of an
+#: integer output, or a range declared in round figures: 2e-4 of 32767 counts is 6.6 counts).
 RANGE_TOLERANCE = 2e-4
 
 
@@ -136,8 +136,8 @@ def flat_tops(experiment, *, rests):
     For each gyro axis and sign, the samples whose rate equals the record's extreme to the last bits
     (``1e-9`` relative) when that extreme exceeds :data:`FLAT_TOP_MIN_RPS`, some of them consecutive, in at
     most :data:`FLAT_TOP_MAX_RUNS` runs none longer than :data:`FLAT_TOP_MAX_RUN_S`, and at most
-    :data:`FLAT_TOP_MAX_FRACTION` of the record (else a plateau: a table turning at a constant rate). An episode (:data:`EPISODE_GAP_S`) that a
-    segment boundary follows before the next rest is not counted (the record was cut there), nor one after its
+    :data:`FLAT_TOP_MAX_FRACTION` of the record (else a plateau: a table turning at a constant rate). An episode
+    (:data:`EPISODE_GAP_S`) that a segment boundary follows before the next rest is not counted (the record was cut there), nor one after its
     segment's last rest (no rotation factor ties it to a later attitude that gravity fixes).
 
     Parameters

@@ -94,7 +94,9 @@ def test_a_record_too_short_to_judge_an_effect_held_out_does_not_adopt_it(real_d
     guarded = diagnose(exp, options=options, diagnosis=DiagnosisOptions(solvers=("factor-graph",)))
     assert guarded.added == []
     first = guarded.rounds[0].to_json()
-    assert first["held_out"]["adopted"] is False and "rests are too few for 2 folds of two" in first["held_out"]["unjudged"]
+    held = first["held_out"]
+    assert held["adopted"] is False and "rests are too few for 2 folds of two" in held["unjudged"]
     assert "cannot be judged held out (--no-holdout adopts on the score tests alone)" in first["decision"]
-    free = diagnose(exp, options=options, diagnosis=replace(DiagnosisOptions(solvers=("factor-graph",)), holdout=False))
+    free = diagnose(exp, options=options,
+                    diagnosis=replace(DiagnosisOptions(solvers=("factor-graph",)), holdout=False))
     assert free.added[:1] == ["gyro.g_sensitivity"]
