@@ -100,3 +100,19 @@ def test_a_record_too_short_to_judge_an_effect_held_out_does_not_adopt_it(real_d
     free = diagnose(exp, options=options,
                     diagnosis=replace(DiagnosisOptions(solvers=("factor-graph",)), holdout=False))
     assert free.added[:1] == ["gyro.g_sensitivity"]
+
+
+def test_the_command_line_guards_by_default_and_no_holdout_adopts_on_the_tests(real_data, tmp_path, capsys):
+    """``graph-calib diagnose``: the two-rest record exits 3 with nothing adopted; ``--no-holdout`` adopts the tests'
+    choice and exits 0."""
+    import json
+
+    from graph_calib.cli import main
+
+    exp = tmp_path / "x90.h5"
+    assert main(["import", "mpu6050", str(real_data / "mpu6050_uncuyo" / "imu_90_x_rot.csv"), "--out", str(exp)]) == 0
+    assert main(["diagnose", str(exp), "--out", str(tmp_path / "guarded"), "--solver", "factor-graph"]) == 3
+    assert json.loads((tmp_path / "guarded" / "diagnosis.json").read_text())["added"] == []
+    assert main(["diagnose", str(exp), "--out", str(tmp_path / "free"), "--solver", "factor-graph",
+                 "--no-holdout"]) == 0
+    assert json.loads((tmp_path / "free" / "diagnosis.json").read_text())["added"] == ["gyro.g_sensitivity"]
