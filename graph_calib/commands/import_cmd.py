@@ -19,7 +19,7 @@ from graph_calib.commands.paths import output_file
 from graph_calib.errors import InputError
 from graph_calib.importers.registry import formats
 from graph_calib.io import write_experiment
-from graph_calib.records.saturation import (cut_at_saturation, flat_top_text, flat_tops, record_static, saturated_rates,
+from graph_calib.records.saturation import (cut_at_saturation, flat_top_text, flat_tops, saturated_rates,
                                            saturation_note)
 
 
@@ -139,7 +139,7 @@ def run(args):
     note = saturation_note(experiment.description)
     if note:
         print(f"note: {note}")
-    elif (tops := flat_tops(experiment, rests=record_static(experiment))) is not None:
+    elif (tops := flat_tops(experiment)) is not None:
         print(f"note: the gyros sit at their largest output {flat_top_text(tops)}, as a saturated gyro does: "
               "--gyro-range-dps with the gyros' range cuts the record after each saturated turn, so that no rotation "
               "factor spans the angle it lost (docs/model.md, \"A saturated gyro\")")

@@ -130,7 +130,7 @@ FLAT_TOP_MAX_RUNS = 20
 FLAT_TOP_MAX_RUN_S = 2.0
 
 
-def flat_tops(experiment, *, rests):
+def flat_tops(experiment, *, rests=None):
     """Where a gyro sits at its largest output in runs, as a saturated gyro does, and no boundary follows.
 
     For each gyro axis and sign, the samples whose rate equals the record's extreme to the last bits
@@ -143,8 +143,9 @@ def flat_tops(experiment, *, rests):
     Parameters
     ----------
     experiment : Experiment
-    rests : array_like of int, shape (P, 2)
-        The static intervals the calibration takes, ``[start, stop)`` samples of the record.
+    rests : array_like of int, shape (P, 2), optional
+        The static intervals the calibration takes, ``[start, stop)`` samples of the record; default
+        :func:`record_static`'s, found only when a flat top is seen.
 
     Returns
     -------
@@ -172,6 +173,7 @@ def flat_tops(experiment, *, rests):
         return None
     seg = np.zeros(n, dtype=np.int64) if experiment.segment is None else np.asarray(experiment.segment)
     starts = set((np.flatnonzero(np.diff(seg)) + 1).tolist())
+    rests = record_static(experiment) if rests is None else rests
     rest_starts = np.sort(np.asarray(rests, dtype=np.int64).reshape(-1, 2)[:, 0])
 
     def tied(b):                 # a rest of the same segment after it, and no boundary right after it
