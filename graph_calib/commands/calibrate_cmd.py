@@ -11,8 +11,8 @@ from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
 from graph_calib.commands.paths import earlier_results
-from graph_calib.commands.model_options import (add_moving, add_still, add_sway, finite_float, moving_of, still_of,
-                                                 sway_of)
+from graph_calib.commands.model_options import (add_gyro_range, add_moving, add_still, add_sway, check_gyro_range,
+                                                 finite_float, moving_of, still_of, sway_of, with_gyro_range)
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade, grade_warning
 from graph_calib.model import ModelOptions
@@ -36,6 +36,7 @@ def add_arguments(p):
     p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
     add_sway(p)
+    add_gyro_range(p)
     add_moving(p)
     add_still(p)
     p.add_argument("--residuals", action="store_true",
@@ -58,6 +59,7 @@ def options_from_args(args, *, grade=None):
             raise InputError(f"unknown effect {e!r}; known: {', '.join(FURTHER_EFFECTS)}", dataset="--effect")
     if args.keyframe <= 0:
         raise InputError("must be positive", dataset="--keyframe")
+    check_gyro_range(args)
     model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade or "navigation",
                          extra_effects=tuple(args.effect), sway_sigma=sway_of(args),
                          moving_sigma=moving_of(args), still_at_rest=still_of(args))
@@ -73,7 +75,7 @@ def run(args):
     if not path.exists():
         raise InputError("no such file", path=path)
     options_from_args(args)                       # bad arguments refused before the file is read
-    exp = io.read_experiment(path)
+    exp = with_gyro_range(args, io.read_experiment(path))
     choice = None
     if args.grade is None:
         choice = choose_grade(exp, keyframe_s=args.keyframe)

@@ -14,7 +14,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import calibrate, calibrate_with_effects
 from graph_calib.commands.calibrate_cmd import options_from_args
-from graph_calib.commands.model_options import add_moving, add_still, add_sway, finite_float
+from graph_calib.commands.model_options import add_gyro_range, add_moving, add_still, add_sway, finite_float, with_gyro_range
 from graph_calib.commands.paths import make_output_folder, output_folder
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.diagnosis import DiagnosisOptions, diagnose
@@ -43,6 +43,7 @@ def add_arguments(p):
     p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
     add_sway(p)
+    add_gyro_range(p)
     add_moving(p)
     add_still(p)
 
@@ -55,7 +56,7 @@ def run(args):
         raise InputError("must be at least 2", dataset="--folds")
     options_from_args(args)                       # bad arguments refused before the file is read
     out = output_folder(args.out)
-    exp = io.read_experiment(path)
+    exp = with_gyro_range(args, io.read_experiment(path))
     grade = args.grade
     if grade is None:
         choice = choose_grade(exp, keyframe_s=args.keyframe)

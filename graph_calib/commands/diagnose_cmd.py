@@ -16,8 +16,8 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from graph_calib.commands.model_options import (add_moving, add_still, add_sway, finite_float, moving_of, still_of,
-                                                 sway_of)
+from graph_calib.commands.model_options import (add_gyro_range, add_moving, add_still, add_sway, check_gyro_range,
+                                                 finite_float, moving_of, still_of, sway_of, with_gyro_range)
 from graph_calib.commands.paths import earlier_results, make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade, grade_warning
@@ -29,6 +29,7 @@ def add_arguments(p):
     p.add_argument("experiment", help="experiment file (HDF5, data-format.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
     add_sway(p)
+    add_gyro_range(p)
     add_moving(p)
     add_still(p)
     p.add_argument("--holdout", action=argparse.BooleanOptionalAction, default=True,
@@ -62,6 +63,7 @@ def _options(args, *, grade="navigation"):
     from graph_calib.model import ModelOptions
     from graph_calib.options import CalibrationOptions, GraphOptions
 
+    check_gyro_range(args)
     for e in args.effect:
         if e not in FURTHER_EFFECTS:
             raise InputError(f"unknown effect {e!r}; known: {', '.join(FURTHER_EFFECTS)}", dataset="--effect")
@@ -111,7 +113,7 @@ def run(args):
     if not path.exists():
         raise InputError("no such file", path=path)
     _options(args)                                # bad arguments refused before the file is read
-    exp = io.read_experiment(path)
+    exp = with_gyro_range(args, io.read_experiment(path))
     choice = None
     if args.grade is None:
         choice = choose_grade(exp, keyframe_s=args.keyframe)

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import argparse
 import math
+import sys
 
 from graph_calib.errors import InputError
+from graph_calib.records.saturation import cut_at_saturation, saturated_rates
 
 
 def finite_float(text):
@@ -42,6 +44,33 @@ def add_still(parser):
 def still_of(args):
     """``ModelOptions.still_at_rest`` from ``--still-rests``."""
     return bool(getattr(args, "still_rests", False))
+
+
+def add_gyro_range(parser):
+    """``--gyro-range-dps DPS``: the record cut after each saturated episode before the work (records/saturation)."""
+    parser.add_argument("--gyro-range-dps", type=finite_float, default=None, metavar="DPS",
+                        help="the gyros' full-scale range, deg/s: the record is cut after each run of samples at it "
+                             "that a rest follows, so that no rotation factor spans the angle a saturated turn lost "
+                             "(as import --gyro-range-dps does; docs/model.md, \"A saturated gyro\")")
+
+
+def check_gyro_range(args):
+    """Refuse a ``--gyro-range-dps`` that is not positive (exit 2 naming the option)."""
+    value = getattr(args, "gyro_range_dps", None)
+    if value is not None and not value > 0.0:
+        raise InputError(f"must be a positive number of deg/s, got {value!r}", dataset="--gyro-range-dps")
+
+
+def with_gyro_range(args, experiment):
+    """``experiment`` cut after its saturated episodes when ``--gyro-range-dps`` is given (printing where), else as is."""
+    check_gyro_range(args)
+    value = getattr(args, "gyro_range_dps", None)
+    if value is None:
+        return experiment
+    cuts = cut_at_saturation(experiment, saturated_rates(experiment, gyro_range_rps=math.radians(value)))
+    print(f"note: {cuts.describe() or f'no gyro sample reaches {value:g} deg/s: the record is not cut.'}",
+          file=sys.stderr)
+    return cuts.experiment
 
 
 def add_moving(parser):

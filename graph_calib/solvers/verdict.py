@@ -245,8 +245,8 @@ def _flat_top_text(tops):
     """The verdict's note on gyro outputs that sit at their extreme in runs the record was not cut for."""
     return (f"rotation: the gyros sit at their largest output {flat_top_text(tops)} and the record is not cut after "
             "them: a saturated gyro loses the angle beyond its range, which the rotation factors take for an error of "
-            "the model (import the log again with --gyro-range-dps to cut the record after each saturated turn; "
-            "docs/model.md, \"A saturated gyro\")")
+            "the model (--gyro-range-dps with the gyros' range, on calibrate, diagnose or import, cuts the record after "
+            "each saturated turn; docs/model.md, \"A saturated gyro\")")
 
 
 def _quiet_readings_text(what, floor_rad):
