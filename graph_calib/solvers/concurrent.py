@@ -40,22 +40,29 @@ class _FirstSolverFailed(Exception):
     """Raised inside the second solver's progress callback to stop it once the first has failed."""
 
 
-def _worker(conn, name, problem, options, initial):
-    """Run solver ``name`` in the forked worker; send ``("progress", event)``, then ``("done", output)``
-    or ``("error", exception or text)``."""
+def _run_in_worker(conn, task, what):
+    """Run ``task()`` in the forked worker (BLAS on one thread); send ``("done", result)`` or ``("error", exception
+    or text)``: every error goes back to the parent, which raises it (as text, naming ``what``, when it does not
+    pickle)."""
     try:
         with threadpool_limits(limits=1, user_api="blas"):
-            out = solve(name, problem, options=options, progress=lambda e: conn.send(("progress", e)),
-                        initial=initial)
-        conn.send(("done", out))
-    except BaseException as exc:   # every error goes back to the parent, which raises it
+            result = task()
+        conn.send(("done", result))
+    except BaseException as exc:
         try:
             pickle.loads(pickle.dumps(exc))    # it must also unpickle there
             conn.send(("error", exc))
         except Exception:          # an exception that does not pickle: its text
-            conn.send(("error", f"{name} failed in its worker process:\n" + "".join(traceback.format_exception(exc))))
+            conn.send(("error", f"{what} failed in its worker process:\n" + "".join(traceback.format_exception(exc))))
     finally:
         conn.close()
+
+
+def _worker(conn, name, problem, options, initial):
+    """Run solver ``name`` in the forked worker; send ``("progress", event)``, then ``("done", output)``
+    or ``("error", exception or text)``."""
+    _run_in_worker(conn, lambda: solve(name, problem, options=options, progress=lambda e: conn.send(("progress", e)),
+                                       initial=initial), name)
 
 
 def fork_available():
@@ -177,22 +184,6 @@ def solve_pair(names, problem, *, options, progress=None, initial=None, on_outpu
         recv.close()
 
 
-def _task_worker(conn, task):
-    """Run ``task()`` in the forked worker; send ``("done", result)`` or ``("error", exception or text)``."""
-    try:
-        with threadpool_limits(limits=1, user_api="blas"):
-            result = task()
-        conn.send(("done", result))
-    except BaseException as exc:   # every error goes back to the parent, which raises it
-        try:
-            pickle.loads(pickle.dumps(exc))
-            conn.send(("error", exc))
-        except Exception:
-            conn.send(("error", "a task failed in its worker process:\n" + "".join(traceback.format_exception(exc))))
-    finally:
-        conn.close()
-
-
 def run_both(first, second):
     """``(first(), second())``: ``first`` in a forked worker while ``second`` runs here, as :func:`solve_pair` runs
     two solvers (one after the other where :func:`fork_available` says no).
@@ -204,7 +195,7 @@ def run_both(first, second):
         return first(), second()
     ctx = multiprocessing.get_context("fork")
     recv, send = ctx.Pipe(duplex=False)
-    proc = ctx.Process(target=_task_worker, args=(send, first), daemon=True)
+    proc = ctx.Process(target=_run_in_worker, args=(send, first, "a task"), daemon=True)
     proc.start()
     send.close()
     try:
