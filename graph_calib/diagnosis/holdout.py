@@ -103,8 +103,8 @@ def held_out_check(experiment, *, options, grown, solver, folds=2):
     try:
         # the two models' cross-validations at once (a forked worker for the first; one after the other without fork)
         cv_before, cv_after = run_both(
-            lambda: cross_validate(experiment, fit=fitter(options), folds=folds, by="pairs"),
-            lambda: cross_validate(experiment, fit=fitter(grown), folds=folds, by="pairs"))
+            lambda: cross_validate(experiment, fit=fitter(options), folds=folds, by="pairs", rests=rests),
+            lambda: cross_validate(experiment, fit=fitter(grown), folds=folds, by="pairs", rests=rests))
     except InputError as exc:
         return HoldOutCheck(effect=effect, before={}, after={}, worse=(),
                             unjudged=f"a fold's training record cannot be calibrated ({exc})")

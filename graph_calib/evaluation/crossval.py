@@ -60,8 +60,7 @@ import numpy as np
 from graph_calib.constants import RAD_TO_DEG
 from graph_calib.errors import InputError
 from graph_calib.evaluation.imu_tk import transition_figures
-from graph_calib.navigation.static_detection import detect_static
-from graph_calib.noise.rests import segment_static, segment_thresholds
+from graph_calib.noise.rests import record_rests
 from graph_calib.records.experiment import Table
 
 #: The figures compared between calibrated and raw, and whether smaller is better (all are).
@@ -177,22 +176,6 @@ class CrossValidation:
             "pooled": {w: {k: _json_float(v) for k, v in self.pooled(w).items()} for w in ("calibrated", "raw")},
             "worse_than_raw": list(self.worse_than_raw()),
         }
-
-
-def record_rests(experiment):
-    """The rests of a record, ``[start, stop)`` sample indices, shape (P, 2): the calibration's static intervals.
-
-    Segment by segment, each with its own threshold (:func:`graph_calib.noise.rests.segment_thresholds`), the
-    short rests of a hand-held session included (:func:`graph_calib.noise.rests.segment_static`).
-    """
-    out = []
-    for a, _, piece, th in segment_thresholds(experiment):
-        try:
-            st = segment_static(piece, threshold=th) if th is not None else detect_static(piece)
-        except InputError:
-            continue
-        out.extend((int(s) + a, int(e) + a) for s, e in np.asarray(st, dtype=np.int64).reshape(-1, 2))
-    return np.array(out, dtype=np.int64).reshape(-1, 2)
 
 
 def make_folds(experiment, *, folds=2, by="pairs", rests=None):
@@ -391,7 +374,7 @@ def held_out_figures(experiment, fold, calibration=None):
     )
 
 
-def cross_validate(experiment, *, fit, folds=2, by="pairs", progress=None):
+def cross_validate(experiment, *, fit, folds=2, by="pairs", progress=None, rests=None):
     """Calibrate without each fold in turn and judge on it.
 
     Parameters
@@ -403,12 +386,14 @@ def cross_validate(experiment, *, fit, folds=2, by="pairs", progress=None):
     by : {'pairs', 'rests', 'segments', 'transitions'}
     progress : callable, optional
         Called with a line of text per fold.
+    rests : ndarray of int, shape (P, 2), optional
+        The record's rests when the caller has them (default :func:`record_rests`).
 
     Returns
     -------
     CrossValidation
     """
-    rests = record_rests(experiment)
+    rests = record_rests(experiment) if rests is None else rests
     out = []
     for fold in make_folds(experiment, folds=folds, by=by, rests=rests):
         if progress is not None:

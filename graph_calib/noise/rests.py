@@ -33,6 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from graph_calib.errors import InputError
 from graph_calib.navigation.static_detection import _moving_stats, _runs, accelerometer_threshold, detect_static
 
 #: The quantile of the moving-window scatter taken as a segment's resting noise level.
@@ -169,6 +170,22 @@ def segment_rests(experiment):
     return out
 
 
+def record_rests(experiment):
+    """The rests of a record, ``[start, stop)`` sample indices, shape (P, 2): the calibration's static intervals.
+
+    Segment by segment, each with its own threshold (:func:`segment_thresholds`), the short rests of a hand-held
+    session included (:func:`segment_static`); a segment whose detection refuses it (``InputError``) has none.
+    """
+    out = []
+    for a, _, piece, th in segment_thresholds(experiment):
+        try:
+            st = segment_static(piece, threshold=th) if th is not None else detect_static(piece)
+        except InputError:
+            continue
+        out.extend((int(s) + a, int(e) + a) for s, e in np.asarray(st, dtype=np.int64).reshape(-1, 2))
+    return np.array(out, dtype=np.int64).reshape(-1, 2)
+
+
 def white_windows(x, *, rate_hz, window_s=WINDOW_S, ratio=WHITE_RATIO):
     """Sample centres whose window scatter of ``x`` (N, 3) is at most ``ratio`` times the white level (module doc)."""
     h = max(1, int(round(window_s * float(rate_hz) / 2.0)))
@@ -228,5 +245,5 @@ def find_rests(experiment, *, min_duration_s=2.0, use_gyro=True):
     return np.concatenate(out) if out else np.zeros((0, 2), dtype=np.int64)
 
 
-__all__ = ["find_rests", "segment_rests", "segment_static", "segment_static_parts", "short_window_s", "SHORT_REST_WINDOWS", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
+__all__ = ["find_rests", "record_rests", "segment_rests", "segment_static", "segment_static_parts", "short_window_s", "SHORT_REST_WINDOWS", "quiet_threshold", "segment_threshold", "segment_thresholds", "SEGMENT_CAP", "white_windows", "WHITE_RATIO", "QUIET_QUANTILE", "THRESHOLD_MULT",
            "START_LOUDER"]
