@@ -4,7 +4,7 @@ Run from the repository root: ``.venv/bin/python scripts/saturation_monte_carlo.
 (``consumer-ferraris 175 10``: about a minute).  Each seed's record is simulated (``numpy.random.default_rng(seed)``,
 seeds 0 to SEEDS-1), its gyro rates clipped at +-RANGE_DPS, and calibrated three ways with ``calibrate``'s defaults
 (consumer grade, the factor graph): the clean record, the clipped record kept whole, and the clipped record cut after
-each saturated episode (:func:`graph_calib.records.saturation.cut_at_saturation`).  Printed per way: the pooled RMS
+each saturated episode (:func:`graph_calib.records.saturation.cut_at_range`).  Printed per way: the pooled RMS
 and the largest of the normalised errors against the truth (every element with a sigma), and the verdicts passed.
 """
 
@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from graph_calib.calibrate import calibrate  # noqa: E402
 from graph_calib.model import ModelOptions  # noqa: E402
 from graph_calib.options import CalibrationOptions  # noqa: E402
-from graph_calib.records.saturation import cut_at_saturation, saturated_rates  # noqa: E402
+from graph_calib.records.saturation import cut_at_range  # noqa: E402
 from graph_calib.simulation.scenarios import simulate  # noqa: E402
 
 
@@ -42,7 +42,7 @@ def main(argv=None):
         exp, truth = made.experiment, made.truth.values
         w = np.clip(exp.dtheta / exp.dt[:, None], -R, R)
         clipped = dataclasses.replace(exp, dtheta=w * exp.dt[:, None])
-        cuts = cut_at_saturation(clipped, saturated_rates(clipped, gyro_range_rps=R))
+        cuts = cut_at_range(clipped, gyro_range_rps=R)
         episodes.append(cuts.episodes.shape[0])
         cut.append(int(cuts.cut.sum()))
         for name, record in (("clean", exp), ("kept whole", clipped), ("cut", cuts.experiment)):

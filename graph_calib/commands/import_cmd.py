@@ -19,8 +19,8 @@ from graph_calib.commands.paths import output_file
 from graph_calib.errors import InputError
 from graph_calib.importers.registry import formats
 from graph_calib.io import write_experiment
-from graph_calib.records.saturation import (cut_at_saturation, flat_top_text, flat_tops, saturated_rates,
-                                           saturation_note)
+from graph_calib.commands.model_options import check_gyro_range
+from graph_calib.records.saturation import cut_at_range, flat_top_text, flat_tops, saturation_note
 
 
 def _format_options():
@@ -122,14 +122,12 @@ def run(args):
     for p in args.inputs:            # before what the format asks of its options (a latitude): the first to fix
         if not Path(p).exists():
             raise InputError("file not found", path=p)
-    if args.gyro_range_dps is not None and not (math.isfinite(args.gyro_range_dps) and args.gyro_range_dps > 0.0):
-        raise InputError(f"must be a positive number of deg/s, got {args.gyro_range_dps!r}", dataset="--gyro-range-dps")
+    check_gyro_range(args)
     if args.gyro_range_dps is not None:
         options["keep_saturated"] = True      # the declared range, not a format's own limits, says where to cut
     experiment = fmt.read([Path(p) for p in args.inputs], options)
     if args.gyro_range_dps is not None:
-        experiment = cut_at_saturation(experiment, saturated_rates(
-            experiment, gyro_range_rps=args.gyro_range_dps * c.DEG_TO_RAD)).experiment
+        experiment = cut_at_range(experiment, gyro_range_rps=args.gyro_range_dps * c.DEG_TO_RAD).experiment
     write_experiment(experiment, out)
     print(f"graph-calib import {args.format}: " + ", ".join(str(p) for p in args.inputs))
     for line in summary(experiment):

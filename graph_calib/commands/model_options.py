@@ -7,7 +7,7 @@ import math
 import sys
 
 from graph_calib.errors import InputError
-from graph_calib.records.saturation import cut_at_saturation, saturated_rates
+from graph_calib.records.saturation import cut_at_range
 
 
 def finite_float(text):
@@ -55,19 +55,20 @@ def add_gyro_range(parser):
 
 
 def check_gyro_range(args):
-    """Refuse a ``--gyro-range-dps`` that is not positive (exit 2 naming the option)."""
+    """Refuse a ``--gyro-range-dps`` that is not a positive finite number (exit 2 naming the option)."""
     value = getattr(args, "gyro_range_dps", None)
-    if value is not None and not value > 0.0:
+    if value is not None and not (math.isfinite(value) and value > 0.0):
         raise InputError(f"must be a positive number of deg/s, got {value!r}", dataset="--gyro-range-dps")
 
 
 def with_gyro_range(args, experiment):
-    """``experiment`` cut after its saturated episodes when ``--gyro-range-dps`` is given (printing where), else as is."""
+    """``experiment`` cut after its saturated episodes when ``--gyro-range-dps`` is given (printing where), else as
+    is."""
     check_gyro_range(args)
     value = getattr(args, "gyro_range_dps", None)
     if value is None:
         return experiment
-    cuts = cut_at_saturation(experiment, saturated_rates(experiment, gyro_range_rps=math.radians(value)))
+    cuts = cut_at_range(experiment, gyro_range_rps=math.radians(value))
     print(f"note: {cuts.describe() or f'no gyro sample reaches {value:g} deg/s: the record is not cut.'}",
           file=sys.stderr)
     return cuts.experiment
@@ -129,4 +130,5 @@ def noise_of(args):
     return out
 
 
-__all__ = ["finite_float", "add_sway", "sway_of", "add_still", "still_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise", "noise_of"]
+__all__ = ["finite_float", "add_sway", "sway_of", "add_still", "still_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise",
+           "noise_of", "add_gyro_range", "check_gyro_range", "with_gyro_range"]

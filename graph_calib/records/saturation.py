@@ -32,7 +32,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from graph_calib.errors import InputError
-from graph_calib.noise.rests import segment_rests
+from graph_calib.navigation.static_detection import _runs
+from graph_calib.noise.rests import record_rests, segment_rests
 from graph_calib.records.experiment import Experiment
 
 #: A rate within this fraction of the declared range counts as at the range (a few counts below the limit of an
@@ -145,7 +146,7 @@ def flat_tops(experiment, *, rests=None):
     experiment : Experiment
     rests : array_like of int, shape (P, 2), optional
         The static intervals the calibration takes, ``[start, stop)`` samples of the record; default
-        :func:`record_static`'s, found only when a flat top is seen.
+        :func:`graph_calib.noise.rests.record_rests`'s, found only when a flat top is seen.
 
     Returns
     -------
@@ -173,7 +174,7 @@ def flat_tops(experiment, *, rests=None):
         return None
     seg = np.zeros(n, dtype=np.int64) if experiment.segment is None else np.asarray(experiment.segment)
     starts = set((np.flatnonzero(np.diff(seg)) + 1).tolist())
-    rests = record_static(experiment) if rests is None else rests
+    rests = record_rests(experiment) if rests is None else rests
     rest_starts = np.sort(np.asarray(rests, dtype=np.int64).reshape(-1, 2)[:, 0])
 
     def tied(b):                 # a rest of the same segment after it, and no boundary right after it
@@ -187,14 +188,6 @@ def flat_tops(experiment, *, rests=None):
     return {"samples": int(sum(int(mask[a:b].sum()) for a, b in open_)), "episodes": len(open_), "axes": axes}
 
 
-def record_static(experiment):
-    """The static intervals the calibration takes (:func:`graph_calib.noise.rests.segment_rests`), ``[start, stop)``
-    samples of the record, shape (P, 2), in order: the ``rests`` of :func:`flat_tops`."""
-    parts = [np.concatenate([long, short]) + a for a, _, _, long, short in segment_rests(experiment)]
-    out = np.concatenate(parts).astype(np.int64).reshape(-1, 2) if parts else np.zeros((0, 2), np.int64)
-    return out[np.argsort(out[:, 0], kind="stable")]
-
-
 def flat_top_text(tops):
     """``tops`` (:func:`flat_tops`) in words: the axes, their extremes (deg/s), the samples and episodes."""
     where = ", ".join(f"{ax} at {' and '.join(f'{np.degrees(v):+.5g}' for v in vs)} deg/s"
@@ -203,10 +196,14 @@ def flat_top_text(tops):
     return f"({where}) in {tops['samples']} samples ({e} episode{'s' if e > 1 else ''})"
 
 
+def cut_at_range(experiment, *, gyro_range_rps):
+    """:func:`cut_at_saturation` at the samples whose rate reaches ``gyro_range_rps`` (:func:`saturated_rates`)."""
+    return cut_at_saturation(experiment, saturated_rates(experiment, gyro_range_rps=gyro_range_rps))
+
+
 def _episodes(mask, gap):
     """``[start, stop)`` of the runs of ``mask``, runs fewer than ``gap`` samples apart joined."""
-    d = np.diff(np.concatenate([[0], mask.astype(np.int8), [0]]))
-    runs = np.column_stack([np.flatnonzero(d == 1), np.flatnonzero(d == -1)]).astype(np.int64)
+    runs = _runs(mask).astype(np.int64).reshape(-1, 2)
     if runs.shape[0] < 2:
         return runs
     new = np.concatenate([[True], runs[1:, 0] - runs[:-1, 1] >= gap])
@@ -269,7 +266,6 @@ def _labels(own, cuts, n):
     return np.cumsum(mark).astype(np.int32)
 
 
-__all__ = ["SaturationCuts", "saturated_rates", "cut_at_saturation", "saturation_note", "flat_tops", "flat_top_text",
-           "record_static", "RANGE_TOLERANCE",
+__all__ = ["SaturationCuts", "saturated_rates", "cut_at_saturation", "cut_at_range", "saturation_note", "flat_tops", "flat_top_text", "RANGE_TOLERANCE",
            "EPISODE_GAP_S", "EPISODE_INSIDE_S", "NOTE_START", "FLAT_TOP_MIN_RPS", "FLAT_TOP_MAX_FRACTION",
            "FLAT_TOP_MAX_RUNS", "FLAT_TOP_MAX_RUN_S"]
