@@ -35,9 +35,10 @@ def to_body_axes(res, C, *, rows=None, C_jacobians=()):
         The attitude ``C_nb`` of each factor of ``rows``.
     rows : ndarray of int, optional
         The factors to turn (default every one).
-    C_jacobians : sequence of (name, ndarray (F, 3, n))
+    C_jacobians : sequence of (name, ndarray (F, 3, n) or None)
         How ``C`` moves with the factor's variables, as right perturbations: ``("H_R", J)``, ``("H_R_next", J)`` or
-        ``("H_x", J)``; ``C``'s turn enters that Jacobian as ``[u x] J``.
+        ``("H_x", J)``; ``C``'s turn enters that Jacobian as ``[u x] J`` (``J`` None: the identity, ``C`` being that
+        variable itself).
 
     Returns
     -------
@@ -58,7 +59,7 @@ def to_body_axes(res, C, *, rows=None, C_jacobians=()):
         if out[name] is not None:
             out[name][rows] = M @ getattr(res, name)[rows]
     for name, J in C_jacobians:
-        out[name][rows] += U @ J
+        out[name][rows] += U if J is None else U @ J
     r, sigma = res.r.copy(), res.sigma.copy()
     r[rows] = u
     sigma[rows] = s[:, None]

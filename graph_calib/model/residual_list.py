@@ -175,8 +175,7 @@ def residual_list(model, R, preint, x):
         rows = np.arange(grav.key.size)
         if model.options.moving_sigma is not None:          # the moving keyframes' large residuals stay level
             rows = rows[np.asarray(model.record.static_key, dtype=bool)[grav.key]]
-        factors["gravity"] = to_body_axes(grav, R[grav.key[rows]], rows=rows,
-                                          C_jacobians=(("H_R", np.broadcast_to(np.eye(3), (rows.size, 3, 3))),))
+        factors["gravity"] = to_body_axes(grav, R[grav.key[rows]], rows=rows, C_jacobians=(("H_R", None),))
     factors["rotation"], factors["still"] = fuse_still(factors["rotation"], factors["still"])
     return factors
 
