@@ -51,6 +51,23 @@ _INT32 = np.iinfo(np.int32)
 _EXACT_FLOAT_INTEGER = 2.0**53
 
 
+def _refuse_skipped_counts(count, segment, *, path, header_lines):
+    """A sample counter is the sample clock itself: a step other than one inside a segment is lost (or repeated)
+    samples, never late stamps, so it is refused naming the line (the timing's jitter rule is for stamps)."""
+    step = np.diff(count)
+    bad = step != 1
+    if segment is not None:
+        bad &= np.diff(segment) == 0
+    if not bad.any():
+        return
+    k = int(np.flatnonzero(bad)[0])
+    line = data_line_numbers(path, header_lines)[k + 1]
+    lost = f"{step[k] - 1:.0f} sample(s) lost" if step[k] > 1 else "a count repeated or going back"
+    raise InputError(f"the sample counter steps from {count[k]:.0f} to {count[k + 1]:.0f} (input line {line}): {lost}. "
+                     "Mark where each piece starts with a segment column (segment=COLUMN in --columns, e.g. a "
+                     "counter that steps at each gap) and each piece is integrated on its own", path=path, dataset="t")
+
+
 def _resolve_columns(columns, *, path, delimiter, header_lines):
     """Check a column mapping; return ({key: index from 0}, [temperature keys], {key: channel name}, header lines):
     names of header columns without ``header_lines`` read the first line as the header when it holds any of them."""
@@ -271,8 +288,8 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
     if "t" in index:
         time_units = "s" if time_units is None else time_units
         if time_units == "samples" and rate_hz is None:
-            raise InputError("time units 'samples': give the sample rate (--rate-hz), t = index / rate_hz",
-                             dataset="rate_hz")
+            raise InputError("the time column counts samples: give the sample rate (--rate-hz HZ), t = index / "
+                             "rate_hz", path=path, dataset="--rate-hz")
     elif time_units is not None:
         raise InputError(f"{show(time_units)} given, but no time column (t=COLUMN): samples are then "
                          "k / rate_hz apart", dataset="time_units")
@@ -341,6 +358,8 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
             rate_hz = positive(float(f"{1.0 / float(np.median(inside)):.6g}"), "rate_hz")
         if segment is not None:
             t = rebase_segments(t, segment, rate_hz)
+        if time_units == "samples":
+            _refuse_skipped_counts(col["t"], segment, path=path, header_lines=header_lines)
         try:
             t, rate_hz, timing_note = regular_times(t, rate_hz, segment=segment, source=path.name,
                                                     given_rate=given_rate, path=path)
@@ -349,7 +368,8 @@ def import_csv(path, *, columns, latitude_rad, gravity_mps2=None, rate_hz=None, 
             raise InputError(f"{exc} (input line {line})") from None
     else:
         if rate_hz is None:
-            raise InputError("no time column: give the sample rate", dataset="rate_hz")
+            raise InputError("no time column: give the sample rate (--rate-hz HZ), or map a time column (t=COLUMN "
+                             "in --columns)", path=path, dataset="--rate-hz")
         t = np.arange(n, dtype=np.float64) / rate_hz
     dt = intervals(t, rate_hz, segment)[:, None]
 

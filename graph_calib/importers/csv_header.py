@@ -6,6 +6,9 @@ gyro ``gx``, ``gyro_x``, ``gyr_x``, ``omega_x``, ``wx``, ``w_x``, ``angular_velo
 EuRoC's ``w_RS_S_x``; accelerometer ``ax``, ``acc_x``, ``accel_x``, ``a_x``, ``alpha_x``
 (Kalibr's ``imu0.csv``), ``linear_acceleration.x``, EuRoC's ``a_RS_S_x``;
 temperature ``temp``, ``temperature``, ``temp_c``, ``temperature_degc``, ``imu_temp``, ``temp_imu``; ``segment``.
+A sample counter (``n_samples``, ``sample``, ``sample_index``, ``index``, ``counter``, ...; imucal's and many
+loggers' exports) is the time column in samples when no time column is named: ``t = index / --rate-hz``, and a
+counter that skips says where samples were lost.
 Units in brackets set the units (``[ns]``, ``[rad s^-1]``, ``[deg/s]``, ``[m s^-2]``,
 ``[g]``); a time column of whole numbers above 1e12 without a unit is read as
 nanoseconds (Kalibr's and ROS's stamps), and the note says so.
@@ -29,6 +32,9 @@ _NAMES["temp"] = ("temp", "temperature", "temp_c", "temperature_degc", "temp_deg
                   "imu_temperature", "temperature_imu")
 _NAMES["segment"] = ("segment",)
 _LOOKUP = {alias: key for key, aliases in _NAMES.items() for alias in aliases}
+#: Names of a sample counter: the time column, in samples, of a header that names no time column.
+SAMPLE_COUNTER_NAMES = ("n_samples", "sample", "samples", "sample_index", "sample_number", "sample_no", "sample_nr",
+                        "index", "idx", "counter", "sample_counter", "packet_counter", "packetcounter")
 _UNITS = {"ns": ("time", "ns"), "us": ("time", "us"), "ms": ("time", "ms"), "s": ("time", "s"),
           "rad s^-1": ("gyro", "rad/s"), "rad/s": ("gyro", "rad/s"), "deg/s": ("gyro", "deg/s"),
           "dps": ("gyro", "deg/s"), "m s^-2": ("accel", "m/s^2"), "m/s^2": ("accel", "m/s^2"),
@@ -102,6 +108,11 @@ def detect_layout(path, *, delimiter):
             ukind, uname = _UNITS[unit.lower()]
             if ukind == kind:
                 units[kind] = uname
+    if "t" not in columns:
+        counter = next((j for j, cell in enumerate(cells) if _normal(cell)[0] in SAMPLE_COUNTER_NAMES), None)
+        if counter is not None:
+            columns["t"] = counter
+            units["time"] = "samples"
     missing = [k for k in ("gx", "gy", "gz", "ax", "ay", "az") if k not in columns]
     if missing:
         other = next((name for name, d in DELIMITERS.items() if d not in (delimiter, None, " ") and len(cells) == 1
@@ -113,6 +124,8 @@ def detect_layout(path, *, delimiter):
                          f"{', '.join(missing)}: give --columns (e.g. t=0,gx=1,gy=2,gz=3,ax=4,ay=5,az=6)",
                          path=path, dataset=f"line {header_lines}")
     notes = ["columns from the header line: " + ", ".join(f"{k}={cells[j].strip()}" for k, j in columns.items())]
+    if units.get("time") == "samples":
+        notes.append(f"{cells[columns['t']].strip()} read as a sample counter: t = index / --rate-hz")
     if header_lines > 1:
         notes.append(f"{header_lines - 1} line(s) above the header line read as comments")
     if "t" in columns and "time" not in units:
@@ -167,4 +180,4 @@ def _numeric(line, delimiter):
     return False
 
 
-__all__ = ["detect_layout", "NANOSECOND_STAMPS_ABOVE"]
+__all__ = ["detect_layout", "NANOSECOND_STAMPS_ABOVE", "SAMPLE_COUNTER_NAMES"]

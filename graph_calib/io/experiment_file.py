@@ -271,7 +271,7 @@ def _check_plausible_increments(dtheta, dv, t, rate, gravity, path):
         raise InputError(
             f"|dtheta| / dt = {omega[k]:.6g} rad/s exceeds {MAX_ANGULAR_RATE_RADPS:g} rad/s "
             f"({MAX_ANGULAR_RATE_RADPS * c.RAD_TO_DEG:.0f} deg/s): degrees written for radians, "
-            "or rates written for increments?",
+            "or rates written for increments? (graph-calib import csv: --gyro-units deg/s for a log in deg/s)",
             path=path, dataset=_DTHETA, index=k)
     f = np.linalg.norm(dv, axis=1) / dt
     bad = f > MAX_SPECIFIC_FORCE_MPS2
@@ -286,7 +286,8 @@ def _check_plausible_increments(dtheta, dv, t, rate, gravity, path):
     if not lo * gravity <= med <= hi * gravity:
         raise InputError(
             f"median |dv| / dt over the record is {med:.6g} m/s^2, outside [{lo:g}, {hi:g}] x gravity "
-            f"({gravity:g} m/s^2): increments in g units, or not in m/s?",
+            f"({gravity:g} m/s^2): increments in g units, or not in m/s? (graph-calib import csv: --accel-units g for "
+            "a log in g)",
             path=path, dataset=_DV)
 
 

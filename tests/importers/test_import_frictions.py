@@ -358,3 +358,50 @@ def test_numbers_with_a_decimal_comma_are_named(tmp_path, capsys, extra):
     assert cli.main(argv) == 2
     err = capsys.readouterr().err
     assert "line 1: the numbers have a decimal comma (0,000000;" in err and "--delimiter semicolon" in err, err
+
+
+def _counter_log(tmp_path, *, skip=None, deg=True):
+    """imucal's example layout: a sample counter, the gyros in deg/s, the accelerometers in m/s^2, no time column."""
+    n = 300
+    omega, f = _signals(n)
+    index = np.arange(n)
+    if skip is not None:
+        index[skip:] += 1                                # one sample lost at ``skip``
+    rows = [[int(index[k]), *(np.degrees(omega[k]) if deg else omega[k]), *f[k]] for k in range(n)]
+    return _write(tmp_path / "session.csv", "n_samples,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z", rows), omega
+
+
+def test_a_sample_counter_is_the_time_column_and_asks_for_the_rate_by_its_option(tmp_path, capsys):
+    path, omega = _counter_log(tmp_path)
+    base = ["import", "csv", str(path), "--latitude-deg", "45", "--temperature", "20", "--gyro-units", "deg/s",
+            "--out", str(tmp_path / "x.h5")]
+    assert cli.main(base) == 2
+    assert (f"{path}: --rate-hz: the time column counts samples: give the sample rate (--rate-hz HZ), t = index / "
+            "rate_hz") in capsys.readouterr().err
+    assert cli.main(base + ["--rate-hz", "102.4"]) == 0
+    printed = capsys.readouterr().out
+    assert "t=n_samples" in printed and "n_samples read as a sample counter: t = index / --rate-hz" in printed
+    exp = io.read_experiment(tmp_path / "x.h5")
+    assert exp.rate_hz == 102.4 and exp.n_samples == 300
+    np.testing.assert_allclose(exp.t, np.arange(300) / 102.4, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(exp.dtheta[1:], omega[1:] / 102.4, rtol=1e-9)
+
+
+def test_a_sample_counter_that_skips_names_the_lost_sample(tmp_path, capsys):
+    path, _ = _counter_log(tmp_path, skip=120)
+    assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--temperature", "20", "--gyro-units",
+                     "deg/s", "--rate-hz", "100", "--out", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert (f"{path}: t: the sample counter steps from 119 to 121 (input line 122): 1 sample(s) lost. Mark where each "
+            "piece starts with a segment column") in err
+
+
+def test_a_log_in_deg_per_s_read_as_radians_names_the_units_option(tmp_path, capsys):
+    n = 300
+    omega, f = _signals(n)
+    omega[100:110] = [20.0, 0.0, 0.0]                    # a fast turn: 20 rad/s, 1146 deg/s, written in deg/s
+    path = _write(tmp_path / "d.csv", "t,gx,gy,gz,ax,ay,az",
+                  [[repr(k / RATE), *np.degrees(omega[k]), *f[k]] for k in range(n)])
+    assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--temperature", "20",
+                     "--out", str(tmp_path / "x.h5")]) == 2
+    assert "(graph-calib import csv: --gyro-units deg/s for a log in deg/s)" in capsys.readouterr().err

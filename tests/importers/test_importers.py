@@ -317,7 +317,7 @@ def test_csv_errors(tmp_path):
         importers.import_csv(path, columns={k: v for k, v in COLS.items() if k != "az"}, **kw)
     with pytest.raises(InputError, match=re.escape(f"{path}: columns: column 9 of temp is beyond the 8 columns")):
         importers.import_csv(path, columns={**COLS, "temp": 9}, **kw)
-    with pytest.raises(InputError, match="rate_hz: no time column: give the sample rate"):
+    with pytest.raises(InputError, match=re.escape(f"{path}: --rate-hz: no time column: give the sample rate (--rate-hz HZ)")):
         importers.import_csv(path, columns={k: v for k, v in COLS.items() if k != "t"}, **kw)
     with pytest.raises(InputError, match="--temperature: no temperature column"):
         importers.import_csv(path, columns={k: v for k, v in COLS.items() if k != "temp"}, **kw)
@@ -415,7 +415,8 @@ def test_csv_sample_index_time_with_rate(tmp_path):
 def test_csv_sample_index_time_needs_the_rate(tmp_path):
     path = _text_csv(tmp_path, _rows(t=str))
     with pytest.raises(InputError, match=re.escape(
-            "rate_hz: time units 'samples': give the sample rate (--rate-hz), t = index / rate_hz")):
+            f"{path}: --rate-hz: the time column counts samples: give the sample rate (--rate-hz HZ), t = index / "
+            "rate_hz")):
         importers.import_csv(path, columns=COLS_TEXT, time_units="samples", **KW)
 
 
