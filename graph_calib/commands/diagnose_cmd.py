@@ -16,8 +16,9 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from graph_calib.commands.model_options import (add_gyro_range, add_moving, add_still, add_sway, check_gyro_range,
-                                                 finite_float, moving_of, still_of, sway_of, with_gyro_range)
+from graph_calib.commands.model_options import (add_guided_turns, add_gyro_range, add_moving, add_still, add_sway, check_gyro_range,
+                                                 finite_float, guided_turns_of, moving_of, still_of, sway_of,
+                                                 with_gyro_range)
 from graph_calib.commands.paths import earlier_results, make_output_folder
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade, grade_warning
@@ -32,6 +33,7 @@ def add_arguments(p):
     add_gyro_range(p)
     add_moving(p)
     add_still(p)
+    add_guided_turns(p)
     p.add_argument("--holdout", action=argparse.BooleanOptionalAction, default=True,
                    help="without a table, adopt an effect only when it does not make the held-out figures (two "
                         "folds of the rests) worse (default; --no-holdout adopts on the score tests alone; "
@@ -81,7 +83,8 @@ def _options(args, *, grade="navigation"):
     calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade,
                                                  extra_effects=tuple(args.effect), sway_sigma=sway_of(args),
                                                  moving_sigma=moving_of(args),
-                                                 still_at_rest=still_of(args)),
+                                                 still_at_rest=still_of(args),
+                                                 guided_turns=guided_turns_of(args)),
                                              graph=graph, t_ref_degC=args.t_ref)
     solvers = registry.primary_first(registry.parse_choice(args.solver)[0])
     diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers,

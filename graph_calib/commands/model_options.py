@@ -46,6 +46,32 @@ def still_of(args):
     return bool(getattr(args, "still_rests", False))
 
 
+def add_guided_turns(parser):
+    """``--guided-turns DEG|off``: a Ferraris session's full turns about the vertical, ``ModelOptions.guided_turns``."""
+    parser.add_argument("--guided-turns", default=None, metavar="DEG|off",
+                        help="full turns about the vertical between two rests on one face are a Ferraris session's "
+                             "guided turns (slid flat, pressed against a guide before and after): they close and stay "
+                             "flat within this spread, deg (default 0.5, used where such turns are found); 'off' takes "
+                             "them for motion like any other (docs/model.md, \"Guided full turns\")")
+
+
+def guided_turns_of(args):
+    """``ModelOptions.guided_turns`` from ``--guided-turns``: True (the default spread), False (off) or a spread in
+    rad."""
+    text = getattr(args, "guided_turns", None)
+    if text is None:
+        return True
+    if str(text).lower() == "off":
+        return False
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"must be 'off' or a positive number of degrees, got {text!r}", dataset="--guided-turns")
+    return math.radians(value)
+
+
 def add_gyro_range(parser):
     """``--gyro-range-dps DPS``: the record cut after each saturated episode before the work (records/saturation)."""
     parser.add_argument("--gyro-range-dps", type=finite_float, default=None, metavar="DPS",
@@ -131,4 +157,4 @@ def noise_of(args):
 
 
 __all__ = ["finite_float", "add_sway", "sway_of", "add_still", "still_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise",
-           "noise_of", "add_gyro_range", "check_gyro_range", "with_gyro_range"]
+           "noise_of", "add_gyro_range", "check_gyro_range", "with_gyro_range", "add_guided_turns", "guided_turns_of"]

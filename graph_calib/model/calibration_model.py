@@ -15,7 +15,7 @@ import numpy as np
 
 from graph_calib.constants import omega_ie_n as _omega_ie_n
 from graph_calib.sensors.effects import uninformed, with_lower_orders
-from graph_calib.model import factors
+from graph_calib.model import factors, guided_turns
 from graph_calib.model.options import ModelOptions
 from graph_calib.model.preintegration import SensorTerms, preintegrate
 from graph_calib.model.record import PreparedRecord
@@ -147,6 +147,10 @@ class CalibrationModel:
         self.initial_attitude_sigma = self._initial_attitude_sigma(record.experiment)
         self.terms = SensorTerms.of(self.layout)
         self.still_keys = self._still_keys()
+        # a Ferraris session's turns about the vertical, where the rests are known and no table reads the attitude
+        self.turns = guided_turns.find_guided_turns(record) if self.turn_sigma is not None and not record.has_table \
+            else np.zeros((0, 2), dtype=np.int64)
+        self.turn_keys = np.repeat(self.turns[:, 0], self.turns[:, 1] - self.turns[:, 0])
 
     # -- the record's figures every caller needs ----------------------------
 
@@ -415,6 +419,20 @@ class CalibrationModel:
         """
         return self.noise.scaled("still", factors.still_factors(self.record, R, preint, x, keys=self.still_keys,
                                                                  sigma=np.sqrt(self._still_variance())))
+
+    @property
+    def turn_sigma(self):
+        """The guided turns' protocol sigma, rad, or None (:attr:`ModelOptions.guided_turns`)."""
+        g = self.options.guided_turns
+        if g is None or g is False:
+            return None
+        return guided_turns.DEFAULT_SIGMA if g is True else float(g)
+
+    def turn_factors(self, R, preint, x):
+        """:func:`graph_calib.model.guided_turns.turn_factors` of this model's guided turns; the kind's variance factor
+        (``turn``) scales them."""
+        return self.noise.scaled(guided_turns.KIND, guided_turns.turn_factors(
+            self.record, R, preint, x, turns=self.turns, sigma=self.turn_sigma or 0.0, gyro_noise=self.noise.gyro))
 
     def rotation_factors(self, R, preint, x):
         """:func:`graph_calib.model.factors.rotation_factors` of this model."""

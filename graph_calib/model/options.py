@@ -59,6 +59,11 @@ class ModelOptions:
         :func:`graph_calib.model.factors.still_factors`: the rests' gyro integrals then inform the gyro biases, as a
         Ferraris calibration's rests do).  Where the rests are known (a static mask); off by default (docs/model.md,
         "A unit at rest does not turn").
+    guided_turns : float or bool or None
+        A Ferraris session's full turns about the vertical, slid flat and pressed against a guide before and after
+        (:mod:`graph_calib.model.guided_turns`): the protocol's one sigma per axis, rad (True, the default: 0.5
+        deg); None or False: such turns are motion like any other.  Found where the rests are known and no table
+        reads the attitude (a record without such turns is not changed).
     n_newton : int
         Newton steps of the sensor-model inversion.
     noise_source : dict
@@ -99,6 +104,7 @@ class ModelOptions:
     moving_sigma: float | str | None = None
     sway_sigma: float | str | None = None
     still_at_rest: bool = False
+    guided_turns: float | bool | None = True
     n_newton: int = 2
     noise_source: dict = field(default_factory=dict)
     noise_identified: dict = field(default_factory=dict)

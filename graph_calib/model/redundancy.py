@@ -182,7 +182,10 @@ def fit_statistics(model, attitudes, x):
         return {"rotation": 1.0 - own, "encoder": own - fl}
 
     def keep_rows(kind, res, sl, r, A, B, X, cols, ne):
-        rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X, None, shares_of(kind, res, sl)))
+        # a weightless row (sigma infinite: a guided turn's two-row tilt in a three-row factor) is no measurement
+        weighted = np.isfinite(res.sigma[sl])
+        rows.setdefault(kind.name, []).append((r, res.key[sl], A, B, X, None if weighted.all() else weighted,
+                                               shares_of(kind, res, sl)))
         if kind.name == "gravity" and moving is not None:
             # the moving keyframes' gravity factors again, on their own (their sigma is moving_sigma's)
             m = moving[res.key[sl]]
@@ -234,7 +237,7 @@ def fit_statistics(model, attitudes, x):
                 r, h = np.where(mask, r, 0.0), np.where(mask, h, 1.0)
             chi2 += float(np.sum(r**2))
             redundancy += float(np.sum(1.0 - h))
-            count += int(r.shape[0] if mask is None else np.count_nonzero(mask))
+            count += int(r.shape[0] if mask is None or name not in PSEUDO_KINDS else np.count_nonzero(mask))
             if name == FLOORED:
                 share_redundancy += float(np.sum((1.0 - h) * shares[FLOORED]))
             elif name not in PSEUDO_KINDS:

@@ -29,6 +29,7 @@ import numpy as np
 
 from graph_calib.model.factors import encoder_columns
 from graph_calib.model.gravity_gyro_noise import condition_on_gravity
+from graph_calib.model.guided_turns import KIND as TURN
 from graph_calib.model.heading_axes import to_body_axes
 from graph_calib.model.shared_gyro_noise import decorrelate
 from graph_calib.model.still_fusion import fuse_still
@@ -78,6 +79,8 @@ class FactorKind:
             return model.record.reading_t
         if self.name == "still":
             return model.t_key[model.still_keys]
+        if self.name == TURN:
+            return model.t_key[model.turn_keys]
         return model.t_key[:-1]
 
     def robust_groups(self, res, *, robust, robust_k):
@@ -96,6 +99,7 @@ FACTOR_KINDS = (
     FactorKind("gravity", "gravity_factors", robust=True),
     FactorKind("encoder", "encoder_factors", robust=True, per_keyframe=True),
     FactorKind("still", "still_factors", robust=True, optional=True),
+    FactorKind(TURN, "turn_factors", robust=True, optional=True),
 )
 #: Their names.
 KIND_NAMES = tuple(k.name for k in FACTOR_KINDS)

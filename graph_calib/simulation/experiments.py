@@ -294,13 +294,14 @@ def _random_poses(r_prog, *, rate_hz, duration_s, n_poses, initial_static_s, hol
 def _make_handheld_experiment(*, file_name, scenario, imu, imu_id, seed, rate_hz, duration_s, n_poses,
                               initial_static_s, hold_s, turn_s, translation_m, latitude_rad, gravity_mps2,
                               noise, description, tag, cut=False, pivot_m=0.0, hand_accel_mps2=0.0,
-                              program="poses", noise_factor=1.0, face_s=10.0, rest_s=5.0, gyro_noise_factor=1.0):
+                              program="poses", noise_factor=1.0, face_s=10.0, rest_s=5.0, gyro_noise_factor=1.0,
+                              guided=False):
     g = params.grade(imu.grade)
     spec = SensorNoiseSpec(gyro=g.gyro_noise * noise_factor * gyro_noise_factor, accel=g.accel_noise * noise_factor)
     r_prog, r_therm, r_noise = _child_rngs(seed, 3)
     if program == "ferraris":
         motion, full_turns = ferraris_motion(rate_hz, rng=r_prog, initial_static_s=initial_static_s,
-                                              face_s=face_s, rest_s=rest_s)
+                                              face_s=face_s, rest_s=rest_s, guided=guided)
         k = len(motion.turn_ticks())
     else:
         motion, k = _random_poses(r_prog, rate_hz=rate_hz, duration_s=duration_s, n_poses=n_poses,

@@ -21,6 +21,8 @@ from graph_calib.simulation.handheld import HandheldMotion
 FACES = ((0, 0, 1), (0, 0, -1), (1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0))
 #: For each body axis turned round, the face the unit rests on meanwhile (an axis across it is up).
 ROTATION_FACES = {0: (0, 0, 1), 1: (1, 0, 0), 2: (0, 1, 0)}
+#: The same with the turns guided (imucal's guide): the axis turned round is up, the unit slid flat on the surface.
+GUIDED_ROTATION_FACES = {0: (1, 0, 0), 1: (0, 1, 0), 2: (0, 0, 1)}
 
 
 def _rot_z(a):
@@ -51,7 +53,7 @@ def _length(rng, spec):
 
 
 def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=(1.5, 2.5),
-                    rotation_s=(3.0, 5.0), rest_s=5.0):
+                    rotation_s=(3.0, 5.0), rest_s=5.0, guided=False):
     """The Ferraris-style programme as a hand-held motion.
 
     Parameters
@@ -70,6 +72,10 @@ def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=
         Range of a full turn's length, s.
     rest_s : float or (float, float)
         Rest before and after each full turn, s (a range: drawn per rest).
+    guided : bool
+        Each full turn about the body axis that is up, the unit slid flat on a level surface and back to its
+        start (imucal's guide: pressed against a box before and after), instead of about a horizontal axis.
+        The same draws either way.
 
     Returns
     -------
@@ -101,7 +107,8 @@ def ferraris_motion(rate_hz, *, rng, initial_static_s=20.0, face_s=10.0, turn_s=
         motion.hold(_length(rng, face_s))
     rotations = []
     for axis in range(3):
-        go(face_attitude(ROTATION_FACES[axis], rng.uniform(0.0, 2.0 * np.pi)), rng.uniform(*turn_s))
+        faces = GUIDED_ROTATION_FACES if guided else ROTATION_FACES
+        go(face_attitude(faces[axis], rng.uniform(0.0, 2.0 * np.pi)), rng.uniform(*turn_s))
         motion.hold(_length(rng, rest_s))
         phi = np.zeros(3)
         phi[axis] = 2.0 * np.pi * (1.0 if rng.uniform() < 0.5 else -1.0)
@@ -116,4 +123,4 @@ def _unit(v):
     return v / np.linalg.norm(v)
 
 
-__all__ = ["FACES", "ROTATION_FACES", "face_attitude", "ferraris_motion"]
+__all__ = ["FACES", "ROTATION_FACES", "GUIDED_ROTATION_FACES", "face_attitude", "ferraris_motion"]

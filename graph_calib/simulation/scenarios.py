@@ -350,7 +350,8 @@ def consumer_handheld(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
 
 def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0, effects=(), effect_scale=1.0,
                       initial_static_s=20.0, latitude_deg=DEFAULT_LATITUDE_DEG, gravity_mps2=DEFAULT_GRAVITY_MPS2,
-                      cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag="", noise_factor=1.0, face_s=10.0, rest_s=5.0):
+                      cut=False, pivot_m=0.0, hand_accel_mps2=0.0, tag="", noise_factor=1.0, face_s=10.0, rest_s=5.0,
+                      guided=False):
     """A Ferraris-style session of a consumer MEMS IMU by hand, no table (about 2.5 min).
 
     Six static faces (10 s each, the first 20 s) joined by hand turns, then a
@@ -363,7 +364,9 @@ def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
     ``face_s`` and ``rest_s`` (s, a number or a range ``(lo, hi)`` drawn per rest) set the rests on the
     faces and around the full turns; ``initial_static_s=0`` starts the record in motion.  A session as
     a hand makes it: ``face_s=rest_s=(0.5, 1.5), initial_static_s=0, hand_accel_mps2=0.05``
-    (:data:`SHORT_REST_FERRARIS`).
+    (:data:`SHORT_REST_FERRARIS`).  ``guided``: each full turn about the axis that is up, slid flat on a level
+    surface and back to its start, as imucal's guide has it (:data:`GUIDED_FERRARIS`;
+    :mod:`graph_calib.model.guided_turns`).
     """
     if hours is not None:
         raise InputError("consumer-ferraris has a fixed programme (six faces, three full turns): no --hours")
@@ -373,6 +376,7 @@ def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
     imu = draw_imu("consumer", rng=np.random.default_rng(imu_seed), effects=effects, effect_scale=effect_scale,
                    errors=errors, curvature=False, exclude=exclude)
     desc = ("graph-calib simulate consumer-ferraris: consumer MEMS IMU by hand, six faces and three full turns"
+            + (" about the vertical, guided" if guided else "")
             + (", the turns between faces cut out (/imu/segment)" if cut else "")
             + ("" if noise else ", no noise") + ("" if errors else ", no errors") + (f"; {tag}" if tag else ""))
     make = partial(
@@ -382,13 +386,13 @@ def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
         latitude_rad=np.radians(latitude_deg), gravity_mps2=float(gravity_mps2), noise=noise, description=desc,
         tag=tag, cut=bool(cut), pivot_m=float(pivot_m), hand_accel_mps2=float(hand_accel_mps2), program="ferraris",
         noise_factor=_noise_keywords(noise_factor=noise_factor)["noise_factor"],
-        face_s=_rest_length(face_s, "face_s"), rest_s=_rest_length(rest_s, "rest_s"),
+        face_s=_rest_length(face_s, "face_s"), rest_s=_rest_length(rest_s, "rest_s"), guided=bool(guided),
     )
     plan = ExperimentPlan(file_name="ferraris.h5", make=make, summary="six faces and three full turns by hand"
                           + (", cut together" if cut else ""))
     info = {"rate_hz": rate_hz, "noise": noise, "errors": errors, "effects": list(effects), "cut": bool(cut),
             "pivot_m": pivot_m, "hand_accel_mps2": hand_accel_mps2, "face_s": face_s, "rest_s": rest_s,
-            "initial_static_s": initial_static_s}
+            "initial_static_s": initial_static_s, "guided": bool(guided)}
     return Simulation(scenario="consumer-ferraris", imu_id="SIM-MEMS 0002", grade="consumer", plans=(plan,),
                       imu=imu, exclude=exclude, info=info)
 
@@ -396,6 +400,10 @@ def consumer_ferraris(*, rng, hours=None, noise=True, errors=True, rate_hz=100.0
 #: consumer-ferraris as a hand makes it (issue 22): rests of 0.5-1.5 s on the faces and around the full
 #: turns, a swaying hand, the record starting in motion.
 SHORT_REST_FERRARIS = {"face_s": (0.5, 1.5), "rest_s": (0.5, 1.5), "initial_static_s": 0.0, "hand_accel_mps2": 0.05}
+#: consumer-ferraris as imucal's guide has it: each full turn about the axis that is up, slid flat on a level surface
+#: against a guide (:mod:`graph_calib.model.guided_turns`), rests of 3 s as the guide asks, the sensor 5 cm from the
+#: turn's axis (its centripetal acceleration tells the turn from a rest, as a real one does).
+GUIDED_FERRARIS = {"face_s": 5.0, "rest_s": 3.0, "initial_static_s": 5.0, "guided": True, "pivot_m": 0.1}
 
 
 def _rest_length(spec, name):
@@ -502,5 +510,5 @@ def simulate(name, *, rng, **options):
 __all__ = [
     "ExperimentPlan", "Simulation", "Scenario", "SCENARIOS", "scenario_names", "get_scenario", "simulate",
     "nav_subrange", "nav_subrange_short", "nav_campaign", "nav_campaign_cubic", "consumer_handheld", "consumer_ferraris", "effect_scenario",
-    "SHORT_REST_FERRARIS", "CAMPAIGN_SUBRANGES", "DEFAULT_LATITUDE_DEG", "DEFAULT_GRAVITY_MPS2",
+    "SHORT_REST_FERRARIS", "GUIDED_FERRARIS", "CAMPAIGN_SUBRANGES", "DEFAULT_LATITUDE_DEG", "DEFAULT_GRAVITY_MPS2",
 ]

@@ -76,7 +76,8 @@ def residual_block(output, *, statistics=None):
 def noise_block(model):
     """The result's ``noise`` block (data-format.md): the densities the solve used and where each came from.
 
-    ``gyro_rad_per_sqrt_s``, ``accel_mps_per_sqrt_s``, ``encoder_rad``, ``sway_mps2``; the rate random walks
+    ``gyro_rad_per_sqrt_s``, ``accel_mps_per_sqrt_s``, ``encoder_rad``, ``sway_mps2``; ``guided_turns`` (count and
+    protocol sigma, rad) where the record's full turns are the Ferraris protocol's; the rate random walks
     ``gyro_random_walk_rad_per_s_per_sqrt_s`` and ``accel_random_walk_mps2_per_sqrt_s`` where the rests support
     them; ``source`` per sensor
     (``identified`` from the record, ``declared`` by the user, or the ``grade``'s); and, where the record
@@ -94,6 +95,10 @@ def noise_block(model):
     out = {"gyro_rad_per_sqrt_s": model.gyro_noise, "accel_mps_per_sqrt_s": model.accel_noise,
            "encoder_rad": model.encoder_noise, "sway_mps2": float(sway) if isinstance(sway, (int, float)) else 0.0,
            "source": src}
+    if model.turns.size:
+        # the guided full turns used as the Ferraris protocol's (graph_calib.model.guided_turns): their count and the
+        # protocol's sigma before the turn kind's variance factor
+        out["guided_turns"] = {"count": int(model.turns.shape[0]), "sigma_rad": float(model.turn_sigma)}
     if model.gyro_quantization:
         # the gyros' angle quantization (IEEE Q) the encoder and gravity factors carry (docs/model.md)
         out["gyro_quantization_rad"] = model.gyro_quantization

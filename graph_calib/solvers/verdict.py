@@ -76,14 +76,21 @@ MIN_JUDGED_REDUNDANCY = 1.0
 #: The part of the gravity kind's figures the verdict judges where the moving keyframes' are apart (data-format.md).
 STATIC_PART = "static"
 #: The measurement kinds the verdict judges, and the sensor whose noise each is weighted by.
-JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder", "still": "gyro"}
+JUDGED_KINDS = {"rotation": "gyro", "gravity": "accel", "encoder": "encoder", "still": "gyro", "turn": "protocol"}
 #: What a kind's residuals measure, where its name does not say (the verdict's words).
-KIND_WORDS = {"still": "still (the rests' gyro integrals against the Earth's turn)"}
+KIND_WORDS = {"still": "still (the rests' gyro integrals against the Earth's turn)",
+              "turn": "guided-turn (the Ferraris protocol's full turns: closing, flat)"}
 #: A sensor's name in the verdict's words.
-SENSOR_WORDS = {"accel": "accelerometer", "encoder": "table-reading"}
+SENSOR_WORDS = {"accel": "accelerometer", "encoder": "table-reading", "protocol": "guided-turn protocol"}
 #: What beside a lacking effect makes a kind's residuals too large, where the sensor's noise is not all of it.
+#: Kinds whose sigma is a declared bound of a protocol (no noise identified): their residuals well below it are a
+#: note, in these words.
+DECLARED_SPREAD_KINDS = {"turn": "the guided turns close and stay flat better than their declared spread: what they "
+                                 "inform is weighted conservatively (--guided-turns DEG declares a tighter spread)"}
 KIND_CAUSES = {"still": "the unit turned while it rested (declare the rests still only where it sits on a surface), "
-                        "or the gyro noise is larger than assumed"}
+                        "or the gyro noise is larger than assumed",
+               "turn": "the full turns do not close or tilt more than a turn pressed against a guide on a level surface "
+                       "does (--guided-turns DEG declares their spread, --guided-turns off takes them for motion)"}
 
 
 def kind_limits(redundancy, *, alpha=RESIDUAL_ALPHA):
@@ -153,6 +160,10 @@ def judge_kinds(result):
             problems.append(f"{what} > {hi:.3g}: the {KIND_WORDS.get(kind, kind)} residuals are larger than their "
                             f"noise model; the model lacks an effect or {cause}; sigmas optimistic by about "
                             f"{v ** 0.5:.2g}x")
+        elif v < lo and kind in DECLARED_SPREAD_KINDS:
+            # a declared spread is a bound on the protocol, not a noise density: turns that keep it better are news,
+            # not a misfit
+            notes.append(f"{what} < {lo:.3g}: {DECLARED_SPREAD_KINDS[kind]}")
         elif v < lo:
             text = (f"{what} < {lo:.3g}: the {kind} residuals are smaller than their noise model; the "
                     f"{_overstated(kind, sensor, noise)} is overstated; "
@@ -163,6 +174,9 @@ def judge_kinds(result):
         if vf != 1.0:
             if source.get(sensor) == "grade":
                 notes.append(f"{kind}: variance factor {vf:.3g} on the {sensor} noise of the grade (none identified)")
+            elif vf > VARIANCE_FACTOR_LIMIT and kind in KIND_CAUSES:
+                problems.append(f"{kind} residuals need a variance factor {vf:.3g} > {VARIANCE_FACTOR_LIMIT:g} on "
+                                f"their declared noise: {KIND_CAUSES[kind]}")
             elif vf > VARIANCE_FACTOR_LIMIT:
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} > {VARIANCE_FACTOR_LIMIT:g} on "
                                 f"the {source.get(sensor, 'assumed')} {sensor} noise: the model lacks an effect "
@@ -188,6 +202,11 @@ def judge_kinds(result):
     tops = (noise.get("identified") or {}).get(SATURATION_SEEN_KEY)
     if tops:
         notes.append(_flat_top_text(tops))
+    turns = noise.get("guided_turns")
+    if turns:
+        notes.append(f"{turns['count']} full turn(s) about the vertical between two rests on one face taken as a "
+                     f"Ferraris session's guided turns (closing, flat; {math.degrees(turns['sigma_rad']):.2g} deg): "
+                     "--guided-turns off takes them for motion")
     staged = _staged_text((result.extra or {}).get("staged"))
     if staged:
         problems.append(staged)
@@ -198,6 +217,10 @@ def _factor_note(kind, sensor, factor, source):
     """The note of a kind whose variance factor lies within the limit but outside :data:`NOTE_FACTOR_BAND`."""
     what = KIND_WORDS.get(kind, kind)
     sensor = SENSOR_WORDS.get(sensor, sensor)
+    if kind in DECLARED_SPREAD_KINDS:
+        return (f"{kind}: variance factor {factor:.2g}: the {what} residuals scatter {factor:.2g} times, in variance, "
+                f"their declared spread (a hand's turns closing and lying flat less well than declared); the sigmas "
+                f"it governs are scaled by {factor ** 0.5:.2g}, as the residuals ask")
     if factor > 1.0:
         cause = (f"a small effect the model lacks (below the structure tests' thresholds), or {sensor} noise beyond "
                  "white over a keyframe (a bias instability)")

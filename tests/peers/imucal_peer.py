@@ -39,8 +39,13 @@ class ImucalCalibration:
         return np.asarray(gyr) * DEG_TO_RAD, np.asarray(acc)
 
 
-def ferraris_regions(experiment, rests):
-    """``{label: (start, stop)}`` of the six faces and the three full turns (module docstring)."""
+def ferraris_regions(experiment, rests, *, whole_turns=False):
+    """``{label: (start, stop)}`` of the six faces and the three full turns (module docstring).
+
+    ``whole_turns``: each turn's region runs from the middle of the rest before to the middle of the rest after, as
+    a user marks a whole turn whose slow start and end the rests' detector took for rest (a smooth turn about the
+    vertical leaves the specific force as it was); imucal takes the gyro bias off the static faces, so the rest in
+    the region adds nothing but its noise.  Default: between the two rests' edges."""
     f = experiment.dv / experiment.dt[:, None]
     g = float(experiment.gravity_mps2)
     out = {}
@@ -50,12 +55,13 @@ def ferraris_regions(experiment, rests):
         if abs(m[k]) > 0.8 * g:
             out.setdefault(FACE_NAMES[(k, int(np.sign(m[k])))], (int(a), int(b)))
     signs = {}
-    for (a0, b0), (a1, _) in zip(rests[:-1], rests[1:]):
-        angle = experiment.dtheta[b0:a1].sum(axis=0)
+    for (a0, b0), (a1, b1) in zip(rests[:-1], rests[1:]):
+        start, stop = ((a0 + b0) // 2, (a1 + b1) // 2) if whole_turns else (b0, a1)
+        angle = experiment.dtheta[start:stop].sum(axis=0)
         k = int(np.argmax(np.abs(angle)))
         if abs(angle[k]) > np.deg2rad(300.0):
             label = "xyz"[k] + "_rot"
-            out.setdefault(label, (int(b0), int(a1)))
+            out.setdefault(label, (int(start), int(stop)))
             signs.setdefault(k, float(np.sign(angle[k])))
     missing = sorted((set(FACE_NAMES.values()) | {"x_rot", "y_rot", "z_rot"}) - set(out))
     if missing:
@@ -63,9 +69,10 @@ def ferraris_regions(experiment, rests):
     return out, signs
 
 
-def imucal_ferraris(experiment, rests):
-    """imucal's Ferraris calibration of ``experiment`` (its rests ``[start, stop)``), as :class:`ImucalCalibration`."""
-    regions, signs = ferraris_regions(experiment, rests)
+def imucal_ferraris(experiment, rests, *, whole_turns=False):
+    """imucal's Ferraris calibration of ``experiment`` (its rests ``[start, stop)``), as :class:`ImucalCalibration`
+    (``whole_turns``: :func:`ferraris_regions`)."""
+    regions, signs = ferraris_regions(experiment, rests, whole_turns=whole_turns)
     f = experiment.dv / experiment.dt[:, None]
     w = experiment.dtheta / experiment.dt[:, None] * RAD_TO_DEG
     parts = []

@@ -7,7 +7,8 @@ from graph_calib import io
 from graph_calib.calibrate import calibrate
 from graph_calib.cli import main
 from graph_calib.compensation.calibration import Calibration
-from graph_calib.evaluation.crossval import Fold, held_out_figures, make_folds, record_rests, training_record
+from graph_calib.evaluation.crossval import (Fold, face_to_face_folds, held_out_figures, make_folds, record_rests,
+                                             training_record)
 from graph_calib.model import ModelOptions
 from graph_calib.options import CalibrationOptions
 
@@ -134,3 +135,54 @@ def test_the_sway_term_makes_a_hand_held_fold_s_gyro_scales_honest():
     assert np.max(np.abs(z)) < 3.0
     mine, before = (held_out_figures(exp, fold, Calibration.from_result(r)) for r in (swayed, still))
     assert mine.transitions_rms_deg < 0.7 * before.transitions_rms_deg
+
+
+def _guided_session(seed):
+    from graph_calib.simulation.scenarios import GUIDED_FERRARIS, simulate
+    made = simulate("consumer-ferraris", rng=np.random.default_rng(seed), **GUIDED_FERRARIS).plans[0].make()
+    return made.experiment, made.truth
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_guided_turns_inform_the_gyro_within_its_sigmas_and_both_solvers_agree(seed):
+    """imucal's protocol (each full turn about the axis that is up, slid flat against a guide): the product finds the
+    three turns and uses their closure and flatness; every gyro and accelerometer element within 3.5 sigma of the
+    truth, no gyro sigma larger than with the turns taken for motion, the two solvers agreeing.  (On the whole record
+    the faces' transitions already hold the gyro to 0.04 %; a closure of 0.5 deg over 360 deg adds 0.14 %: the turns
+    matter where the transitions are few, below.)"""
+    exp, truth = _guided_session(seed)
+    run = calibrate(exp, options=CONSUMER)
+    assert run.verdict.agree and run.verdict.max_difference_sigma < 0.1
+    guided = run.results["factor-graph"]
+    assert guided.extra["noise"]["guided_turns"]["count"] == 3
+    off = calibrate(exp, options=CalibrationOptions(model=ModelOptions(grade="consumer", guided_turns=False)),
+                    solvers=("factor-graph",)).results["factor-graph"]
+    z = [(guided.values[k] - truth.values[k]) / guided.sigmas[k] for k in guided.values
+         if k.startswith(("gyro.", "accel.")) and "_tc" not in k]
+    assert np.max(np.abs(z)) < 3.5
+    for k in guided.sigmas:
+        if k.startswith("gyro."):
+            assert guided.sigmas[k] <= off.sigmas[k] * (1.0 + 1e-6)
+
+
+def test_guided_turns_predict_the_held_out_face_to_face_turns():
+    """Every rest and full turn kept, the turns between faces held out (neither imucal nor the product fits them):
+    seeds 1-3, two folds each. Measured: the turns taken for motion 2.00 deg rms, guided 0.35 deg; imucal 0.065, the
+    truth 0.066 (imucal's box axes, exact in the simulator, give it the misalignments the product estimates from the
+    faces' transitions; the rest is seed 3's first fold, 0.76 deg, whose sensor 10 cm off the turn's axis leaves a
+    size effect in the rests' edges that the structure tests name)."""
+    rows = []
+    for seed in (1, 2, 3):
+        exp, truth = _guided_session(seed)
+        rests = record_rests(exp)
+        for fold in face_to_face_folds(exp, folds=2, rests=rests):
+            train = training_record(exp, fold, rests=rests)
+            fig = []
+            for guided in (False, True):
+                options = CalibrationOptions(model=ModelOptions(grade="consumer", guided_turns=guided))
+                r = calibrate(train, options=options, solvers=("factor-graph",)).results["factor-graph"]
+                fig.append(held_out_figures(exp, fold, Calibration.from_result(r)).transitions_rms_deg)
+            rows.append(fig)
+    off, guided = np.sqrt(np.mean(np.square(rows), axis=0))
+    assert guided < 0.25 * off
+    assert np.mean(np.array(rows)[:, 1] < 0.3) >= 0.8

@@ -304,3 +304,51 @@ def test_an_overstated_gravity_noise_with_a_sway_term_names_the_sway():
     assert any("accel noise or the sway term (0.0083 m/s^2" in p and "drop --sway-sigma" in p for p in v.problems)
     bare = _result({"gravity": (0.5, 900.0, 0.23), "rotation": (1.0, 60.0, 1.0)})
     assert not any("sway" in p for p in verdict_of({"factor-graph": bare}).problems)
+
+
+TURN_KINDS = {"rotation": (1.0, 60.0, 1.0), "gravity": (1.0, 900.0, 1.0)}
+
+
+@pytest.mark.parametrize("side", ["high", "low"])
+def test_guided_turns_either_side_of_their_limits(side):
+    """The guided turns' sigma is a declared spread of the protocol, not a noise density: turns that keep it better are
+    a note; turns that do not close or lie flat as declared fail, naming the remedies."""
+    nu = 40.0
+    lo, hi = kind_limits(nu)
+    edge = hi if side == "high" else lo
+    inside = dict(TURN_KINDS, turn=(edge * (0.99 if side == "high" else 1.01), nu, 1.0))
+    outside = dict(TURN_KINDS, turn=(edge * (1.01 if side == "high" else 0.99), nu, 1.0))
+    assert verdict_of({"factor-graph": _result(inside)}).passed
+    v = verdict_of({"factor-graph": _result(outside)})
+    if side == "low":
+        assert v.passed, v.problems
+        assert any(n.startswith("factor-graph: turn chi2/redundancy") and "better than their declared spread" in n
+                   and "--guided-turns DEG" in n for n in v.notes), v.notes
+    else:
+        assert not v.passed
+        (problem,) = v.problems
+        assert problem.startswith("factor-graph: turn chi2/redundancy")
+        assert "do not close or tilt more than a turn pressed against a guide" in problem
+        assert "--guided-turns off" in problem
+
+
+@pytest.mark.parametrize("vf, passes", [(VARIANCE_FACTOR_LIMIT * 0.99, True), (VARIANCE_FACTOR_LIMIT * 1.01, False)])
+def test_a_guided_turns_factor_beyond_the_limit_fails_in_the_protocols_words(vf, passes):
+    v = verdict_of({"factor-graph": _result(dict(TURN_KINDS, turn=(1.0, 40.0, vf)))})
+    assert v.passed == passes, v.problems
+    if passes:
+        assert any(n.startswith(f"factor-graph: turn: variance factor {vf:.2g}") and "their declared spread" in n
+                   for n in v.notes), v.notes
+    else:
+        (problem,) = v.problems
+        assert problem.startswith(f"factor-graph: turn residuals need a variance factor {vf:.3g} > "
+                                  f"{VARIANCE_FACTOR_LIMIT:g} on their declared noise: the full turns do not close")
+
+
+def test_the_guided_turns_used_are_a_note_naming_the_option():
+    res = _result(TURN_KINDS)
+    res.extra["noise"]["guided_turns"] = {"count": 3, "sigma_rad": np.radians(0.5)}
+    v = verdict_of({"factor-graph": res})
+    assert v.passed
+    assert any("3 full turn(s) about the vertical between two rests on one face taken as a Ferraris session's guided "
+               "turns (closing, flat; 0.5 deg): --guided-turns off takes them for motion" in n for n in v.notes)
