@@ -109,6 +109,15 @@ def turntable_experiment(*, layout, x, rng=None, noise=None, static_s=120.0, dwe
     return exp, C_end
 
 
+def perturbed_point(model, *, rng):
+    """``(x, preint, R)``: a calibration of 1e-3 per element and the attitudes it propagates, each turned by 1e-2 rad
+    at random: a linearisation point off the solution, where a Jacobian check means something."""
+    x = rng.normal(size=model.layout.size) * 1e-3
+    preint = model.preintegrate(x)
+    R = model.propagate(np.eye(3), preint, x) @ exp_so3(rng.normal(size=(model.n_keyframes + 1, 3)) * 1e-2)
+    return x, preint, R
+
+
 def assert_calibration_jacobian_matches_fd(model, factors, R, x, *, H_x, eps, rtol, atol=0.0):
     """Each column of ``H_x`` (F, 3, P), the calibration Jacobian of ``factors(R, preint, x)`` (a model's
     factor method), against central differences of step ``eps``, each re-preintegrated:

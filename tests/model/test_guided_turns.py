@@ -14,7 +14,7 @@ from graph_calib.records.problem import build_problem
 from graph_calib.simulation.scenarios import GUIDED_FERRARIS, SHORT_REST_FERRARIS, simulate
 from graph_calib.solvers import solve
 
-from _synthetic import assert_calibration_jacobian_matches_fd
+from _synthetic import assert_calibration_jacobian_matches_fd, perturbed_point
 
 EPS = 1e-6
 CONSUMER = CalibrationOptions(model=ModelOptions(grade="consumer"))
@@ -27,12 +27,7 @@ def _ferraris(seed, **kw):
 @pytest.fixture(scope="module")
 def guided():
     problem = build_problem(_ferraris(1, **GUIDED_FERRARIS), options=CONSUMER)
-    model = problem.model
-    rng = np.random.default_rng(3)
-    x = rng.normal(size=model.layout.size) * 1e-3
-    preint = model.preintegrate(x)
-    R = model.propagate(np.eye(3), preint, x) @ exp_so3(rng.normal(size=(model.n_keyframes + 1, 3)) * 1e-2)
-    return problem, x, preint, R
+    return (problem, *perturbed_point(problem.model, rng=np.random.default_rng(3)))
 
 
 def test_the_three_guided_turns_are_found_each_a_whole_turn_about_the_rests_vertical(guided):

@@ -12,7 +12,7 @@ from graph_calib.model.residual_list import FACTOR_KINDS, residual_list
 from graph_calib.model.still_fusion import fuse_still
 from graph_calib.navigation.rotations import exp_so3, log_so3
 
-from _synthetic import assert_pair_jacobians_match_fd, wobbly_experiment
+from _synthetic import assert_pair_jacobians_match_fd, perturbed_point, wobbly_experiment
 
 EPS = 1e-6
 
@@ -28,10 +28,7 @@ def problem():
     exp = wobbly_experiment(rng=rng)
     model = CalibrationModel(exp, options=ModelOptions(keyframe_s=0.5, still_at_rest=True),
                              static_mask=_static_mask(exp))
-    x = rng.normal(size=model.layout.size) * 1e-3
-    preint = model.preintegrate(x)
-    R = model.propagate(np.eye(3), preint, x) @ exp_so3(rng.normal(size=(model.n_keyframes + 1, 3)) * 1e-2)
-    return model, x, preint, R
+    return (model, *perturbed_point(model, rng=rng))
 
 
 def test_still_factor_jacobians_in_both_attitudes_match_fd(problem):
