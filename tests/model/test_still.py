@@ -10,7 +10,7 @@ from graph_calib.model import CalibrationModel, ModelOptions
 from graph_calib.model.calibration_model import STILL_FRACTION
 from graph_calib.model.residual_list import FACTOR_KINDS, residual_list
 from graph_calib.model.still_fusion import fuse_still
-from graph_calib.navigation.rotations import exp_so3, log_so3
+from graph_calib.navigation.rotations import log_so3
 
 from _synthetic import assert_pair_jacobians_match_fd, perturbed_point, wobbly_experiment
 
