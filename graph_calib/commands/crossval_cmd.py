@@ -29,9 +29,11 @@ def add_arguments(p):
     p.add_argument("experiment", help="experiment file (HDF5, data-format.md): a multi-position record")
     p.add_argument("--out", required=True, help="output folder (crossval.json)")
     p.add_argument("--folds", type=int, default=2, help="number of folds (default 2)")
-    p.add_argument("--by", choices=("pairs", "rests", "segments", "transitions"), default="pairs",
+    p.add_argument("--by", choices=("pairs", "rests", "segments", "transitions", "faces"), default="pairs",
                    help="what is held out: consecutive pairs of rests in turn (default), contiguous blocks of rests, "
-                        "whole segments of /imu/segment, or only the rotations between rests (docs/crossval.md)")
+                        "whole segments of /imu/segment, only the rotations between rests, or only those between two "
+                        "faces, every full turn kept (a Ferraris session judged as imucal never fits it; "
+                        "docs/crossval.md)")
     p.add_argument("--solver", choices=DEFAULT_SOLVERS, default=DEFAULT_SOLVERS[-1],
                    help=f"the solver whose result is judged (default {DEFAULT_SOLVERS[-1]})")
     p.add_argument("--diagnose", action="store_true",

@@ -25,9 +25,11 @@ the units are dealt to the ``K`` folds:
     to the start of rest ``i + 1``, dealt in turn), every rest stays in the training record: the gyro
     triad is judged out of sample on the transitions while the accelerometer triad keeps every pose
     (a six-face session has no face to spare); the static figures are then not held out and are left
-    out (NaN).  :func:`face_to_face_folds` deals the rotations between two faces alone, the full turns
-    of a Ferraris session kept for training with the rests (what imucal fits, so that on the held-out
-    motions both are out of sample).
+    out (NaN);
+``by="faces"``
+    :func:`face_to_face_folds`: the rotations between two faces alone, dealt in turn, the full turns of a
+    Ferraris session kept for training with the rests (what imucal fits, so that on the held-out motions both
+    are out of sample).
 
 A unit's held-out span runs from the first sample of its first rest to the first sample of the rest
 after its last (or the record's end), so the rotations inside a unit are held out with its rests and
@@ -186,7 +188,8 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
     experiment : graph_calib.records.experiment.Experiment
     folds : int
         Number of folds, at least 2.
-    by : {'pairs', 'rests', 'segments', 'transitions'}
+    by : {'pairs', 'rests', 'segments', 'transitions', 'faces'}
+        ``faces``: :func:`face_to_face_folds` (the rotations between two faces alone; every rest and full turn stays).
     rests : array_like of int, shape (P, 2), optional
         ``[start, stop)`` of the rests; default :func:`record_rests`.
 
@@ -197,6 +200,8 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
     if folds < 2:
         raise InputError(f"needs at least 2 folds, got {folds}", dataset="--folds")
     rests = record_rests(experiment) if rests is None else np.asarray(rests, dtype=np.int64).reshape(-1, 2)
+    if by == "faces":
+        return face_to_face_folds(experiment, folds=folds, rests=rests)
     n, p = experiment.n_samples, rests.shape[0]
     if by == "segments":
         bounds = experiment.segment_bounds()
@@ -222,7 +227,7 @@ def make_folds(experiment, *, folds=2, by="pairs", rests=None):
         units = [idx for idx in np.array_split(np.arange(p), folds)]
         owner = np.arange(len(units))
     else:
-        raise InputError(f"folds are made by 'pairs', 'rests', 'segments' or 'transitions', not {by!r}",
+        raise InputError(f"folds are made by 'pairs', 'rests', 'segments', 'transitions' or 'faces', not {by!r}",
                          dataset="--by")
     if p < 2 * folds or len(units) < folds:
         raise InputError(f"has {p} rest(s): {folds} folds need at least {2 * folds} (two per fold, one rotation "
@@ -420,5 +425,5 @@ def crossval_table(cv):
         lines.append(row(str(f.fold.index + 1), f.calibrated.n_rests, f.calibrated.__dict__, f.raw.__dict__))
     lines.append(row("all", sum(f.calibrated.n_rests for f in cv.folds), cv.pooled("calibrated"), cv.pooled("raw")))
     if cv.by == "transitions":
-        lines.append("(-: not held out; with folds by transitions every rest stays in the training record)")
+        lines.append("(-: not held out; with folds by transitions or faces every rest stays in the training record)")
     return "\n".join(lines)

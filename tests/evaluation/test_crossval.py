@@ -64,6 +64,8 @@ def test_face_to_face_folds_hold_out_the_rotations_between_faces_and_keep_the_fu
     assert sorted(held) == sorted(t for t, a in angle.items() if a < FULL_TURN_DEG)
     assert sum(a > FULL_TURN_DEG for a in angle.values()) == 3          # the three full turns, none held out
     assert len(folds[0].spans) - len(folds[1].spans) in (0, 1)
+    # make_folds (and crossval --by faces) deals the same folds
+    assert [f.spans for f in make_folds(exp, by="faces", rests=rests)] == [f.spans for f in folds]
     with pytest.raises(InputError, match="rotation.s. between two faces"):
         face_to_face_folds(exp, rests=rests, folds=len(held) + 1)
 
