@@ -27,6 +27,15 @@ before, and with a short window (:func:`short_window_s`) whose length follows fr
 the scatter it estimates; the short pass adds the rests the first left out, at least two short windows
 long.  The noise identification (:func:`find_rests`, Allan variances) keeps its 2 s rests: a record with
 only short rests has no identified noise and falls back to its grade's (said in the result).
+
+A rest does not turn (:func:`_not_turning`).  The first pass judges the specific force alone, and a turn about
+the vertical leaves it as it was where the sensor sits near the axis: the slow start and end of a Ferraris
+session's guided turn (and a turntable's) passed for rest, their gravity factors and the transitions measured
+from them tilted by the turn.  Its rests therefore lose the samples whose window-mean rate departs from the
+rests' median (the gyro bias and the Earth rate) by more than :data:`TURNING_RATE`, 3 deg/s: on the simulated
+guided sessions 0.8-1.0 s of each turn's rests; on the Xsens session, the imucal session and the simulated
+sessions whose turns are about a horizontal axis nothing, on the MPU-6050 session two samples, on hand-held
+sessions a few (a hand's slow drift).
 """
 
 from __future__ import annotations
@@ -93,7 +102,7 @@ def segment_static(piece, *, threshold):
 
 def segment_static_parts(piece, *, threshold):
     """``(detect_static's intervals, the short rests the short pass adds)`` of one segment, each shape (P, 2)."""
-    long = np.asarray(detect_static(piece, threshold=threshold), dtype=np.int64).reshape(-1, 2)
+    long = _not_turning(piece, np.asarray(detect_static(piece, threshold=threshold), dtype=np.int64).reshape(-1, 2))
     w = short_window_s(piece.rate_hz)
     th_g = quiet_threshold(piece.dtheta / piece.dt[:, None], rate_hz=piece.rate_hz, window_s=w)
     short = np.asarray(detect_static(piece, threshold=threshold, window_s=w, min_duration_s=SHORT_REST_WINDOWS * w,
@@ -111,6 +120,34 @@ def segment_static_parts(piece, *, threshold):
     c = np.concatenate([[0], np.cumsum(inside)])
     free = (c[short[:, 1]] - c[short[:, 0]]) == 0
     return long, short[free]
+
+
+#: A rest's window-mean rate departs from the rests' own (the gyro bias and the Earth rate) by less than this, rad/s
+#: (module docstring).
+TURNING_RATE = np.radians(3.0)
+
+
+def _not_turning(piece, long):
+    """The rests ``long`` (P, 2) less their samples whose window-mean rate departs from the rests' median by more than
+    :data:`TURNING_RATE`: a smooth turn about the vertical leaves the specific force as it was where the sensor sits
+    near the axis, so its slow start and end pass the accelerometer's test; runs shorter than a window are dropped."""
+    if not long.shape[0]:
+        return long
+    h = max(1, int(round(WINDOW_S * piece.rate_hz / 2.0)))
+    rates = piece.dtheta / piece.dt[:, None]
+    if rates.shape[0] < 2 * h + 1:
+        return long
+    mean = _moving_stats(rates, h)[1]
+    inside = np.zeros(piece.n_samples, dtype=bool)
+    for a, b in long:
+        inside[a:b] = True
+    ok = inside & np.all(np.isfinite(mean), axis=1)
+    if not ok.any():
+        return long
+    ref = np.median(mean[ok], axis=0)
+    still = inside & ~(np.linalg.norm(mean - ref, axis=1) > TURNING_RATE)
+    runs = _runs(still)
+    return runs[runs[:, 1] - runs[:, 0] >= 2 * h + 1].astype(np.int64)
 
 
 def quiet_threshold(f, *, rate_hz, window_s=WINDOW_S, quantile=QUIET_QUANTILE, mult=THRESHOLD_MULT):

@@ -95,8 +95,8 @@ def _fold_fit(exp, fold, rests, options):
 @pytest.mark.xfail(strict=True, reason=(
     "the bar lies below the true calibration's own held-out figures: imucal is fitted on the whole record, the held-out "
     "parts included, and each full turn's gyro column comes from that turn alone; over seeds 1-10 (two folds each) the "
-    "truth's held-out transitions are 0.141 deg rms against imucal's 0.131. The product (sway estimated) gives 0.416 deg "
-    "and 1.14e-2 m/s^2 (imucal 9.4e-3); on seed 1 fold 1 0.152 deg against 0.108, 1.44e-2 m/s^2 against 4.8e-3. Most "
+    "truth's held-out transitions are 0.139 deg rms against imucal's 0.132. The product (sway estimated) gives 0.432 deg "
+    "and 1.14e-2 m/s^2 (imucal 9.4e-3); on seed 1 fold 1 0.153 deg against 0.109, 1.51e-2 m/s^2 against 4.8e-3. Most "
     "of the rest is the gyro scale about the held-out full turn's axis, which the fold's training record barely informs "
     "(scripts/turn_diagnosis.py). On the face-to-face motions alone, which neither fits, 0.167 deg against imucal's "
     "0.145 and the truth's 0.133 (scripts/handheld_vs_imucal.py --by faces, docs/crossval.md); with the rests declared "
@@ -119,7 +119,7 @@ def test_imucal_fitted_on_the_held_out_turn_beats_the_true_calibration():
     peer = imucal_ferraris(exp, rests)
     fold = make_folds(exp, folds=2, by="pairs", rests=rests)[0]
     theirs, true = held_out_figures(exp, fold, peer), held_out_figures(exp, fold, truth)
-    assert theirs.transitions_rms_deg < 0.6 * true.transitions_rms_deg          # 0.026 against 0.056 deg
+    assert theirs.transitions_rms_deg < 0.85 * true.transitions_rms_deg         # 0.035 against 0.047 deg
 
 
 def test_the_sway_term_makes_a_hand_held_fold_s_gyro_scales_honest():
@@ -147,7 +147,8 @@ def _guided_session(seed):
 def test_guided_turns_inform_the_gyro_within_its_sigmas_and_both_solvers_agree(seed):
     """imucal's protocol (each full turn about the axis that is up, slid flat against a guide): the product finds the
     three turns and uses their closure and flatness; every gyro and accelerometer element within 3.5 sigma of the
-    truth, no gyro sigma larger than with the turns taken for motion, the two solvers agreeing.  (On the whole record
+    truth, no gyro sigma larger than with the turns taken for motion (but for the variance components' 2 %), the two
+    solvers agreeing.  (On the whole record
     the faces' transitions already hold the gyro to 0.04 %; a closure of 0.5 deg over 360 deg adds 0.14 %: the turns
     matter where the transitions are few, below.)"""
     exp, truth = _guided_session(seed)
@@ -161,16 +162,15 @@ def test_guided_turns_inform_the_gyro_within_its_sigmas_and_both_solvers_agree(s
          if k.startswith(("gyro.", "accel.")) and "_tc" not in k]
     assert np.max(np.abs(z)) < 3.5
     for k in guided.sigmas:
-        if k.startswith("gyro."):
-            assert guided.sigmas[k] <= off.sigmas[k] * (1.0 + 1e-6)
+        if k.startswith("gyro."):          # the variance components of the two may differ by a little
+            assert guided.sigmas[k] <= 1.02 * off.sigmas[k]
 
 
 def test_guided_turns_predict_the_held_out_face_to_face_turns():
     """Every rest and full turn kept, the turns between faces held out (neither imucal nor the product fits them):
-    seeds 1-3, two folds each. Measured: the turns taken for motion 2.00 deg rms, guided 0.35 deg; imucal 0.065, the
-    truth 0.066 (imucal's box axes, exact in the simulator, give it the misalignments the product estimates from the
-    faces' transitions; the rest is seed 3's first fold, 0.76 deg, whose sensor 10 cm off the turn's axis leaves a
-    size effect in the rests' edges that the structure tests name)."""
+    seeds 1-3, two folds each. Measured: the turns taken for motion 1.45 deg rms, guided 0.088 deg; imucal 0.047, the
+    truth 0.020 (imucal's box axes, exact in the simulator, give it the misalignments the product estimates from the
+    faces' transitions)."""
     rows = []
     for seed in (1, 2, 3):
         exp, truth = _guided_session(seed)
@@ -184,5 +184,5 @@ def test_guided_turns_predict_the_held_out_face_to_face_turns():
                 fig.append(held_out_figures(exp, fold, Calibration.from_result(r)).transitions_rms_deg)
             rows.append(fig)
     off, guided = np.sqrt(np.mean(np.square(rows), axis=0))
-    assert guided < 0.25 * off
-    assert np.mean(np.array(rows)[:, 1] < 0.3) >= 0.8
+    assert guided < 0.1 * off
+    assert np.all(np.array(rows)[:, 1] < 0.2)
