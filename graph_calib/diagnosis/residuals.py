@@ -161,9 +161,7 @@ def regression_tests(series, ctx, *, key, static=None):
 #: What the three components of each series are.  An encoder residual is turned into the principal axes of its
 #: reading's noise (graph_calib.model.encoder_noise): body x, y, z where the declared isotropic noise holds
 #: (readings in motion), the scatter's axes ordered and signed nearest them in a static dwell.
-_COMPONENTS = {"rotation": "xyz (body)", "gravity": "ENU", "gravity_body": "xyz (body)",
-               "encoder": "noise axes nearest body xyz",
-               "still": "xyz (body), the rest's gyro integral against the Earth's turn"}
+_COMPONENTS = {**{k.name: k.components for k in FACTOR_KINDS}, "gravity_body": "xyz (body)"}
 
 
 def residual_statistics(stage, *, top=5, lags=10, context=None):

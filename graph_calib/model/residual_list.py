@@ -52,6 +52,8 @@ class FactorKind:
     optional : bool
         Whether a model has the kind only on request (the still factors): a model without any leaves it out of its
         residual series and statistics, where every other kind is listed, empty or not.
+    components : str
+        What the three components of a factor are, in a report's words.
     """
 
     name: str
@@ -59,6 +61,7 @@ class FactorKind:
     robust: bool
     per_keyframe: bool = False
     optional: bool = False
+    components: str = "xyz (body)"
 
     def evaluate(self, model, R, preint, x):
         """The kind's :class:`graph_calib.model.factors.Residuals` at ``(R, x)``, on its own: the rotation and
@@ -96,10 +99,14 @@ class FactorKind:
 #: Every factor kind of the model, in the order solvers and files list them.
 FACTOR_KINDS = (
     FactorKind("rotation", "rotation_factors", robust=False),
-    FactorKind("gravity", "gravity_factors", robust=True),
-    FactorKind("encoder", "encoder_factors", robust=True, per_keyframe=True),
-    FactorKind("still", "still_factors", robust=True, optional=True),
-    FactorKind(TURN, "turn_factors", robust=True, optional=True),
+    FactorKind("gravity", "gravity_factors", robust=True, components="ENU"),
+    FactorKind("encoder", "encoder_factors", robust=True, per_keyframe=True,
+               components="noise axes nearest body xyz"),
+    FactorKind("still", "still_factors", robust=True, optional=True,
+               components="xyz (body), the rest's gyro integral against the Earth's turn"),
+    FactorKind(TURN, "turn_factors", robust=True, optional=True,
+               components="a guided turn's closure (xyz), or its tilt (two axes normal to the vertical, a weightless "
+                          "third)"),
 )
 #: Their names.
 KIND_NAMES = tuple(k.name for k in FACTOR_KINDS)

@@ -73,3 +73,13 @@ def test_the_guided_turns_halve_the_held_out_face_to_face_error(session):
     assert np.sqrt(np.mean(guided**2)) < 0.55 * np.sqrt(np.mean(off**2))
     assert np.all(guided < off)
     assert np.sqrt(np.mean(guided**2)) < 1.6 * np.sqrt(np.mean(theirs**2))
+
+
+def test_diagnose_adopts_nothing_that_holds_out_worse_and_says_what_is_left(session, tmp_path):
+    """The loop's candidates (gyro.scale_asym first) fit the record better and hold it out worse: none is adopted, and
+    the verdict still names what the residuals carry (exit 3)."""
+    assert main(["diagnose", str(session), "--out", str(tmp_path / "d"), "--solver", "factor-graph"]) == 3
+    doc = json.loads((tmp_path / "d" / "diagnosis.json").read_text())
+    assert doc["added"] == []
+    assert "turn" in doc["before"]["residuals"]["factor-graph"]
+    assert "RESIDUALS CARRY AN EFFECT THE MODEL LACKS" in doc["verdict"]["text"]
