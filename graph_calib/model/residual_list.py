@@ -50,8 +50,9 @@ class FactorKind:
     per_keyframe : bool
         Whether one robust loss covers every factor of a keyframe (the encoder readings), else one per factor.
     optional : bool
-        Whether a model has the kind only on request (the still factors): a model without any leaves it out of its
-        residual series and statistics, where every other kind is listed, empty or not.
+        Whether a model has the kind only on request or where its record shows it (the still factors, the guided
+        turns): a model without any leaves it out of its residual series and statistics, where every other kind is
+        listed, empty or not.
     components : str
         What the three components of a factor are, in a report's words.
     """
