@@ -1,7 +1,9 @@
 r"""A CSV header that names its columns in a common way, read without ``--columns`` (:func:`detect_layout`).
 
 Recognised names (case, spaces, ``#``, ``field.`` prefixes and units in brackets
-ignored): time ``t``, ``time``, ``timestamp``, ``stamp``, ``%time``, ``header.stamp``;
+ignored; the header is the first line that names both triads, or the last line before the first row of numbers,
+so that the rows of a file with a text label column are data): time ``t``, ``time``, ``timestamp``, ``stamp``,
+``%time``, ``header.stamp``;
 gyro ``gx``, ``gyro_x``, ``gyr_x``, ``omega_x``, ``wx``, ``w_x``, ``angular_velocity.x``,
 EuRoC's ``w_RS_S_x``; accelerometer ``ax``, ``acc_x``, ``accel_x``, ``a_x``, ``alpha_x``
 (Kalibr's ``imu0.csv``), ``linear_acceleration.x``, EuRoC's ``a_RS_S_x``;
@@ -89,6 +91,8 @@ def detect_layout(path, *, delimiter):
                 break
             _refuse_decimal_comma(path, line.strip(), len(leading) + 1)
             leading.append(line.strip())
+            if _names_both_triads(line.strip(), delimiter):
+                break           # the header: the rows after it are data, a text label column in them or not
     if not leading:
         return None, {}, [], 0
     # the header is the last line before the data; what comes before it is an exporter's comment lines
@@ -141,6 +145,12 @@ def detect_layout(path, *, delimiter):
                              "--time-units to read it in other units")
             break
     return columns, units, notes, header_lines
+
+
+def _names_both_triads(line, delimiter):
+    """Whether ``line`` names a gyro and an accelerometer column of each axis in a known way (a header line)."""
+    keys = {_LOOKUP.get(_normal(cell)[0]) for cell in split_cells(line, delimiter)}
+    return all(f"{t}{a}" in keys for t in "ga" for a in _AXES)
 
 
 #: Lines read before the data at most when looking for the header line.

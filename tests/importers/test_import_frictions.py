@@ -405,3 +405,24 @@ def test_a_log_in_deg_per_s_read_as_radians_names_the_units_option(tmp_path, cap
     assert cli.main(["import", "csv", str(path), "--latitude-deg", "45", "--temperature", "20",
                      "--out", str(tmp_path / "x.h5")]) == 2
     assert "(graph-calib import csv: --gyro-units deg/s for a log in deg/s)" in capsys.readouterr().err
+
+
+def test_a_header_above_rows_with_a_text_label_column_is_the_first_line(tmp_path, capsys):
+    """imucal's annotated session: a label column first (``part``), then a sample counter and the triads; its rows hold
+    text, so the header is the line that names both triads, not the last line before a row of numbers (there is
+    none: the importer once took the 50th data row for the header). Grouped by label, each group restarting its
+    counter: the message names the label column as the remedy, which then imports."""
+    rows = []
+    for label in ("x_a", "x_p"):
+        omega, f = _signals(100, seed=len(rows))
+        rows += [[label, 1000 + k, *np.degrees(omega[k]), *f[k]] for k in range(100)]
+    path = _write(tmp_path / "annotated.csv", "part,samples,gyr_x,gyr_y,gyr_z,acc_x,acc_y,acc_z", rows)
+    base = ["import", "csv", str(path), "--latitude-deg", "45", "--temperature", "20", "--rate-hz", "100",
+            "--gyro-units", "deg/s", "--out", str(tmp_path / "x.h5")]
+    assert cli.main(base) == 2
+    assert ("line 102: time 1000.0 samples is not after the previous row's 1099.0 samples: rows must be in time order. "
+            "If the rows are grouped") in capsys.readouterr().err
+    assert cli.main(base + ["--columns", "segment=part,t=samples,gx=gyr_x,gy=gyr_y,gz=gyr_z,ax=acc_x,ay=acc_y,az=acc_z",
+                            "--time-units", "samples"]) == 0
+    exp = io.read_experiment(tmp_path / "x.h5")
+    assert exp.n_segments == 2 and exp.n_samples == 200
