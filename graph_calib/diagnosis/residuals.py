@@ -16,7 +16,7 @@ from scipy.special import chdtrc
 
 from graph_calib.sensors import effects
 from graph_calib.diagnosis.drivers import keyframe_context
-from graph_calib.model.residual_list import FACTOR_KINDS, residual_list
+from graph_calib.model.residual_list import FACTOR_KINDS, residual_list, series_rms, weighted_components
 
 
 def factor_residuals(model, R, x, *, pre=None, factors=None):
@@ -217,10 +217,9 @@ def residual_rms(stage):
     """
     out = {}
     if stage.residuals:
-        fg = {k: np.sqrt(np.mean(v["w"] ** 2, axis=0)).tolist() for k, v in stage.residuals.items()
-              if v["w"].size}
-        fg["overall"] = float(np.sqrt(np.mean(np.concatenate([v["w"].ravel() for v in stage.residuals.values()])
-                                              ** 2)))
+        fg = {k: series_rms(k, v["w"])[0] for k, v in stage.residuals.items() if v["w"].size}
+        fg["overall"] = float(np.sqrt(np.mean(np.concatenate([v["w"][weighted_components(k, v["w"])]
+                                                              for k, v in stage.residuals.items()]) ** 2)))
         si = {}
         for k, v in stage.residuals.items():
             if v["r"].size:
@@ -233,8 +232,9 @@ def residual_rms(stage):
     for solver, series in stage.innovations.items():
         if not series:
             continue
-        kf = {k: np.sqrt(np.mean(v["w"] ** 2, axis=0)).tolist() for k, v in series.items()}
-        kf["overall"] = float(np.sqrt(np.mean(np.concatenate([v["w"].ravel() for v in series.values()]) ** 2)))
+        kf = {k: series_rms(k, v["w"])[0] for k, v in series.items()}
+        kf["overall"] = float(np.sqrt(np.mean(np.concatenate([v["w"][weighted_components(k, v["w"])]
+                                                              for k, v in series.items()]) ** 2)))
         out[solver] = kf
     return out
 

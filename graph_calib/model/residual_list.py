@@ -55,6 +55,9 @@ class FactorKind:
         listed, empty or not.
     components : str
         What the three components of a factor are, in a report's words.
+    weightless_rows : bool
+        Whether some of its factors' components are weightless (sigma infinite: a guided turn's tilt is two rows of
+        three), which its series then hold as exact zeros, left out of their RMS.
     """
 
     name: str
@@ -63,6 +66,7 @@ class FactorKind:
     per_keyframe: bool = False
     optional: bool = False
     components: str = "xyz (body)"
+    weightless_rows: bool = False
 
     def evaluate(self, model, R, preint, x):
         """The kind's :class:`graph_calib.model.factors.Residuals` at ``(R, x)``, on its own: the rotation and
@@ -107,12 +111,29 @@ FACTOR_KINDS = (
                components="xyz (body), the rest's gyro integral against the Earth's turn"),
     FactorKind(TURN, "turn_factors", robust=True, optional=True,
                components="a guided turn's closure (xyz), or its tilt (two axes normal to the vertical, a weightless "
-                          "third)"),
+                          "third)", weightless_rows=True),
 )
 #: Their names.
 KIND_NAMES = tuple(k.name for k in FACTOR_KINDS)
 #: The kinds that are measurements (their components count in the degrees of freedom of the verdict).
 MEASUREMENT_KINDS = tuple(k.name for k in FACTOR_KINDS if k.robust)
+#: The kinds whose series hold weightless components as exact zeros (:attr:`FactorKind.weightless_rows`).
+WEIGHTLESS_ROW_KINDS = tuple(k.name for k in FACTOR_KINDS if k.weightless_rows)
+
+
+def weighted_components(kind, values):
+    """The components of a kind's series (F, 3) that are measurements: all, or for a kind with weightless rows
+    (:data:`WEIGHTLESS_ROW_KINDS`) those that are not exact zeros; a boolean array of ``values``' shape."""
+    values = np.asarray(values)
+    return values != 0.0 if kind in WEIGHTLESS_ROW_KINDS else np.ones(values.shape, dtype=bool)
+
+
+def series_rms(kind, values):
+    """``(per-axis RMS (3,) list, RMS)`` of a kind's series over its weighted components (:func:`weighted_components`)."""
+    v = np.asarray(values, dtype=float)
+    w = weighted_components(kind, v)
+    per_axis = np.sqrt(np.sum(np.where(w, v**2, 0.0), axis=0) / np.maximum(np.sum(w, axis=0), 1))
+    return per_axis.tolist(), float(np.sqrt(np.sum(v[w] ** 2) / max(int(np.sum(w)), 1)))
 
 
 def robust_loss(e, kind, k):
@@ -192,5 +213,5 @@ def residual_list(model, R, preint, x):
     return factors
 
 
-__all__ = ["FactorKind", "FACTOR_KINDS", "KIND_NAMES", "MEASUREMENT_KINDS", "robust_loss", "whiten", "cost_by_key",
+__all__ = ["FactorKind", "FACTOR_KINDS", "KIND_NAMES", "MEASUREMENT_KINDS", "WEIGHTLESS_ROW_KINDS", "weighted_components", "series_rms", "robust_loss", "whiten", "cost_by_key",
            "residual_list"]

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from graph_calib.model.residual_list import MEASUREMENT_KINDS
+from graph_calib.model.residual_list import MEASUREMENT_KINDS, series_rms, weighted_components
 from graph_calib.model.redundancy import FLOORED, MOVING, PSEUDO_KINDS, fit_statistics, static_gravity
 from graph_calib.records.experiment import Result
 
@@ -41,10 +41,11 @@ def residual_block(output, *, statistics=None):
         v = np.asarray(series.values, dtype=float)
         if v.size == 0:
             continue
-        kinds[kind] = {"count": int(v.shape[0]), "rms_axis": np.sqrt(np.mean(v**2, axis=0)).tolist(),
-                       "rms": float(np.sqrt(np.mean(v**2)))}
+        # a kind's weightless components (exact zeros in its series) are no measurement: left out of its RMS
+        per_axis, rms = series_rms(kind, v)
+        kinds[kind] = {"count": int(v.shape[0]), "rms_axis": per_axis, "rms": rms}
         if kind in MEASUREMENT_KINDS:
-            measured.append(v.ravel())
+            measured.append(v[weighted_components(kind, v)])
     if statistics is not None:
         for kind, fit in statistics.kinds.items():
             if kind in PSEUDO_KINDS:            # a part of a kind: inside it (below)

@@ -97,3 +97,13 @@ def test_weightless_rows_carry_no_redundancy(guided):
     # every weighted component's redundancy number lies in [0, 1]; a weightless one would add 1 each
     assert 0.0 < turn.redundancy < n_weighted
     assert abs(fs.trace - fs.n_unknowns) < 1e-4 * fs.n_unknowns
+
+
+def test_a_series_rms_leaves_the_weightless_rows_out_for_the_turn_kind_alone():
+    from graph_calib.model.residual_list import series_rms
+    v = np.array([[1.0, 2.0, 0.0], [1.0, 2.0, 0.0], [1.0, 2.0, 3.0]])       # two tilt rows, one closure row
+    per_axis, rms = series_rms("turn", v)
+    np.testing.assert_allclose(per_axis, [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(rms, np.sqrt((3 * 1.0 + 3 * 4.0 + 9.0) / 7))
+    per_axis, _ = series_rms("rotation", v)                                  # a zero of another kind is a residual
+    np.testing.assert_allclose(per_axis[2], np.sqrt(9.0 / 3))
