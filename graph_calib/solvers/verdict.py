@@ -82,11 +82,11 @@ KIND_WORDS = {"still": "still (the rests' gyro integrals against the Earth's tur
               "turn": "guided-turn (the Ferraris protocol's full turns: closing, flat)"}
 #: A sensor's name in the verdict's words.
 SENSOR_WORDS = {"accel": "accelerometer", "encoder": "table-reading", "protocol": "guided-turn protocol"}
-#: What beside a lacking effect makes a kind's residuals too large, where the sensor's noise is not all of it.
 #: Kinds whose sigma is a declared bound of a protocol (no noise identified): their residuals well below it are a
 #: note, in these words.
 DECLARED_SPREAD_KINDS = {"turn": "the guided turns close and stay flat better than their declared spread: what they "
                                  "inform is weighted conservatively (--guided-turns DEG declares a tighter spread)"}
+#: What beside a lacking effect makes a kind's residuals too large, where the sensor's noise is not all of it.
 KIND_CAUSES = {"still": "the unit turned while it rested (declare the rests still only where it sits on a surface), "
                         "or the gyro noise is larger than assumed",
                "turn": "the full turns do not close or tilt more than a turn pressed against a guide on a level surface "
@@ -174,7 +174,7 @@ def judge_kinds(result):
         if vf != 1.0:
             if source.get(sensor) == "grade":
                 notes.append(f"{kind}: variance factor {vf:.3g} on the {sensor} noise of the grade (none identified)")
-            elif vf > VARIANCE_FACTOR_LIMIT and kind in KIND_CAUSES:
+            elif vf > VARIANCE_FACTOR_LIMIT and kind in DECLARED_SPREAD_KINDS:
                 problems.append(f"{kind} residuals need a variance factor {vf:.3g} > {VARIANCE_FACTOR_LIMIT:g} on "
                                 f"their declared noise: {KIND_CAUSES[kind]}")
             elif vf > VARIANCE_FACTOR_LIMIT:
