@@ -38,7 +38,8 @@ from __future__ import annotations
 import numpy as np
 
 from graph_calib.model.factors import Residuals
-from graph_calib.navigation.rotations import exp_so3, log_so3, right_jacobian_inv, skew
+from graph_calib.navigation.rotations import log_so3, quat_to_rotvec, right_jacobian_inv, skew
+from graph_calib.navigation.strapdown import integrate_attitude
 
 #: The factor kind's name (:data:`graph_calib.model.residual_list.FACTOR_KINDS`).
 KIND = "turn"
@@ -60,12 +61,13 @@ def _angle_deg(u, v):
     return float(np.degrees(np.arccos(np.clip(c, -1.0, 1.0))))
 
 
-def _raw_rotation(w, dt):
-    """The rotation of raw rate samples ``w`` (N, 3) over ``dt`` (N,), one sample after the other."""
-    C = np.eye(3)
-    for step in exp_so3(w * dt[:, None]):
-        C = C @ step
-    return C
+def _raw_turn_deg(record, start, stop):
+    """The angle, deg, by which the raw increments of samples ``[start, stop)`` turn the unit in the level frame
+    (:func:`graph_calib.navigation.strapdown.integrate_attitude`: coning and the Earth rate in)."""
+    e = record.experiment
+    q = integrate_attitude(e.dtheta[start:stop], t=e.t[start:stop], rate_hz=e.rate_hz, q_nb0=[1.0, 0.0, 0.0, 0.0],
+                           latitude_rad=e.latitude_rad)
+    return float(np.degrees(np.linalg.norm(quat_to_rotvec(q[-1]))))
 
 
 def find_guided_turns(record):
@@ -113,7 +115,7 @@ def find_guided_turns(record):
         if (_angle_deg(f_before, f_after) > FACE_TOLERANCE_DEG
                 or np.degrees(np.linalg.norm(angle)) < MIN_TURN_DEG
                 or min(_angle_deg(angle, f_before), _angle_deg(angle, -f_before)) > AXIS_TOLERANCE_DEG
-                or np.degrees(np.linalg.norm(log_so3(_raw_rotation(w, dt)))) > CLOSURE_TOLERANCE_DEG):
+                or _raw_turn_deg(record, k0[a], k0[b]) > CLOSURE_TOLERANCE_DEG):
             continue
         out.append((a, b))
     return np.asarray(out, dtype=np.int64).reshape(-1, 2)
