@@ -102,9 +102,11 @@ def segment_static(piece, *, threshold):
 
 def segment_static_parts(piece, *, threshold):
     """``(detect_static's intervals, the short rests the short pass adds)`` of one segment, each shape (P, 2)."""
-    long = _not_turning(piece, np.asarray(detect_static(piece, threshold=threshold), dtype=np.int64).reshape(-1, 2))
+    rates = piece.dtheta / piece.dt[:, None]
+    long = np.asarray(detect_static(piece, threshold=threshold), dtype=np.int64).reshape(-1, 2)
+    long = _not_turning(piece, rates, long)
     w = short_window_s(piece.rate_hz)
-    th_g = quiet_threshold(piece.dtheta / piece.dt[:, None], rate_hz=piece.rate_hz, window_s=w)
+    th_g = quiet_threshold(rates, rate_hz=piece.rate_hz, window_s=w)
     short = np.asarray(detect_static(piece, threshold=threshold, window_s=w, min_duration_s=SHORT_REST_WINDOWS * w,
                                      use_gyro=th_g is not None, gyro_threshold=th_g), dtype=np.int64).reshape(-1, 2)
     if not short.shape[0]:
@@ -127,14 +129,14 @@ def segment_static_parts(piece, *, threshold):
 TURNING_RATE = np.radians(3.0)
 
 
-def _not_turning(piece, long):
-    """The rests ``long`` (P, 2) less their samples whose window-mean rate departs from the rests' median by more than
-    :data:`TURNING_RATE`: a smooth turn about the vertical leaves the specific force as it was where the sensor sits
-    near the axis, so its slow start and end pass the accelerometer's test; runs shorter than a window are dropped."""
+def _not_turning(piece, rates, long):
+    """The rests ``long`` (P, 2) of ``piece`` (its rates ``rates``, (N, 3) rad/s) less their samples whose window-mean
+    rate departs from the rests' median by more than :data:`TURNING_RATE`: a smooth turn about the vertical leaves the
+    specific force as it was where the sensor sits near the axis, so its slow start and end pass the accelerometer's
+    test; runs shorter than a window are dropped."""
     if not long.shape[0]:
         return long
     h = max(1, int(round(WINDOW_S * piece.rate_hz / 2.0)))
-    rates = piece.dtheta / piece.dt[:, None]
     if rates.shape[0] < 2 * h + 1:
         return long
     mean = _moving_stats(rates, h)[1]
