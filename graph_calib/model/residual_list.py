@@ -55,6 +55,9 @@ class FactorKind:
         listed, empty or not.
     components : str
         What the three components of a factor are, in a report's words.
+    keys : str or None
+        The model's attribute holding each factor's keyframe, where the kind has factors on some keyframes only (the
+        still factors, the guided turns): its times are theirs.
     weightless_rows : bool
         Whether some of its factors' components are weightless (sigma infinite: a guided turn's tilt is two rows of
         three), which its series then hold as exact zeros, left out of their RMS.
@@ -66,6 +69,7 @@ class FactorKind:
     per_keyframe: bool = False
     optional: bool = False
     components: str = "xyz (body)"
+    keys: str | None = None
     weightless_rows: bool = False
 
     def evaluate(self, model, R, preint, x):
@@ -85,10 +89,8 @@ class FactorKind:
             return model.t_key[model.record.rotation_keys + 1]
         if self.name == "encoder":
             return model.record.reading_t
-        if self.name == "still":
-            return model.t_key[model.still_keys]
-        if self.name == TURN:
-            return model.t_key[model.turn_keys]
+        if self.keys is not None:
+            return model.t_key[getattr(model, self.keys)]
         return model.t_key[:-1]
 
     def robust_groups(self, res, *, robust, robust_k):
@@ -107,9 +109,9 @@ FACTOR_KINDS = (
     FactorKind("gravity", "gravity_factors", robust=True, components="ENU"),
     FactorKind("encoder", "encoder_factors", robust=True, per_keyframe=True,
                components="noise axes nearest body xyz"),
-    FactorKind("still", "still_factors", robust=True, optional=True,
+    FactorKind("still", "still_factors", robust=True, optional=True, keys="still_keys",
                components="xyz (body), the rest's gyro integral against the Earth's turn"),
-    FactorKind(TURN, "turn_factors", robust=True, optional=True,
+    FactorKind(TURN, "turn_factors", robust=True, optional=True, keys="turn_keys",
                components="a guided turn's closure (xyz), or its tilt (two axes normal to the vertical, a weightless "
                           "third)", weightless_rows=True),
 )
