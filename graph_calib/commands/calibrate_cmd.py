@@ -11,8 +11,7 @@ from graph_calib import io
 from graph_calib.calibrate import build_problem, solve_problem
 from graph_calib.constants import RS_TO_DH
 from graph_calib.commands.paths import earlier_results
-from graph_calib.commands.model_options import (add_guided_turns, add_gyro_range, add_moving, add_still, add_sway, check_gyro_range,
-                                                 finite_float, guided_turns_of, moving_of, still_of, sway_of,
+from graph_calib.commands.model_options import (add_bench_options, bench_options, check_gyro_range, finite_float,
                                                  with_gyro_range)
 from graph_calib.errors import InputError
 from graph_calib.records.grade_choice import choose_grade, grade_warning
@@ -36,11 +35,7 @@ def add_arguments(p):
                    help="model a further effect of model.md (repeatable)")
     p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
-    add_sway(p)
-    add_gyro_range(p)
-    add_moving(p)
-    add_still(p)
-    add_guided_turns(p)
+    add_bench_options(p)
     p.add_argument("--residuals", action="store_true",
                    help="also write each solver's residual time series, SOLVER.residuals.h5 (docs/data-format.md)")
 
@@ -63,9 +58,7 @@ def options_from_args(args, *, grade=None):
         raise InputError("must be positive", dataset="--keyframe")
     check_gyro_range(args)
     model = ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade or "navigation",
-                         extra_effects=tuple(args.effect), sway_sigma=sway_of(args),
-                         moving_sigma=moving_of(args), still_at_rest=still_of(args),
-                         guided_turns=guided_turns_of(args))
+                         extra_effects=tuple(args.effect), **bench_options(args))
     return CalibrationOptions(model=model, graph=GraphOptions(robust=args.robust), t_ref_degC=args.t_ref)
 
 

@@ -14,8 +14,7 @@ from pathlib import Path
 from graph_calib import io
 from graph_calib.calibrate import calibrate, calibrate_with_effects
 from graph_calib.commands.calibrate_cmd import options_from_args
-from graph_calib.commands.model_options import (add_guided_turns, add_gyro_range, add_moving, add_still, add_sway, finite_float,
-                                                 with_gyro_range)
+from graph_calib.commands.model_options import add_bench_options, finite_float, with_gyro_range
 from graph_calib.commands.paths import make_output_folder, output_folder
 from graph_calib.compensation.calibration import Calibration
 from graph_calib.diagnosis import DiagnosisOptions, diagnose
@@ -45,11 +44,7 @@ def add_arguments(p):
                    help="model a further effect of model.md (repeatable)")
     p.add_argument("--t-ref", type=finite_float, default=None, help="reference temperature, degC")
     p.add_argument("--robust", choices=("huber", "cauchy"), default=None, help="robust loss (factor graph)")
-    add_sway(p)
-    add_gyro_range(p)
-    add_moving(p)
-    add_still(p)
-    add_guided_turns(p)
+    add_bench_options(p)
 
 
 def run(args):

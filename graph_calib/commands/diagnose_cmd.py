@@ -16,8 +16,7 @@ import sys
 from dataclasses import replace
 from pathlib import Path
 
-from graph_calib.commands.model_options import (add_guided_turns, add_gyro_range, add_moving, add_still, add_sway, check_gyro_range,
-                                                 finite_float, guided_turns_of, moving_of, still_of, sway_of,
+from graph_calib.commands.model_options import (add_bench_options, bench_options, check_gyro_range, finite_float,
                                                  with_gyro_range)
 from graph_calib.commands.paths import earlier_results, make_output_folder
 from graph_calib.errors import InputError
@@ -29,11 +28,7 @@ from graph_calib.solvers import registry
 def add_arguments(p):
     p.add_argument("experiment", help="experiment file (HDF5, data-format.md)")
     p.add_argument("--out", required=True, metavar="DIR", help="output folder")
-    add_sway(p)
-    add_gyro_range(p)
-    add_moving(p)
-    add_still(p)
-    add_guided_turns(p)
+    add_bench_options(p)
     p.add_argument("--holdout", action=argparse.BooleanOptionalAction, default=True,
                    help="without a table, adopt an effect only when it does not make the held-out figures (two "
                         "folds of the rests) worse (default; --no-holdout adopts on the score tests alone; "
@@ -81,10 +76,7 @@ def _options(args, *, grade="navigation"):
             raise InputError("must be at least 1", dataset="--max-iterations")
         graph = GraphOptions(max_iterations=args.max_iterations)
     calibration_options = CalibrationOptions(model=ModelOptions(keyframe_s=args.keyframe, grade=args.grade or grade,
-                                                 extra_effects=tuple(args.effect), sway_sigma=sway_of(args),
-                                                 moving_sigma=moving_of(args),
-                                                 still_at_rest=still_of(args),
-                                                 guided_turns=guided_turns_of(args)),
+                                                 extra_effects=tuple(args.effect), **bench_options(args)),
                                              graph=graph, t_ref_degC=args.t_ref)
     solvers = registry.primary_first(registry.parse_choice(args.solver)[0])
     diagnosis_options = DiagnosisOptions(alpha=args.alpha, max_added=args.max_added, solvers=solvers,

@@ -72,6 +72,23 @@ def guided_turns_of(args):
     return math.radians(value)
 
 
+def add_bench_options(parser):
+    """The bench options every command that calibrates takes, in one order: ``--sway-sigma``, ``--gyro-range-dps``,
+    ``--moving-sigma``, ``--still-rests``, ``--guided-turns`` (:func:`bench_options` reads them)."""
+    add_sway(parser)
+    add_gyro_range(parser)
+    add_moving(parser)
+    add_still(parser)
+    add_guided_turns(parser)
+
+
+def bench_options(args):
+    """The :class:`~graph_calib.model.ModelOptions` fields of the bench options every command that calibrates takes
+    (``--sway-sigma``, ``--moving-sigma``, ``--still-rests``, ``--guided-turns``), each read and checked once."""
+    return {"sway_sigma": sway_of(args), "moving_sigma": moving_of(args), "still_at_rest": still_of(args),
+            "guided_turns": guided_turns_of(args)}
+
+
 def add_gyro_range(parser):
     """``--gyro-range-dps DPS``: the record cut after each saturated episode before the work (records/saturation)."""
     parser.add_argument("--gyro-range-dps", type=finite_float, default=None, metavar="DPS",
@@ -157,4 +174,5 @@ def noise_of(args):
 
 
 __all__ = ["finite_float", "add_sway", "sway_of", "add_still", "still_of", "add_moving", "moving_of", "GRADE_CHOICES", "add_noise",
-           "noise_of", "add_gyro_range", "check_gyro_range", "with_gyro_range", "add_guided_turns", "guided_turns_of"]
+           "noise_of", "add_gyro_range", "check_gyro_range", "with_gyro_range", "add_guided_turns", "guided_turns_of",
+           "bench_options", "add_bench_options"]
